@@ -1,0 +1,44 @@
+# ctxsearch: two-command quick start.  `make demo` runs the main job, `make test` the tests.
+# Both create .venv on demand from requirements.lock (pinned) and are no-ops when nothing changed.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.ctxsearch-installed
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: demo test bench lint syscheck clean help
+
+help:
+	@echo "make demo   - learn in a few office rooms, then search with and without context (writes demo/)"
+	@echo "make test   - run the test suite"
+	@echo "make bench  - run the benchmarks (writes results/)"
+	@echo "make lint   - ruff"
+
+$(STAMP): pyproject.toml requirements.lock
+	@$(PYTHON) scripts/syscheck.py
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check -r requirements.lock
+	$(PY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+syscheck:
+	@$(PYTHON) scripts/syscheck.py
+
+demo: $(STAMP)
+	$(VENV)/bin/ctxsearch demo
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+bench: $(STAMP)
+	$(VENV)/bin/ctxsearch bench kb --out results
+	$(VENV)/bin/ctxsearch bench sim --out results
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""The robot's behaviour: perception, navigation, view planning, acquisition and search."""

@@ -1,0 +1,313 @@
+"""The object-type catalog: types, their sizes, detectability and relation volumes (paper, 2.2).
+
+A catalog is a TOML file (default ``assets/types.toml``) holding an array of ``[[type]]`` tables,
+each with an array of ``[[type.relation]]`` tables.
+
+Object frame (ROS REP 103): the origin is the centre of the object's bounding box, local +x is the
+object's FRONT, +y its LEFT (as seen by the object looking out of its front), +z is up. ``size`` is
+the full extent along (x, y, z) in metres. Poses are yaw-only (objects stand upright).
+
+A relation volume is a box in that frame. Its bounds are given relative to the object's extents
+(the object itself spans -0.5..0.5 on every axis) plus metric margins::
+
+    local_lo = lo * size + margin_lo        local_hi = hi * size + margin_hi
+
+so ON-TOP-OF-DESK = lo [-0.5,-0.5,0.5], hi [0.5,0.5,0.5], margin_hi [0,0,0.4] is the 40 cm slab
+resting on the desk top, whatever the desk's size. Relation names follow the paper's convention:
+``<REL>-<TYPE>`` with the type's name upper-cased as suffix, which makes every name unique.
+Coordinate systems may be partial: a Cup may have ABOVE/NEAR and no FRONT.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from knowledge.errors import CatalogError
+
+ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
+DEFAULT_CATALOG = ASSETS_DIR / "types.toml"
+
+KINDS = ("furniture", "object")
+# How envs/ builds the type's geometry. knowledge/ only checks the name is one of these.
+SHAPES = (
+    "box",
+    "cylinder",
+    "desk",
+    "table",
+    "chair",
+    "shelf",
+    "cabinet",
+    "sofa",
+    "bed",
+    "counter",
+    "monitor",
+    "laptop",
+    "plant",
+    "mug",
+)
+TYPE_FIELDS = {"name", "kind", "shape", "size", "color", "min_pixels", "max_range", "relation"}
+RELATION_FIELDS = {"name", "lo", "hi", "margin_lo", "margin_hi"}
+_NAME_RE = re.compile(r"^[A-Z][A-Za-z0-9]*$")
+_REL_RE = re.compile(r"^[A-Z][A-Z0-9]*(-[A-Z0-9]+)*$")
+
+
+@dataclass(frozen=True)
+class RelationSpec:
+    """One relation of a reference type: its name, the reference type, and its volume spec."""
+
+    name: str
+    ref: str
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+    margin_lo: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    margin_hi: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def local_bounds(self, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The volume's (lo, hi) corners in the reference object's frame for an object of ``size``."""
+        size = np.asarray(size, dtype=float)
+        return (np.asarray(self.lo) * size + np.asarray(self.margin_lo),
+                np.asarray(self.hi) * size + np.asarray(self.margin_hi))
+
+
+@dataclass(frozen=True)
+class ObjectType:
+    """An object type: name, kind, builder shape, size range, colour, detectability, relations."""
+
+    name: str
+    kind: str
+    shape: str
+    size_min: tuple[float, float, float]
+    size_max: tuple[float, float, float]
+    color: tuple[float, float, float]
+    min_pixels: int
+    max_range: float
+    relations: tuple[RelationSpec, ...] = ()
+
+    @property
+    def is_furniture(self) -> bool:
+        """True for furniture (large, rests on the floor), False for small objects."""
+        return self.kind == "furniture"
+
+    def sample_size(self, rng: np.random.Generator) -> tuple[float, float, float]:
+        """A size drawn uniformly per axis from the type's size range."""
+        lo, hi = np.asarray(self.size_min), np.asarray(self.size_max)
+        return tuple(float(v) for v in lo + (hi - lo) * rng.random(3))
+
+    @property
+    def relation_names(self) -> tuple[str, ...]:
+        """RELATIONS(type), in catalog order."""
+        return tuple(r.name for r in self.relations)
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """An immutable, validated set of object types with fast name look-ups."""
+
+    types: tuple[ObjectType, ...]
+    path: str = "<memory>"
+    _by_name: dict[str, ObjectType] = field(init=False, repr=False, compare=False)
+    _rel_by_name: dict[str, RelationSpec] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_by_name", {t.name: t for t in self.types})
+        object.__setattr__(
+            self, "_rel_by_name", {r.name: r for t in self.types for r in t.relations}
+        )
+
+    @property
+    def type_names(self) -> tuple[str, ...]:
+        """Type names in catalog order."""
+        return tuple(t.name for t in self.types)
+
+    @property
+    def relations(self) -> tuple[RelationSpec, ...]:
+        """Every relation of every type, in catalog order."""
+        return tuple(r for t in self.types for r in t.relations)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._by_name
+
+    def __len__(self) -> int:
+        return len(self.types)
+
+    def type(self, name: str) -> ObjectType:
+        """The type called ``name``; a CatalogError naming the known types if there is none."""
+        try:
+            return self._by_name[name]
+        except KeyError:
+            raise CatalogError(
+                self.path, f"unknown type '{name}' (known: {', '.join(self.type_names)})"
+            ) from None
+
+    def relation(self, name: str) -> RelationSpec:
+        """The relation called ``name`` (e.g. ``ON-TOP-OF-DESK``)."""
+        try:
+            return self._rel_by_name[name]
+        except KeyError:
+            raise CatalogError(self.path, f"unknown relation '{name}'") from None
+
+    def has_relation(self, name: str) -> bool:
+        """True if some type defines relation ``name``."""
+        return name in self._rel_by_name
+
+    @property
+    def fingerprint(self) -> str:
+        """A hash of the catalog's content (types, sizes, detectability, relation volumes).
+
+        Stores record it: evidence gathered with other relation volumes is not comparable.
+        """
+        doc = [
+            {
+                "name": t.name, "kind": t.kind, "shape": t.shape,
+                "size_min": t.size_min, "size_max": t.size_max, "color": t.color,
+                "min_pixels": t.min_pixels, "max_range": t.max_range,
+                "relations": [
+                    [r.name, r.lo, r.hi, r.margin_lo, r.margin_hi] for r in t.relations
+                ],
+            }
+            for t in self.types
+        ]
+        blob = json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def relation_suffix(type_name: str) -> str:
+    """The suffix every relation of ``type_name`` must carry, e.g. ``-DESK`` for ``Desk``."""
+    return "-" + type_name.upper()
+
+
+def _vec3(path: Path, tname: str | None, fname: str, value: object) -> tuple[float, float, float]:
+    if (
+        not isinstance(value, list)
+        or len(value) != 3
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    ):
+        raise CatalogError(path, f"expected 3 numbers, got {value!r}", type_name=tname, field=fname)
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _parse_size(path: Path, tname: str, value: object) -> tuple[tuple, tuple]:
+    if isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value):
+        pairs = []
+        for v in value:
+            if len(v) != 2 or not all(isinstance(x, int | float) for x in v) or v[0] > v[1]:
+                raise CatalogError(path, f"each axis range must be [min, max], got {v!r}",
+                                   type_name=tname, field="size")
+            pairs.append((float(v[0]), float(v[1])))
+        lo = tuple(p[0] for p in pairs)
+        hi = tuple(p[1] for p in pairs)
+    else:
+        lo = hi = _vec3(path, tname, "size", value)
+    if min(lo) <= 0:
+        raise CatalogError(path, f"sizes must be positive, got {list(lo)}", type_name=tname, field="size")
+    return lo, hi
+
+
+def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> RelationSpec:
+    if not isinstance(raw, dict):
+        raise CatalogError(path, "a relation must be a table", type_name=tname, field="relation")
+    unknown = set(raw) - RELATION_FIELDS
+    if unknown:
+        raise CatalogError(path, f"unknown field(s) {sorted(unknown)} in a relation "
+                           f"(allowed: {sorted(RELATION_FIELDS)})", type_name=tname, field="relation")
+    name = raw.get("name")
+    if not isinstance(name, str) or not _REL_RE.match(name):
+        raise CatalogError(path, f"relation name must be upper-case words joined by '-', got {name!r}",
+                           type_name=tname, field="relation.name")
+    suffix = relation_suffix(tname)
+    if not name.endswith(suffix) or name == suffix[1:]:
+        raise CatalogError(path, f"relation '{name}' must end in '{suffix}' (paper's convention)",
+                           type_name=tname, field="relation.name")
+    for req in ("lo", "hi"):
+        if req not in raw:
+            raise CatalogError(path, f"relation '{name}' lacks '{req}'", type_name=tname,
+                               field=f"relation.{req}")
+    spec = RelationSpec(
+        name=name, ref=tname,
+        lo=_vec3(path, tname, f"{name}.lo", raw["lo"]),
+        hi=_vec3(path, tname, f"{name}.hi", raw["hi"]),
+        margin_lo=_vec3(path, tname, f"{name}.margin_lo", raw.get("margin_lo", [0, 0, 0])),
+        margin_hi=_vec3(path, tname, f"{name}.margin_hi", raw.get("margin_hi", [0, 0, 0])),
+    )
+    # The bounds are affine in each size axis, so checking both ends of the range is enough.
+    for size in (size_lo, size_hi):
+        lo, hi = spec.local_bounds(np.asarray(size))
+        if np.any(hi - lo <= 0):
+            raise CatalogError(path, f"relation '{name}' has an empty volume for size {list(size)}",
+                               type_name=tname, field=f"relation.{name}")
+    return spec
+
+
+def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
+    """Validate a parsed TOML document and build a Catalog; CatalogError on any problem."""
+    path = Path(path) if not isinstance(path, Path) else path
+    unknown_top = set(doc) - {"type", "schema"}
+    if unknown_top:
+        raise CatalogError(path, f"unknown top-level field(s) {sorted(unknown_top)}")
+    raw_types = doc.get("type")
+    if not isinstance(raw_types, list) or not raw_types:
+        raise CatalogError(path, "no [[type]] tables", field="type")
+    types: list[ObjectType] = []
+    seen: set[str] = set()
+    for i, raw in enumerate(raw_types):
+        name = raw.get("name") if isinstance(raw, dict) else None
+        if not isinstance(name, str) or not _NAME_RE.match(name):
+            raise CatalogError(path, f"type #{i + 1}: name must be a capitalised word, got {name!r}",
+                               field="name")
+        if name in seen:
+            raise CatalogError(path, "duplicate type name", type_name=name, field="name")
+        seen.add(name)
+        unknown = set(raw) - TYPE_FIELDS
+        if unknown:
+            raise CatalogError(path, f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TYPE_FIELDS)})",
+                               type_name=name, field=sorted(unknown)[0])
+        for req in ("kind", "shape", "size", "color", "min_pixels", "max_range"):
+            if req not in raw:
+                raise CatalogError(path, "missing", type_name=name, field=req)
+        if raw["kind"] not in KINDS:
+            raise CatalogError(path, f"must be one of {KINDS}, got {raw['kind']!r}", type_name=name, field="kind")
+        if raw["shape"] not in SHAPES:
+            raise CatalogError(path, f"must be one of {SHAPES}, got {raw['shape']!r}", type_name=name, field="shape")
+        size_lo, size_hi = _parse_size(path, name, raw["size"])
+        color = _vec3(path, name, "color", raw["color"])
+        if not all(0.0 <= c <= 1.0 for c in color):
+            raise CatalogError(path, f"components must be in [0, 1], got {list(color)}", type_name=name, field="color")
+        mp, mr = raw["min_pixels"], raw["max_range"]
+        if not isinstance(mp, int) or isinstance(mp, bool) or mp < 1:
+            raise CatalogError(path, f"must be a positive integer, got {mp!r}", type_name=name, field="min_pixels")
+        if not isinstance(mr, int | float) or isinstance(mr, bool) or mr <= 0:
+            raise CatalogError(path, f"must be a positive number of metres, got {mr!r}", type_name=name, field="max_range")
+        raw_rels = raw.get("relation", [])
+        if not isinstance(raw_rels, list):
+            raise CatalogError(path, "must be an array of tables [[type.relation]]", type_name=name, field="relation")
+        rels = [_parse_relation(path, name, r, size_lo, size_hi) for r in raw_rels]
+        names = [r.name for r in rels]
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            raise CatalogError(path, f"duplicate relation '{dup}'", type_name=name, field="relation.name")
+        types.append(ObjectType(name=name, kind=raw["kind"], shape=raw["shape"], size_min=size_lo,
+                                size_max=size_hi, color=color, min_pixels=mp, max_range=float(mr),
+                                relations=tuple(rels)))
+    return Catalog(types=tuple(types), path=str(path))
+
+
+def load_catalog(path: str | Path | None = None) -> Catalog:
+    """Load and validate a catalog TOML file (default ``assets/types.toml``)."""
+    path = Path(path) if path is not None else DEFAULT_CATALOG
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except FileNotFoundError:
+        raise CatalogError(path, "no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CatalogError(path, f"TOML syntax error: {exc}") from None
+    except OSError as exc:
+        raise CatalogError(path, f"cannot read: {exc.strerror}") from None
+    return parse_catalog(doc, path)

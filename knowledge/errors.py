@@ -1,0 +1,24 @@
+"""Errors that the CLI reports as one line (``ctxsearch: error: ...``) with exit code 2."""
+
+from __future__ import annotations
+
+
+class CtxsearchError(Exception):
+    """A user-facing error: bad input file, unknown name, incompatible store. One line, no traceback."""
+
+
+class CatalogError(CtxsearchError):
+    """The object-type catalog is malformed or inconsistent."""
+
+    def __init__(self, path: object, message: str, *, type_name: str | None = None, field: str | None = None):
+        where = str(path)
+        if type_name:
+            where += f": type {type_name}"
+        if field:
+            where += f": field '{field}'"
+        super().__init__(f"{where}: {message}")
+        self.path, self.type_name, self.field = path, type_name, field
+
+
+class StoreError(CtxsearchError):
+    """A knowledge store that cannot be used (not ours, newer schema, other catalog)."""

@@ -1,0 +1,190 @@
+"""Relation geometry: object instances, world-frame relation volumes v_rel(b), and holds(rel, obj, b).
+
+This is the one geometry code path: the room generator, the ground-truth statistics, the oracle
+perception and the robot's camera-based perception all decide relations here.
+
+All boxes are yaw-only (upright), so the overlap test is exact and cheap: the z intervals must
+overlap, and the two rectangles in the ground plane must overlap on all four separating axes
+(the edge normals of both rectangles). "Positive volume" means every one of those overlaps is
+larger than ``EPS`` (1 mm), so boxes that merely touch (a cup resting on a desk top is *touching*
+the desk but not inside it) do not count as overlapping.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from knowledge.catalog import Catalog, RelationSpec
+
+EPS = 1e-3  # metres: overlaps thinner than this count as touching, not overlapping
+
+
+@dataclass(frozen=True)
+class ObjectInstance:
+    """An object somewhere: its type, a unique instance id, bounding-box centre, yaw and full size.
+
+    The same value flows from the room generator through perception into relation checks.
+    ``position`` is the centre of the bounding box (z included), ``size`` its full extents along
+    the object's local (x=front, y=left, z=up) axes, ``yaw`` the rotation about world z in radians.
+    """
+
+    type: str
+    id: int
+    position: tuple[float, float, float]
+    yaw: float
+    size: tuple[float, float, float]
+
+    @property
+    def bottom(self) -> float:
+        """z of the underside of the bounding box."""
+        return self.position[2] - self.size[2] / 2
+
+    @property
+    def top(self) -> float:
+        """z of the top of the bounding box."""
+        return self.position[2] + self.size[2] / 2
+
+    def box(self) -> Box:
+        """The object's own bounding box."""
+        return Box(np.asarray(self.position, float), float(self.yaw), np.asarray(self.size, float) / 2)
+
+
+@dataclass(frozen=True)
+class Box:
+    """A yaw-only box in world coordinates: centre (3,), yaw (rad), half extents (3,)."""
+
+    center: np.ndarray
+    yaw: float
+    half: np.ndarray
+
+    def corners_xy(self) -> np.ndarray:
+        """The four ground-plane corners, (4, 2), counter-clockwise."""
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        hx, hy = self.half[0], self.half[1]
+        local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+        rot = np.array([[c, -s], [s, c]])
+        return local @ rot.T + self.center[:2]
+
+    def corners(self) -> np.ndarray:
+        """All eight corners, (8, 3)."""
+        xy = self.corners_xy()
+        zlo, zhi = self.center[2] - self.half[2], self.center[2] + self.half[2]
+        return np.vstack([np.column_stack([xy, np.full(4, zlo)]), np.column_stack([xy, np.full(4, zhi)])])
+
+    def contains_points(self, pts: np.ndarray) -> np.ndarray:
+        """Boolean mask of which points (N, 3) lie inside the box (boundary included)."""
+        pts = np.atleast_2d(np.asarray(pts, float))
+        d = pts - self.center
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        lx = c * d[:, 0] + s * d[:, 1]
+        ly = -s * d[:, 0] + c * d[:, 1]
+        return (np.abs(lx) <= self.half[0]) & (np.abs(ly) <= self.half[1]) & (np.abs(d[:, 2]) <= self.half[2])
+
+    @property
+    def volume(self) -> float:
+        """The box's volume in cubic metres."""
+        return float(8 * np.prod(self.half))
+
+
+@dataclass(frozen=True)
+class BoxArray:
+    """Many yaw-only boxes as arrays: centers (N, 3), yaws (N,), halves (N, 3)."""
+
+    centers: np.ndarray
+    yaws: np.ndarray
+    halves: np.ndarray
+
+    @classmethod
+    def from_instances(cls, objs: Sequence[ObjectInstance]) -> BoxArray:
+        """Pack object instances' bounding boxes into arrays."""
+        if not objs:
+            return cls(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+        return cls(
+            np.array([o.position for o in objs], float),
+            np.array([o.yaw for o in objs], float),
+            np.array([o.size for o in objs], float) / 2,
+        )
+
+    def __len__(self) -> int:
+        return len(self.yaws)
+
+
+def overlaps(boxes: BoxArray, box: Box, eps: float = EPS) -> np.ndarray:
+    """Which of ``boxes`` overlap ``box`` with positive volume (every axis overlap > eps). (N,) bool."""
+    n = len(boxes)
+    if n == 0:
+        return np.zeros(0, bool)
+    # z: interval overlap.
+    z_ov = np.minimum(boxes.centers[:, 2] + boxes.halves[:, 2], box.center[2] + box.half[2]) - np.maximum(
+        boxes.centers[:, 2] - boxes.halves[:, 2], box.center[2] - box.half[2]
+    )
+    ok = z_ov > eps
+    # ground plane: separating-axis test on the 4 edge normals (2 of each rectangle).
+    d = boxes.centers[:, :2] - box.center[:2]  # (N, 2)
+    ca, sa = np.cos(boxes.yaws), np.sin(boxes.yaws)  # (N,)
+    cb, sb = np.cos(box.yaw), np.sin(box.yaw)
+    ua = np.stack([np.stack([ca, sa], -1), np.stack([-sa, ca], -1)], 1)  # (N, 2 axes, 2)
+    ub = np.array([[cb, sb], [-sb, cb]])  # (2 axes, 2)
+    ha = boxes.halves[:, :2]  # (N, 2)
+    hb = box.half[:2]
+    # Axes of the many boxes.
+    for k in range(2):
+        axis = ua[:, k, :]  # (N, 2)
+        dist = np.abs(np.einsum("ij,ij->i", d, axis))
+        rb = np.abs(axis @ ub.T) @ hb  # (N,)
+        ok &= ha[:, k] + rb - dist > eps
+    # Axes of the single box.
+    for k in range(2):
+        axis = ub[k]
+        dist = np.abs(d @ axis)
+        ra = np.abs(ua @ axis) * ha  # (N, 2)
+        ok &= ra.sum(1) + hb[k] - dist > eps
+    return ok
+
+
+def relation_volume(rel: RelationSpec, ref: ObjectInstance) -> Box:
+    """v_rel(b): the world-frame box of relation ``rel`` for the reference object ``ref``."""
+    lo, hi = rel.local_bounds(np.asarray(ref.size, float))
+    center_local = (lo + hi) / 2
+    c, s = np.cos(ref.yaw), np.sin(ref.yaw)
+    center = np.array(
+        [
+            ref.position[0] + c * center_local[0] - s * center_local[1],
+            ref.position[1] + s * center_local[0] + c * center_local[1],
+            ref.position[2] + center_local[2],
+        ]
+    )
+    return Box(center, float(ref.yaw), (hi - lo) / 2)
+
+
+def holds(rel: RelationSpec, obj: ObjectInstance, ref: ObjectInstance) -> bool:
+    """rel(obj, ref): obj lies at least partly inside v_rel(ref). An object is never related to itself."""
+    if obj.id == ref.id:
+        return False
+    return bool(overlaps(BoxArray.from_instances([obj]), relation_volume(rel, ref))[0])
+
+
+def related(
+    catalog: Catalog, ref: ObjectInstance, objects: Iterable[ObjectInstance]
+) -> list[tuple[str, ObjectInstance]]:
+    """Every (relation name, object) with rel(object, ref) for rel in RELATIONS(type(ref)).
+
+    Figure 2, lines 15-16: RELATED-OBJECTS are the objects, RELATED-TYPES the (rel, type) pairs.
+    """
+    others = [o for o in objects if o.id != ref.id]
+    if not others:
+        return []
+    arr = BoxArray.from_instances(others)
+    out: list[tuple[str, ObjectInstance]] = []
+    for rel in catalog.type(ref.type).relations:
+        mask = overlaps(arr, relation_volume(rel, ref))
+        out.extend((rel.name, others[i]) for i in np.flatnonzero(mask))
+    return out
+
+
+def related_pairs(related_list: Iterable[tuple[str, ObjectInstance]]) -> set[tuple[str, str]]:
+    """RELATED-TYPES: the distinct (relation, type) pairs of a ``related`` result."""
+    return {(rel, o.type) for rel, o in related_list}

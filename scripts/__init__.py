@@ -1,0 +1,1 @@
+"""Command-line entry points (thin: parse, call into agent/ envs/ knowledge/, print)."""

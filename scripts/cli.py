@@ -1,0 +1,64 @@
+"""``ctxsearch``: the command-line interface.
+
+Each sub-command lives in its own thin module ``scripts/cmd_<name>.py`` exposing
+``register(subparsers)`` (and, for benchmarks, ``register_bench(bench_subparsers)``); handlers
+import heavy modules (MuJoCo, rerun) lazily so ``ctxsearch kb show`` starts fast.
+
+Errors a user can fix (bad files, unknown names, incompatible stores) are CtxsearchError: they
+print one line, ``ctxsearch: error: ...``, and exit with code 2. Ctrl-C exits with 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+# Sub-command modules, in the order `ctxsearch --help` lists them.
+COMMAND_MODULES = [
+    "scripts.cmd_kb",
+]
+# Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
+BENCH_MODULES = [
+    "scripts.cmd_kb",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every sub-command registered."""
+    parser = argparse.ArgumentParser(
+        prog="ctxsearch",
+        description="A simulated pan-tilt camera robot that learns spatial context as confidence "
+        "intervals (Wixson 1991) and uses it to find objects.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    bench = sub.add_parser("bench", help="run a benchmark (prints a table, writes JSON/Markdown/plot)")
+    bench_sub = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
+    for name in BENCH_MODULES:
+        importlib.import_module(name).register_bench(bench_sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``ctxsearch`` console script."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+    from knowledge.errors import CtxsearchError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CtxsearchError as exc:
+        print(f"ctxsearch: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("ctxsearch: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
