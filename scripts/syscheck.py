@@ -13,7 +13,7 @@ APT = "apt-get install -y libegl1 libgl1-mesa-dri libgles2"
 
 
 def main() -> int:
-    if sys.version_info < (3, 11):
+    if sys.version_info < (3, 11):  # noqa: UP036 - runs with the system Python, before the venv
         print(f"ctxsearch needs Python >= 3.11 (found {sys.version.split()[0]})", file=sys.stderr)
         return 1
     for lib in ("EGL", "GL"):
