@@ -51,6 +51,9 @@ SHAPES = (
     "laptop",
     "plant",
     "mug",
+    "keyboard",
+    "microscope",
+    "bottle",
 )
 TYPE_FIELDS = {"name", "kind", "shape", "size", "color", "min_pixels", "max_range", "relation"}
 RELATION_FIELDS = {"name", "lo", "hi", "margin_lo", "margin_hi"}
