@@ -200,7 +200,8 @@ def _parse_size(path: Path, tname: str, value: object) -> tuple[tuple, tuple]:
     if isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value):
         pairs = []
         for v in value:
-            if len(v) != 2 or not all(isinstance(x, int | float) for x in v) or v[0] > v[1]:
+            if (len(v) != 2 or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+                    or v[0] > v[1]):
                 raise CatalogError(path, f"each axis range must be [min, max], got {v!r}",
                                    type_name=tname, field="size")
             pairs.append((float(v[0]), float(v[1])))

@@ -57,9 +57,16 @@ def d(y, n, alpha: float = DEFAULT_ALPHA):
 
 
 def interval(y, n, alpha: float = DEFAULT_ALPHA):
-    """The (low, high) confidence interval p0 -/+ d for P(rel(B)), clipped to [0, 1] for round-off."""
+    """The (low, high) confidence interval p0 -/+ d for P(rel(B)), clipped to [0, 1] for round-off.
+
+    The Wilson bounds are exactly 0 at y = 0 and exactly 1 at y = n; they are returned as such
+    (p0 - d alone leaves ~1e-17 of round-off, which would make sorting by lower bound arbitrary).
+    """
     c, h = p0(y, n, alpha), d(y, n, alpha)
-    return np.clip(c - h, 0.0, 1.0)[()], np.clip(c + h, 0.0, 1.0)[()]
+    y, n = np.asarray(y, float), np.asarray(n, float)
+    lo = np.where(y == 0, 0.0, np.clip(c - h, 0.0, 1.0))
+    hi = np.where(y == n, 1.0, np.clip(c + h, 0.0, 1.0))
+    return lo[()], hi[()]
 
 
 def impact(y, n, alpha: float = DEFAULT_ALPHA):
