@@ -1,0 +1,528 @@
+"""The procedural room generator: ``generate_room(style, seed) -> RoomLayout`` (pure data).
+
+Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(style name)])``,
+so the same (style, seed) always gives the same layout, on any machine.
+
+Order of work:
+1. Room size and door (a gap in one wall; about 1 m in front of it stays free).
+2. Furniture from ``[furniture]``, largest first, on the floor: desks, shelves, cabinets,
+   counters, beds and (often) sofas with their back to a wall and their front facing the room;
+   tables and chairs free-standing. Furniture bounding boxes never overlap.
+3. Placement rules in file order: for each instance a of ``ref``, with probability p, ``count``
+   instances of ``type`` such that ``holds(relation, b, a)``: small objects rest on a support
+   surface (``envs.parts``) or the floor, furniture stands on the floor (a chair in front of a
+   desk faces it).
+4. Clutter: small objects anywhere on a furniture surface or the floor.
+
+Every candidate position is checked against the solid parts (``envs.parts.world_parts``) of
+everything already placed with ``knowledge.geometry.overlaps``, so nothing interpenetrates
+(touching is fine: a cup on a desk top touches it; a book is inside a shelf's bounding box but
+not inside its boards). Everything that stands on the floor is also checked on a 10 cm
+occupancy grid: the space where the robot's base centre can be (``RobotSpec().clearance`` from
+every obstacle and wall) must be one connected region that contains the door's entry, and every
+piece of furniture must be reachable - a free cell within ``REACH`` of its front (or of any side,
+for tables and chairs). A candidate that breaks this is rejected; a piece that cannot be placed
+is dropped, and if that leaves a furniture type below the style's minimum, the whole room is
+redrawn.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from envs.layout import Door, RoomLayout
+from envs.parts import WorldSurface, world_parts_array, world_surfaces
+from envs.robot_spec import RobotSpec
+from envs.styles import Rule, Style
+from knowledge.catalog import Catalog, ObjectType, load_catalog
+from knowledge.geometry import EPS, Box, BoxArray, ObjectInstance, relation_volume
+
+GRID = 0.1  # m, occupancy grid resolution for the free-space check
+REACH = 0.6  # m beyond the robot's clearance: how close the base must get to a piece's front
+DOOR_KEEP = 1.0  # m kept free in front of the door
+WALL_GAP = 0.005  # m between a wall and furniture standing against it
+MIN_POCKET_CELLS = 10  # free components smaller than this (0.1 m^2) are ignored
+# The generator's check keeps this much more than the robot's clearance, so that a passage it
+# finds open stays open on any other grid (navigation may discretise differently).
+GRID_SLACK = 0.07
+MAX_ROOM_ATTEMPTS = 12
+FURNITURE_TRIES = 60
+OBJECT_TRIES = 30
+# Probability that a piece of furniture of this shape stands with its back to a wall.
+WALL_PROB = {"desk": 0.75, "shelf": 1.0, "cabinet": 0.95, "counter": 1.0, "bed": 1.0,
+             "sofa": 0.5, "table": 0.15, "chair": 0.1}
+# Shapes whose front matters for reachability; others can be reached from any side.
+FRONTED = {"desk", "shelf", "cabinet", "counter", "sofa", "bed"}
+# Small objects that face the way their support or reference faces (screens, keyboards...).
+ALIGNED = {"monitor", "laptop", "keyboard", "microscope"}
+WALLS = ("north", "south", "east", "west")
+
+
+def style_hash(name: str) -> int:
+    """A stable (cross-process, cross-platform) hash of a style name for seeding."""
+    return zlib.crc32(name.encode("utf-8"))
+
+
+def _rect_dist(px: np.ndarray, py: np.ndarray, cx, cy, yaw, hx, hy) -> np.ndarray:
+    """Distance from points to a yaw-rotated rectangle (0 inside)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    dx, dy = px - cx, py - cy
+    lx, ly = c * dx + s * dy, -s * dx + c * dy
+    return np.hypot(np.maximum(np.abs(lx) - hx, 0.0), np.maximum(np.abs(ly) - hy, 0.0))
+
+
+@dataclass
+class _Obstacle:
+    """A floor footprint the robot cannot drive through (a furniture bbox, a floor object)."""
+
+    obj: ObjectInstance
+    dist: np.ndarray  # distance of every grid cell to the footprint
+    reach_mask: np.ndarray | None  # cells from which the robot can look at it (furniture only)
+
+
+class _Builder:
+    """Mutable state while one room is being generated."""
+
+    def __init__(self, style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec):
+        self.style, self.catalog, self.rng = style, catalog, rng
+        self.clear = robot.clearance
+        self.width = float(rng.uniform(*style.width))
+        self.depth = float(rng.uniform(*style.depth))
+        self.height = float(rng.uniform(*style.height))
+        self.door = self._draw_door()
+        self.objects: list[ObjectInstance] = []
+        self.support: dict[int, int | None] = {}
+        self.placed_by: dict[int, tuple[int, str]] = {}
+        self.resting: dict[int, WorldSurface | None] = {}  # the surface each object rests on
+        self.furniture_boxes: list[Box] = []
+        self._parts: list[BoxArray] = []
+        self._parts_cache: BoxArray | None = None
+        self._radius_cache: np.ndarray | None = None
+        self.surfaces: list[WorldSurface] = []
+        # Occupancy grid: cell centres.
+        nx, ny = max(2, int(self.width / GRID)), max(2, int(self.depth / GRID))
+        xs = -self.width / 2 + (np.arange(nx) + 0.5) * self.width / nx
+        ys = -self.depth / 2 + (np.arange(ny) + 0.5) * self.depth / ny
+        self.gx, self.gy = np.meshgrid(xs, ys, indexing="ij")
+        wall = self.clear + GRID_SLACK
+        self.wall_free = (np.abs(self.gx) <= self.width / 2 - wall) & (np.abs(self.gy) <= self.depth / 2 - wall)
+        self.dmin = np.full(self.gx.shape, np.inf)
+        self.obstacles: list[_Obstacle] = []
+        ex, ey = self._door_entry()
+        self.entry_cell = (int(np.argmin(np.abs(xs - ex))), int(np.argmin(np.abs(ys - ey))))
+        self.door_box = self._door_zone()
+
+    # -- room shell -------------------------------------------------------------------------
+    def _draw_door(self) -> Door:
+        rng = self.rng
+        wall = WALLS[int(rng.integers(4))]
+        width = float(rng.uniform(*self.style.door_width))
+        length = self.width if wall in ("north", "south") else self.depth
+        span = max(0.0, length / 2 - width / 2 - 0.3)
+        return Door(wall=wall, center=float(rng.uniform(-span, span)), width=width)
+
+    def _inward(self, wall: str) -> tuple[float, float, float, float]:
+        """(x, y of the wall's centre line point at along=0, inward unit normal nx, ny)."""
+        W, D = self.width / 2, self.depth / 2
+        return {"north": (0.0, D, 0.0, -1.0), "south": (0.0, -D, 0.0, 1.0),
+                "east": (W, 0.0, -1.0, 0.0), "west": (-W, 0.0, 1.0, 0.0)}[wall]
+
+    def _wall_point(self, wall: str, along: float, inset: float) -> tuple[float, float]:
+        x0, y0, nx, ny = self._inward(wall)
+        # "along" runs along x for north/south walls and along y for east/west walls.
+        if wall in ("north", "south"):
+            return along, y0 + ny * inset
+        return x0 + nx * inset, along
+
+    def _door_entry(self) -> tuple[float, float]:
+        return self._wall_point(self.door.wall, self.door.center, 0.6)
+
+    def _door_zone(self) -> Box:
+        cx, cy = self._wall_point(self.door.wall, self.door.center, DOOR_KEEP / 2)
+        half_along = self.door.width / 2 + 0.15
+        if self.door.wall in ("north", "south"):
+            half = (half_along, DOOR_KEEP / 2, 5.0)
+        else:
+            half = (DOOR_KEEP / 2, half_along, 5.0)
+        return Box(np.array([cx, cy, 0.0]), 0.0, np.array(half))
+
+    # -- bookkeeping --------------------------------------------------------------------------
+    def next_id(self) -> int:
+        return len(self.objects) + 1
+
+    @property
+    def parts(self) -> BoxArray:
+        if self._parts_cache is None:
+            if self._parts:
+                self._parts_cache = BoxArray(np.concatenate([p.centers for p in self._parts]),
+                                             np.concatenate([p.yaws for p in self._parts]),
+                                             np.concatenate([p.halves for p in self._parts]))
+            else:
+                self._parts_cache = BoxArray(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+        return self._parts_cache
+
+    def collides(self, parts: BoxArray) -> bool:
+        """True if any of ``parts`` overlaps (positive volume) a part already placed."""
+        allp = self.parts
+        if len(allp) == 0:
+            return False
+        # Cheap pre-filter: bounding circles in the ground plane and z intervals.
+        if self._radius_cache is None or len(self._radius_cache) != len(allp):
+            self._radius_cache = np.hypot(allp.halves[:, 0], allp.halves[:, 1])
+        rad = np.hypot(parts.halves[:, 0], parts.halves[:, 1])
+        lo = parts.centers - np.column_stack([rad, rad, parts.halves[:, 2]])
+        hi = parts.centers + np.column_stack([rad, rad, parts.halves[:, 2]])
+        cx, cy = (lo[:, 0].min() + hi[:, 0].max()) / 2, (lo[:, 1].min() + hi[:, 1].max()) / 2
+        r = math.hypot(hi[:, 0].max() - lo[:, 0].min(), hi[:, 1].max() - lo[:, 1].min()) / 2
+        d = np.hypot(allp.centers[:, 0] - cx, allp.centers[:, 1] - cy)
+        near = (d < r + self._radius_cache) & (allp.centers[:, 2] - allp.halves[:, 2] < hi[:, 2].max() - EPS) & (
+            allp.centers[:, 2] + allp.halves[:, 2] > lo[:, 2].min() + EPS)
+        idx = np.flatnonzero(near)
+        if len(idx) == 0:
+            return False
+        return overlap_any(BoxArray(allp.centers[idx], allp.yaws[idx], allp.halves[idx]), parts)
+
+    def inside_room(self, obj: ObjectInstance) -> bool:
+        xy = obj.box().corners_xy()
+        return bool(np.all(np.abs(xy[:, 0]) <= self.width / 2 + 1e-9)
+                    and np.all(np.abs(xy[:, 1]) <= self.depth / 2 + 1e-9)
+                    and obj.top <= self.height)
+
+    def in_door_zone(self, obj: ObjectInstance) -> bool:
+        return box_overlap(obj.box(), self.door_box)
+
+    def add(self, obj: ObjectInstance, parts: BoxArray, surface: WorldSurface | None,
+            obstacle: _Obstacle | None = None, placed_by: tuple[int, str] | None = None) -> None:
+        self.objects.append(obj)
+        self._parts.append(parts)
+        self._parts_cache = None
+        self.support[obj.id] = None if surface is None else surface.owner
+        self.resting[obj.id] = surface
+        if placed_by is not None:
+            self.placed_by[obj.id] = placed_by
+        if self.catalog.type(obj.type).is_furniture:
+            self.furniture_boxes.append(obj.box())
+            self.surfaces.extend(world_surfaces(obj, self.catalog))
+        if obstacle is not None:
+            self.obstacles.append(obstacle)
+            self.dmin = np.minimum(self.dmin, obstacle.dist)
+
+    # -- free space -----------------------------------------------------------------------------
+    def make_obstacle(self, obj: ObjectInstance, furniture: bool) -> _Obstacle:
+        b = obj.box()
+        dist = _rect_dist(self.gx, self.gy, b.center[0], b.center[1], b.yaw, b.half[0], b.half[1])
+        reach = None
+        if furniture:
+            reach = dist <= self.clear + GRID_SLACK + REACH
+            if self.catalog.type(obj.type).shape in FRONTED:
+                c, s = math.cos(b.yaw), math.sin(b.yaw)
+                lx = c * (self.gx - b.center[0]) + s * (self.gy - b.center[1])
+                reach &= lx > b.half[0]
+        return _Obstacle(obj, dist, reach)
+
+    def free_space_ok(self, extra: _Obstacle | None = None) -> bool:
+        """Is the robot's free space one region holding the door entry, reaching all furniture?"""
+        dmin = self.dmin if extra is None else np.minimum(self.dmin, extra.dist)
+        free = self.wall_free & (dmin > self.clear + GRID_SLACK)
+        if not free[self.entry_cell]:
+            return False
+        labels, n = ndimage.label(free)
+        main = labels[self.entry_cell]
+        if n > 1:
+            sizes = np.bincount(labels.ravel(), minlength=n + 1)
+            sizes[0] = 0
+            sizes[main] = 0
+            if sizes.max() >= MIN_POCKET_CELLS:
+                return False
+        reachable = labels == main
+        obstacles = self.obstacles if extra is None else [*self.obstacles, extra]
+        return all(not (o.reach_mask is not None and not np.any(o.reach_mask & reachable))
+                   for o in obstacles)
+
+    # -- furniture ------------------------------------------------------------------------------
+    def try_furniture(self, obj: ObjectInstance, placed_by: tuple[int, str] | None = None) -> bool:
+        """Add a piece of furniture if it fits: inside, clear of the door, no overlaps, free space."""
+        if not self.inside_room(obj) or self.in_door_zone(obj):
+            return False
+        box = obj.box()
+        if any(box_overlap(box, other) for other in self.furniture_boxes):
+            return False
+        parts = world_parts_array(obj, self.catalog)
+        if self.collides(parts):
+            return False
+        obstacle = self.make_obstacle(obj, furniture=True)
+        if not self.free_space_ok(obstacle):
+            return False
+        self.add(obj, parts, None, obstacle, placed_by)
+        return True
+
+    def furniture_candidate(self, ot: ObjectType, size, oid: int) -> ObjectInstance:
+        rng = self.rng
+        sx, sy, sz = size
+        if rng.random() < WALL_PROB.get(ot.shape, 0.3):
+            lengths = np.array([self.width, self.width, self.depth, self.depth])
+            wall = WALLS[int(rng.choice(4, p=lengths / lengths.sum()))]
+            length = self.width if wall in ("north", "south") else self.depth
+            span = max(0.0, length / 2 - sy / 2 - WALL_GAP)
+            along = float(rng.uniform(-span, span))
+            x, y = self._wall_point(wall, along, sx / 2 + WALL_GAP)
+            _, _, nx, ny = self._inward(wall)
+            yaw = math.atan2(ny, nx)
+        else:
+            r = math.hypot(sx, sy) / 2
+            x = float(rng.uniform(-self.width / 2 + r, self.width / 2 - r)) if self.width > 2 * r else 0.0
+            y = float(rng.uniform(-self.depth / 2 + r, self.depth / 2 - r)) if self.depth > 2 * r else 0.0
+            yaw = float(rng.integers(4)) * math.pi / 2
+            if rng.random() < 0.3:
+                yaw += float(rng.uniform(-0.15, 0.15))
+        return ObjectInstance(ot.name, oid, (x, y, sz / 2), _wrap(yaw), size)
+
+    def place_furniture(self, tname: str) -> bool:
+        ot = self.catalog.type(tname)
+        size = ot.sample_size(self.rng)
+        oid = self.next_id()
+        for _ in range(FURNITURE_TRIES):
+            if self.try_furniture(self.furniture_candidate(ot, size, oid)):
+                return True
+        return False
+
+    def place_furniture_by_rule(self, rule: Rule, ref: ObjectInstance) -> bool:
+        ot = self.catalog.type(rule.type)
+        rel = self.catalog.relation(rule.relation)
+        vol = relation_volume(rel, ref)
+        size = ot.sample_size(self.rng)
+        oid = self.next_id()
+        c, s = math.cos(vol.yaw), math.sin(vol.yaw)
+        for _ in range(FURNITURE_TRIES):
+            u = float(self.rng.uniform(-vol.half[0], vol.half[0]))
+            v = float(self.rng.uniform(-vol.half[1], vol.half[1]))
+            x, y = vol.center[0] + c * u - s * v, vol.center[1] + s * u + c * v
+            if ot.shape == "chair":  # sits facing its reference
+                yaw = math.atan2(ref.position[1] - y, ref.position[0] - x) + float(self.rng.uniform(-0.2, 0.2))
+            else:
+                yaw = ref.yaw + float(self.rng.integers(4)) * math.pi / 2
+            obj = ObjectInstance(ot.name, oid, (float(x), float(y), size[2] / 2), _wrap(yaw), size)
+            if box_overlap(obj.box(), vol) and self.try_furniture(obj, (ref.id, rel.name)):
+                return True
+        return False
+
+    # -- small objects ----------------------------------------------------------------------------
+    def floor_surface(self) -> WorldSurface:
+        return WorldSurface(owner=-1, center=(0.0, 0.0, 0.0), yaw=0.0,
+                            half_xy=(self.width / 2, self.depth / 2), clearance=self.height)
+
+    def small_yaw(self, ot: ObjectType, facing: float | None) -> float:
+        if ot.shape in ALIGNED and facing is not None:
+            return _wrap(facing + float(self.rng.uniform(-0.25, 0.25)))
+        return float(self.rng.uniform(-math.pi, math.pi))
+
+    def try_small(self, ot: ObjectType, size, yaw: float, surf: WorldSurface, oid: int,
+                  region: tuple[float, float, float, float] | None,
+                  check=None, placed_by: tuple[int, str] | None = None) -> bool:
+        """Sample a spot for a small object on ``surf`` and add it if it is valid."""
+        sx, sy, sz = size
+        if sz > surf.clearance:
+            return False
+        d = yaw - surf.yaw
+        ex = abs(math.cos(d)) * sx / 2 + abs(math.sin(d)) * sy / 2
+        ey = abs(math.sin(d)) * sx / 2 + abs(math.cos(d)) * sy / 2
+        lo_u, hi_u = -surf.half_xy[0] + ex, surf.half_xy[0] - ex
+        lo_v, hi_v = -surf.half_xy[1] + ey, surf.half_xy[1] - ey
+        if region is not None:  # proposal rect (u0, u1, v0, v1) in the surface frame
+            lo_u, hi_u = max(lo_u, region[0] - ex), min(hi_u, region[1] + ex)
+            lo_v, hi_v = max(lo_v, region[2] - ey), min(hi_v, region[3] + ey)
+        if lo_u > hi_u or lo_v > hi_v:
+            return False
+        u, v = float(self.rng.uniform(lo_u, hi_u)), float(self.rng.uniform(lo_v, hi_v))
+        c, s = math.cos(surf.yaw), math.sin(surf.yaw)
+        x = surf.center[0] + c * u - s * v
+        y = surf.center[1] + s * u + c * v
+        obj = ObjectInstance(ot.name, oid, (x, y, surf.center[2] + sz / 2), _wrap(yaw), size)
+        if check is not None and not check(obj):
+            return False
+        on_floor = surf.owner < 0
+        if on_floor and self.in_door_zone(obj):
+            return False
+        parts = world_parts_array(obj, self.catalog)
+        if self.collides(parts):
+            return False
+        obstacle = None
+        if on_floor:
+            obstacle = self.make_obstacle(obj, furniture=False)
+            if not self.free_space_ok(obstacle):
+                return False
+        self.add(obj, parts, None if on_floor else surf, obstacle, placed_by)
+        return True
+
+    def place_small_by_rule(self, rule: Rule, ref: ObjectInstance) -> bool:
+        ot = self.catalog.type(rule.type)
+        rel = self.catalog.relation(rule.relation)
+        vol = relation_volume(rel, ref)
+        size = ot.sample_size(self.rng)
+        h = size[2]
+        zlo, zhi = vol.center[2] - vol.half[2], vol.center[2] + vol.half[2]
+
+        def reaches(z: float) -> bool:  # an object resting at z overlaps the volume in z
+            return min(z + h, zhi) - max(z, zlo) > EPS
+
+        own = [s for s in world_surfaces(ref, self.catalog) if reaches(s.center[2]) and s.clearance >= h]
+        below = self.resting.get(ref.id)
+        sup = [below] if below is not None and reaches(below.center[2]) and below.clearance >= h else []
+        floor = [self.floor_surface()] if reaches(0.0) else []
+        if rule.on == "floor":
+            tiers = [floor]
+        elif rule.on == "surface":
+            tiers = [own + sup]
+        else:
+            tiers = [own, sup, floor]
+        cands = next((t for t in tiers if t), [])
+        if not cands:
+            return False
+        weights = np.array([s.area for s in cands])
+        weights = weights / weights.sum()
+        oid = self.next_id()
+        facing = ref.yaw
+
+        def check(obj: ObjectInstance) -> bool:  # holds(rel, obj, ref), fast
+            return box_overlap(obj.box(), vol)
+
+        for _ in range(OBJECT_TRIES):
+            surf = cands[int(self.rng.choice(len(cands), p=weights))] if len(cands) > 1 else cands[0]
+            yaw = self.small_yaw(ot, facing)
+            region = _volume_region(vol, surf)
+            if self.try_small(ot, size, yaw, surf, oid, region, check, (ref.id, rel.name)):
+                return True
+        return False
+
+    def place_clutter(self, tname: str) -> bool:
+        ot = self.catalog.type(tname)
+        size = ot.sample_size(self.rng)
+        oid = self.next_id()
+        surfaces = [s for s in self.surfaces if s.clearance >= size[2]]
+        weights = np.array([s.area for s in surfaces]) if surfaces else np.zeros(0)
+        for _ in range(OBJECT_TRIES):
+            if not surfaces or self.rng.random() < 0.2:
+                surf = self.floor_surface()
+                facing = None
+            else:
+                surf = surfaces[int(self.rng.choice(len(surfaces), p=weights / weights.sum()))]
+                facing = surf.yaw
+            if self.try_small(ot, size, self.small_yaw(ot, facing), surf, oid, None):
+                return True
+        return False
+
+
+def overlap_any(a: BoxArray, b: BoxArray, eps: float = EPS) -> bool:
+    """True if some box of ``a`` overlaps some box of ``b`` with positive volume.
+
+    The same separating-axis test as ``knowledge.geometry.overlaps`` (every axis overlap > eps),
+    done for all pairs at once.
+    """
+    if len(a) == 0 or len(b) == 0:
+        return False
+    alo, ahi = a.centers[:, None, 2] - a.halves[:, None, 2], a.centers[:, None, 2] + a.halves[:, None, 2]
+    blo, bhi = b.centers[None, :, 2] - b.halves[None, :, 2], b.centers[None, :, 2] + b.halves[None, :, 2]
+    ok = np.minimum(ahi, bhi) - np.maximum(alo, blo) > eps
+    if not ok.any():
+        return False
+    delta = a.yaws[:, None] - b.yaws[None, :]
+    C, S = np.abs(np.cos(delta)), np.abs(np.sin(delta))
+    dx = b.centers[None, :, 0] - a.centers[:, None, 0]
+    dy = b.centers[None, :, 1] - a.centers[:, None, 1]
+    ca, sa = np.cos(a.yaws)[:, None], np.sin(a.yaws)[:, None]
+    cb, sb = np.cos(b.yaws)[None, :], np.sin(b.yaws)[None, :]
+    ha0, ha1 = a.halves[:, None, 0], a.halves[:, None, 1]
+    hb0, hb1 = b.halves[None, :, 0], b.halves[None, :, 1]
+    ok &= ha0 + C * hb0 + S * hb1 - np.abs(dx * ca + dy * sa) > eps
+    ok &= ha1 + S * hb0 + C * hb1 - np.abs(-dx * sa + dy * ca) > eps
+    ok &= hb0 + C * ha0 + S * ha1 - np.abs(dx * cb + dy * sb) > eps
+    ok &= hb1 + S * ha0 + C * ha1 - np.abs(-dx * sb + dy * cb) > eps
+    return bool(ok.any())
+
+
+def box_overlap(a: Box, b: Box, eps: float = EPS) -> bool:
+    """Two yaw-only boxes overlap with positive volume: ``knowledge.geometry.overlaps`` for one
+    pair, in plain floats (fast for the generator's many single checks)."""
+    az, bz = float(a.center[2]), float(b.center[2])
+    ah, bh = a.half, b.half
+    if min(az + ah[2], bz + bh[2]) - max(az - ah[2], bz - bh[2]) <= eps:
+        return False
+    ca, sa, cb, sb = math.cos(a.yaw), math.sin(a.yaw), math.cos(b.yaw), math.sin(b.yaw)
+    C, S = abs(ca * cb + sa * sb), abs(sa * cb - ca * sb)
+    dx, dy = float(b.center[0] - a.center[0]), float(b.center[1] - a.center[1])
+    ha0, ha1, hb0, hb1 = float(ah[0]), float(ah[1]), float(bh[0]), float(bh[1])
+    return (ha0 + C * hb0 + S * hb1 - abs(dx * ca + dy * sa) > eps
+            and ha1 + S * hb0 + C * hb1 - abs(-dx * sa + dy * ca) > eps
+            and hb0 + C * ha0 + S * ha1 - abs(dx * cb + dy * sb) > eps
+            and hb1 + S * ha0 + C * ha1 - abs(-dx * sb + dy * cb) > eps)
+
+
+def _wrap(a: float) -> float:
+    return float(math.atan2(math.sin(a), math.cos(a)))
+
+
+def _volume_region(vol: Box, surf: WorldSurface) -> tuple[float, float, float, float]:
+    """The volume's footprint as an axis-aligned rect (u0, u1, v0, v1) in the surface's frame
+    (its bounding rect if the two are not aligned): where to propose positions."""
+    c, s = math.cos(surf.yaw), math.sin(surf.yaw)
+    corners = vol.corners_xy() - np.asarray(surf.center[:2])
+    u = c * corners[:, 0] + s * corners[:, 1]
+    v = -s * corners[:, 0] + c * corners[:, 1]
+    return float(u.min()), float(u.max()), float(v.min()), float(v.max())
+
+
+def _furniture_order(style: Style, catalog: Catalog, rng: np.random.Generator) -> list[str]:
+    """The furniture to place (type names), largest footprint first."""
+    names = []
+    for tname, (lo, hi) in style.furniture:
+        names += [tname] * int(rng.integers(lo, hi + 1))
+    area = {t: catalog.type(t).size_max[0] * catalog.type(t).size_max[1] for t in names}
+    return sorted(names, key=lambda t: -area[t])  # stable: file order among equals
+
+
+def _build(style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec,
+           strict: bool) -> _Builder | None:
+    b = _Builder(style, catalog, rng, robot)
+    placed: dict[str, int] = {}
+    for tname in _furniture_order(style, catalog, rng):
+        if b.place_furniture(tname):
+            placed[tname] = placed.get(tname, 0) + 1
+    if strict and any(placed.get(t, 0) < lo for t, (lo, _) in style.furniture):
+        return None
+    for rule in style.rules:
+        refs = [o for o in b.objects if o.type == rule.ref]
+        is_furniture = catalog.type(rule.type).is_furniture
+        for ref in refs:
+            if rng.random() >= rule.p:
+                continue
+            for _ in range(int(rng.integers(rule.count[0], rule.count[1] + 1))):
+                if is_furniture:
+                    b.place_furniture_by_rule(rule, ref)
+                else:
+                    b.place_small_by_rule(rule, ref)
+    for tname, (lo, hi) in style.clutter:
+        for _ in range(int(rng.integers(lo, hi + 1))):
+            b.place_clutter(tname)
+    return b
+
+
+def generate_room(style: Style, seed: int, catalog: Catalog | None = None,
+                  robot: RobotSpec | None = None) -> RoomLayout:
+    """A furnished room of ``style``, the same for the same (style, seed)."""
+    catalog = catalog or load_catalog()
+    robot = robot or RobotSpec()
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name)])
+    b = None
+    for attempt in range(MAX_ROOM_ATTEMPTS):
+        b = _build(style, catalog, rng, robot, strict=attempt < MAX_ROOM_ATTEMPTS - 1)
+        if b is not None:
+            break
+    assert b is not None
+    return RoomLayout(style=style.name, seed=int(seed), width=b.width, depth=b.depth,
+                      height=b.height, door=b.door, objects=tuple(b.objects),
+                      support=dict(b.support), placed_by=dict(b.placed_by))
