@@ -2,16 +2,23 @@
 
 Counts follow Figure 1-2 of the paper: n_A counts examinations of objects of type A; y_{rel,B}
 (rel in RELATIONS(A)) counts those examinations in which at least one B stood in rel to the
-examined object. Only nonzero y are stored (a dict per reference type), so memory is O(nonzero).
+examined object.
+
+Storage is O(nonzero y), compact enough for the paper's 30 000 types: per reference type A, the
+nonzero y are kept as two small numpy arrays in CSR form over RELATIONS(A) (the related type's
+index, uint16 for up to 65 536 types, and y, in the smallest unsigned dtype that holds n_A), plus
+the per-relation offsets. A type never examined with a related object costs nothing.
 
 Intervals are derived from the counts whenever they are asked for, for every (rel, B) pair, not
 only for the pairs observed in the last examination (Figure 2 line 20 updates only those, though
 n_S changed for all pairs of S; see DESIGN.md).
 
 The HIF score of a type A (Figure 2, line 11) averages impact(y_{rel,t}, n_A) over rel in
-RELATIONS(A) and all t in TYPES. Since most y are 0 the average is computed as
-(sum over nonzero y + (R_A*T - nnz_A) * impact(0, n_A)) / (R_A*T): O(nnz of A), not O(T). Scores
-are cached per type and invalidated only for the type whose counts change.
+RELATIONS(A) and all t in TYPES. Most y are 0, so the average is
+(sum over nonzero y + (R_A*T - nnz_A) * impact(0, n_A)) / (R_A*T), and since the score depends
+only on the multiset of y values, impact is evaluated once per distinct y (at most n_A + 1 of
+them): O(nnz_A) with a small constant, never O(T). Scores are cached per type and invalidated
+only for the type whose counts change.
 """
 
 from __future__ import annotations
@@ -25,7 +32,8 @@ from knowledge import intervals
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
 
-ScoreFn = Callable[..., np.ndarray]  # (y, n, alpha) -> per-pair score, vectorised like intervals.impact
+# (y, n, alpha) -> per-pair score, vectorised like intervals.impact.
+ScoreFn = Callable[..., np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -47,6 +55,97 @@ class IntervalRow:
         return self.high - self.low
 
 
+def _count_dtype(n: int) -> type[np.unsignedinteger]:
+    """The smallest unsigned dtype that holds every y <= n."""
+    if n <= np.iinfo(np.uint16).max:
+        return np.uint16
+    if n <= np.iinfo(np.uint32).max:
+        return np.uint32
+    return np.uint64
+
+
+class _Counts:
+    """The nonzero y of one reference type, CSR over its relations.
+
+    Entries of relation r (local index in RELATIONS(A)) are ``types[offs[r]:offs[r+1]]`` (sorted
+    related-type indices) with counts ``ys[offs[r]:offs[r+1]]``.
+    """
+
+    __slots__ = ("offs", "types", "ys")
+
+    def __init__(self, n_rel: int, type_dtype, count_dtype):
+        self.offs = np.zeros(n_rel + 1, np.int64)
+        self.types = np.empty(0, type_dtype)
+        self.ys = np.empty(0, count_dtype)
+
+    def find(self, r: int, b: int) -> tuple[int, bool]:
+        """(position, present) of (r, b): where it is, or where it would be inserted."""
+        lo, hi = int(self.offs[r]), int(self.offs[r + 1])
+        i = lo + int(np.searchsorted(self.types[lo:hi], b))
+        return i, (i < hi and int(self.types[i]) == b)
+
+    def get(self, r: int, b: int) -> int:
+        i, present = self.find(r, b)
+        return int(self.ys[i]) if present else 0
+
+    def relation_of_entries(self) -> np.ndarray:
+        """The local relation index of every stored entry."""
+        return np.repeat(np.arange(len(self.offs) - 1), np.diff(self.offs))
+
+    def increment(self, pairs: Sequence[tuple[int, int]]) -> None:
+        """Add 1 to y of every (r, b) in ``pairs`` (distinct), inserting the new ones."""
+        new_pos, new_r, new_b = [], [], []
+        for r, b in sorted(pairs):
+            i, present = self.find(r, b)
+            if present:
+                self.ys[i] += 1
+            else:
+                new_pos.append(i)
+                new_r.append(r)
+                new_b.append(b)
+        if new_pos:
+            # Positions refer to the arrays before insertion; equal positions keep the (r, b)
+            # order, so the segments stay sorted.
+            self.types = np.insert(self.types, new_pos, np.asarray(new_b, self.types.dtype))
+            self.ys = np.insert(self.ys, new_pos, np.ones(len(new_pos), self.ys.dtype))
+            self.offs[1:] += np.cumsum(np.bincount(new_r, minlength=len(self.offs) - 1))
+
+    def replace(self, codes: np.ndarray, ys: np.ndarray, n_types: int, count_dtype) -> None:
+        """Set the entries from sorted unique codes r * T + b and their (positive) counts."""
+        r = codes // n_types
+        self.types = (codes - r * n_types).astype(self.types.dtype)
+        self.ys = ys.astype(count_dtype)
+        self.offs = np.searchsorted(r, np.arange(len(self.offs)), side="left").astype(np.int64)
+
+    def codes(self, n_types: int) -> np.ndarray:
+        """Every stored entry as the code r * T + b (int64, sorted)."""
+        return self.relation_of_entries().astype(np.int64) * n_types + self.types.astype(np.int64)
+
+
+def _d_fixed_n(y: np.ndarray, n: float, z: float) -> np.ndarray:
+    """Eq. 2 for a vector of y and one n > 0 (same values as intervals.d, fewer numpy passes)."""
+    z2 = z * z
+    scale = z / np.sqrt(n) / (1.0 + z2 / n)
+    return scale * np.sqrt(y * (n - y) * (1.0 / (n * n)) + z2 / (4.0 * n))
+
+
+def _impact_fixed_n(y: np.ndarray, n: int, alpha: float) -> np.ndarray:
+    """Eq. 3 for a vector of y and one n (same values as intervals.impact, within round-off)."""
+    if n == 0:
+        return np.broadcast_to(np.asarray(intervals.impact(0.0, 0.0, alpha)), y.shape)
+    z = intervals.z_value(alpha)
+    d0 = _d_fixed_n(y, float(n), z)
+    d1 = _d_fixed_n(y, float(n + 1), z)
+    d2 = _d_fixed_n(y + 1.0, float(n + 1), z)
+    np.subtract(d1, d0, out=d1)
+    np.subtract(d2, d0, out=d2)
+    np.abs(d1, out=d1)
+    np.abs(d2, out=d2)
+    np.maximum(d1, d2, out=d1)
+    d1 *= 2.0
+    return d1
+
+
 class KnowledgeBase:
     """Counts over a catalog, with intervals, HIF impacts and the HIF choice derived on demand."""
 
@@ -54,90 +153,186 @@ class KnowledgeBase:
         intervals.z_value(alpha)  # validates alpha
         self.catalog = catalog
         self.alpha = float(alpha)
-        self._order = {name: i for i, name in enumerate(catalog.type_names)}
-        self._n: dict[str, int] = dict.fromkeys(catalog.type_names, 0)
-        # ref type -> {(relation, related type): y}, only nonzero entries.
-        self._y: dict[str, dict[tuple[str, str], int]] = {name: {} for name in catalog.type_names}
-        self._score_cache: dict[str, dict[object, float]] = {}  # ref type -> {score fn: score}
+        names = catalog.type_names
+        self._names = names
+        self._T = len(names)
+        self._order = {name: i for i, name in enumerate(names)}
+        self._n_rel = np.array([len(t.relations) for t in catalog.types], np.int64)
+        self._n = np.zeros(self._T, np.int64)
+        self._type_dtype = np.uint16 if self._T <= 1 << 16 else np.uint32
+        # Per reference type (catalog order): its nonzero y, or None while it has none.
+        self._counts: list[_Counts | None] = [None] * self._T
+        self._score_cache: dict[int, dict[object, float]] = {}  # type index -> {score fn: score}
 
     # ---- counts -------------------------------------------------------------------------------
     def n(self, ref_type: str) -> int:
         """n_A: how many objects of type A have been examined."""
-        self._check_type(ref_type)
-        return self._n[ref_type]
+        return int(self._n[self._idx(ref_type)])
 
     def y(self, relation: str, type_name: str) -> int:
         """y_{rel,B}: examinations of rel's reference type with at least one B in rel."""
-        rel = self.catalog.relation(relation)
-        self._check_type(type_name)
-        return self._y[rel.ref].get((relation, type_name), 0)
+        a, r = self._rel(relation)
+        b = self._idx(type_name)
+        c = self._counts[a]
+        return 0 if c is None else c.get(r, b)
 
     def nonzero(self, ref_type: str) -> dict[tuple[str, str], int]:
         """The nonzero y of reference type A, {(relation, type): y} (a copy)."""
-        self._check_type(ref_type)
-        return dict(self._y[ref_type])
+        a = self._idx(ref_type)
+        c = self._counts[a]
+        if c is None:
+            return {}
+        rels = self.catalog.types[a].relation_names
+        names = self._names
+        return {
+            (rels[r], names[b]): int(v)
+            for r, b, v in zip(c.relation_of_entries(), c.types, c.ys, strict=True)
+        }
+
+    def nnz(self, ref_type: str | None = None) -> int:
+        """How many y are nonzero (of one reference type, or in all)."""
+        if ref_type is not None:
+            c = self._counts[self._idx(ref_type)]
+            return 0 if c is None else len(c.ys)
+        return sum(len(c.ys) for c in self._counts if c is not None)
 
     @property
     def total_examinations(self) -> int:
         """Sum of n over all types."""
-        return sum(self._n.values())
+        return int(self._n.sum())
 
     def record_examination(self, ref_type: str, related_pairs: Iterable[tuple[str, str]]) -> None:
         """Figure 2, lines 17-19: increment n_S and, once per distinct (rel, type) pair, y_{rel,type}.
 
         Every relation must belong to ``ref_type`` and every type must be in the catalog; a pair
-        given several times counts once ("at least one B").
+        given several times counts once ("at least one B"). Nothing changes if any pair is bad.
         """
-        self._check_type(ref_type)
-        pairs = set(related_pairs)
-        for rel_name, t in pairs:
-            rel = self.catalog.relation(rel_name)
-            if rel.ref != ref_type:
+        a = self._idx(ref_type)
+        local = set()
+        for rel_name, t in set(related_pairs):
+            ra, r = self._rel(rel_name)
+            if ra != a:
                 raise CtxsearchError(f"relation {rel_name} is not a relation of {ref_type}")
-            self._check_type(t)
-        self._n[ref_type] += 1
-        ys = self._y[ref_type]
-        for key in pairs:
-            ys[key] = ys.get(key, 0) + 1
-        self._invalidate(ref_type)
+            local.add((r, self._idx(t)))
+        self._n[a] += 1
+        c = self._counts[a]
+        if c is None and local:
+            c = self._counts[a] = _Counts(int(self._n_rel[a]), self._type_dtype, np.uint16)
+        if c is not None:
+            need = _count_dtype(int(self._n[a]))
+            if np.dtype(need).itemsize > c.ys.dtype.itemsize:
+                c.ys = c.ys.astype(need)
+            if local:
+                c.increment(list(local))
+        self._invalidate(a)
 
     def add_counts(self, ref_type: str, n: int, ys: dict[tuple[str, str], int]) -> None:
         """Add pre-aggregated counts (merging or rebuilding from a store)."""
-        self._check_type(ref_type)
-        self._n[ref_type] += int(n)
-        dst = self._y[ref_type]
-        for key, v in ys.items():
-            if v:
-                dst[key] = dst.get(key, 0) + int(v)
-        if any(v > self._n[ref_type] for v in dst.values()):
-            raise CtxsearchError(f"inconsistent counts for {ref_type}: some y exceeds n")
-        self._invalidate(ref_type)
+        a = self._idx(ref_type)
+        rel_idx, type_idx, vals = [], [], []
+        for (rel_name, t), v in ys.items():
+            ra, r = self._rel(rel_name)
+            if ra != a:
+                raise CtxsearchError(f"relation {rel_name} is not a relation of {ref_type}")
+            rel_idx.append(r)
+            type_idx.append(self._idx(t))
+            vals.append(int(v))
+        self.add_count_arrays(ref_type, n, rel_idx, type_idx, vals)
+
+    def add_count_arrays(self, ref_type: str, n: int, rel_index, type_index, y) -> None:
+        """Add pre-aggregated counts given as arrays, vectorised (bulk loading, benchmarks).
+
+        ``rel_index`` is each entry's relation as an index into RELATIONS(ref_type), ``type_index``
+        the related type's index in catalog order, ``y`` its count; repeated entries are summed.
+        Raises CtxsearchError (and changes nothing) on out-of-range indices, negative counts, or a
+        resulting y larger than n.
+        """
+        a = self._idx(ref_type)
+        n = int(n)
+        rel_index = np.asarray(rel_index, np.int64).ravel()
+        type_index = np.asarray(type_index, np.int64).ravel()
+        y = np.asarray(y, np.int64).ravel()
+        if not len(rel_index) == len(type_index) == len(y):
+            raise CtxsearchError("add_count_arrays: rel_index, type_index and y differ in length")
+        n_rel, T = int(self._n_rel[a]), self._T
+        if n < 0 or (
+            len(y)
+            and (
+                y.min() < 0
+                or rel_index.min() < 0
+                or rel_index.max() >= n_rel
+                or type_index.min() < 0
+                or type_index.max() >= T
+            )
+        ):
+            raise CtxsearchError(f"counts for {ref_type} out of range (negative or unknown index)")
+        new_n = int(self._n[a]) + n
+        keep = y > 0
+        codes, y = rel_index[keep] * T + type_index[keep], y[keep]
+        c = self._counts[a]
+        if c is not None and len(c.ys):
+            codes = np.concatenate([c.codes(T), codes])
+            y = np.concatenate([c.ys.astype(np.int64), y])
+        if len(codes):
+            if len(codes) > 1 and not np.all(codes[1:] > codes[:-1]):
+                codes, inverse = np.unique(codes, return_inverse=True)
+                y = np.bincount(inverse, weights=y, minlength=len(codes)).astype(np.int64)
+            if int(y.max()) > new_n:
+                raise CtxsearchError(f"inconsistent counts for {ref_type}: some y exceeds n")
+            if c is None:
+                c = self._counts[a] = _Counts(n_rel, self._type_dtype, np.uint16)
+            c.replace(codes, y, T, _count_dtype(new_n))
+        elif c is not None:
+            c.ys = c.ys.astype(_count_dtype(new_n))
+        self._n[a] = new_n
+        self._invalidate(a)
 
     # ---- intervals ----------------------------------------------------------------------------
     def interval(self, relation: str, type_name: str) -> tuple[float, float]:
         """INT(rel, B) = p0 -/+ d from the current counts; [0, 1] before any data."""
-        rel = self.catalog.relation(relation)
-        lo, hi = intervals.interval(self.y(relation, type_name), self._n[rel.ref], self.alpha)
+        a, _ = self._rel(relation)
+        lo, hi = intervals.interval(self.y(relation, type_name), int(self._n[a]), self.alpha)
         return float(lo), float(hi)
 
     def rows(self, ref_type: str | None = None, include_zero: bool = True) -> list[IntervalRow]:
-        """All intervals (of one reference type, or every type), sorted by lower bound, descending."""
-        refs = [ref_type] if ref_type is not None else list(self.catalog.type_names)
+        """All intervals (of one reference type, or every type), sorted by lower bound, descending.
+
+        Ties go by relation, then type name. ``include_zero=False`` keeps only the pairs with y > 0.
+        """
+        refs = [self._idx(ref_type)] if ref_type is not None else range(self._T)
         out: list[IntervalRow] = []
+        names = self._names
         for a in refs:
-            self._check_type(a)
-            n = self._n[a]
-            ys = self._y[a]
-            rels = self.catalog.type(a).relation_names
-            keys = [(r, t) for r in rels for t in self.catalog.type_names] if include_zero else sorted(ys)
-            if not keys:
+            n_rel = int(self._n_rel[a])
+            if n_rel == 0:
                 continue
-            yv = np.array([ys.get(k, 0) for k in keys], float)
-            c = np.atleast_1d(intervals.p0(yv, np.full_like(yv, n), self.alpha))
-            lo, hi = (np.atleast_1d(v) for v in intervals.interval(yv, np.full_like(yv, n), self.alpha))
+            n = int(self._n[a])
+            c = self._counts[a]
+            rels = self.catalog.types[a].relation_names
+            if include_zero:
+                dense = np.zeros((n_rel, self._T), np.int64)
+                if c is not None:
+                    dense[c.relation_of_entries(), c.types.astype(np.int64)] = c.ys
+                r_idx = np.repeat(np.arange(n_rel), self._T)
+                b_idx = np.tile(np.arange(self._T), n_rel)
+                yv = dense.ravel()
+            elif c is None or not len(c.ys):
+                continue
+            else:
+                r_idx, b_idx, yv = (
+                    c.relation_of_entries(),
+                    c.types.astype(np.int64),
+                    c.ys.astype(np.int64),
+                )
+            yf = yv.astype(float)
+            nf = np.full_like(yf, n)
+            centre = np.atleast_1d(intervals.p0(yf, nf, self.alpha))
+            lo, hi = (np.atleast_1d(v) for v in intervals.interval(yf, nf, self.alpha))
             out.extend(
-                IntervalRow(a, r, t, int(yy), n, float(cc), float(ll), float(hh))
-                for (r, t), yy, cc, ll, hh in zip(keys, yv, c, lo, hi, strict=True)
+                IntervalRow(
+                    names[a], rels[r], names[b], int(yy), n, float(cc), float(ll), float(hh)
+                )
+                for r, b, yy, cc, ll, hh in zip(r_idx, b_idx, yv, centre, lo, hi, strict=True)
             )
         out.sort(key=lambda row: (-row.low, row.relation, row.type))
         return out
@@ -145,15 +340,22 @@ class KnowledgeBase:
     def mean_width(self) -> float:
         """Mean interval width over every (A, rel, B) of the catalog (O(nonzero), not O(T^2))."""
         total, count = 0.0, 0
-        T = len(self.catalog)
-        for a in self.catalog.type_names:
-            m = len(self.catalog.type(a).relations) * T
+        z = intervals.z_value(self.alpha)
+        for a in range(self._T):
+            m = int(self._n_rel[a]) * self._T
             if m == 0:
                 continue
-            n = self._n[a]
-            yv = np.fromiter(self._y[a].values(), float)
-            w0 = 2 * float(intervals.d(0, n, self.alpha))
-            total += 2 * float(np.sum(intervals.d(yv, np.full_like(yv, n), self.alpha))) + (m - len(yv)) * w0
+            n = int(self._n[a])
+            c = self._counts[a]
+            nnz = 0 if c is None else len(c.ys)
+            if n == 0:
+                total += m * 1.0
+            else:
+                w0 = 2 * float(_d_fixed_n(np.zeros(1), float(n), z)[0])
+                s_nz = (
+                    2 * float(np.sum(_d_fixed_n(c.ys.astype(float), float(n), z))) if nnz else 0.0
+                )
+                total += s_nz + (m - nnz) * w0
             count += m
         return total / count if count else 0.0
 
@@ -162,21 +364,14 @@ class KnowledgeBase:
         """Figure 2, line 11: d_A = average of fn(y_{rel,t}, n_A) over rel in RELATIONS(A), t in TYPES.
 
         With the default ``fn`` this is the paper's average impact. A type without relations
-        scores 0 (examining it teaches nothing).
+        scores 0 (examining it teaches nothing). ``fn`` must be vectorised over y for a scalar n.
         """
-        cached = self._score_cache.get(ref_type, {}).get(fn)
-        if cached is not None:
-            return cached
-        self._check_type(ref_type)
-        m = len(self.catalog.type(ref_type).relations) * len(self.catalog)
-        if m == 0:
-            score = 0.0
-        else:
-            n = self._n[ref_type]
-            yv = np.fromiter(self._y[ref_type].values(), float)
-            s_nz = float(np.sum(fn(yv, np.full_like(yv, n), self.alpha))) if len(yv) else 0.0
-            score = (s_nz + (m - len(yv)) * float(fn(0.0, float(n), self.alpha))) / m
-        self._score_cache.setdefault(ref_type, {})[fn] = score
+        a = self._idx(ref_type)
+        cache = self._score_cache.get(a)
+        if cache is not None and fn in cache:
+            return cache[fn]
+        score = self._compute_score(a, fn)
+        self._score_cache.setdefault(a, {})[fn] = score
         return score
 
     def type_impact(self, ref_type: str) -> float:
@@ -189,20 +384,64 @@ class KnowledgeBase:
         Ties (common: all unseen types score impact(0, 0)) go to the type listed first in the
         catalog, so the choice is deterministic and independent of the candidates' order.
         """
-        cands = sorted(set(candidate_types), key=self._order_of)
+        cands = sorted({self._idx(t) for t in candidate_types})
         if not cands:
             raise CtxsearchError("no candidate types to choose from")
-        scores = [self.type_score(t, fn) for t in cands]
-        return cands[int(np.argmax(scores))]
+        names = self._names
+        scores = [self.type_score(names[a], fn) for a in cands]
+        return names[cands[int(np.argmax(scores))]]
+
+    def clear_cache(self) -> None:
+        """Forget every cached type score (benchmarks use it to time cold choices)."""
+        self._score_cache.clear()
 
     # ---- internals ----------------------------------------------------------------------------
+    def _compute_score(self, a: int, fn: ScoreFn) -> float:
+        m = int(self._n_rel[a]) * self._T
+        if m == 0:
+            return 0.0
+        n = int(self._n[a])
+        c = self._counts[a]
+        ys = c.ys if c is not None else None
+        nnz = 0 if ys is None else len(ys)
+        if nnz == 0:
+            k, w = np.zeros(1), np.array([float(m)])
+        elif n <= 4 * nnz + 64:
+            # Few distinct values possible (y <= n): evaluate fn once per distinct y.
+            hist = np.bincount(ys if ys.dtype != np.uint64 else ys.astype(np.int64))
+            hist[0] = m - nnz
+            k = np.flatnonzero(hist)
+            w = hist[k].astype(float)
+            k = k.astype(float)
+        else:
+            k = np.concatenate([[0.0], ys.astype(float)])
+            w = np.ones(nnz + 1)
+            w[0] = m - nnz
+        if fn is intervals.impact:
+            vals = _impact_fixed_n(k, n, self.alpha)
+        else:
+            vals = np.broadcast_to(np.asarray(fn(k, float(n), self.alpha), float), k.shape)
+        return float(w @ vals) / m
+
+    def _idx(self, name: str) -> int:
+        """The catalog index of type ``name`` (CatalogError naming the known types if unknown)."""
+        i = self._order.get(name)
+        if i is None:
+            self.catalog.type(name)  # raises a CatalogError naming the known types
+            raise AssertionError(name)  # pragma: no cover
+        return i
+
+    def _rel(self, relation: str) -> tuple[int, int]:
+        """(reference type index, local index in RELATIONS(ref)) of relation ``relation``."""
+        rel = self.catalog.relation(relation)
+        a = self._order[rel.ref]
+        return a, self.catalog.types[a].relations.index(rel)
+
     def _order_of(self, name: str) -> int:
-        self._check_type(name)
-        return self._order[name]
+        return self._idx(name)
 
     def _check_type(self, name: str) -> None:
-        if name not in self._n:
-            self.catalog.type(name)  # raises a CatalogError naming the known types
+        self._idx(name)
 
-    def _invalidate(self, ref_type: str) -> None:
-        self._score_cache.pop(ref_type, None)
+    def _invalidate(self, a: int) -> None:
+        self._score_cache.pop(a, None)

@@ -145,9 +145,9 @@ class Catalog:
         try:
             return self._by_name[name]
         except KeyError:
-            raise CatalogError(
-                self.path, f"unknown type '{name}' (known: {', '.join(self.type_names)})"
-            ) from None
+            names = self.type_names
+            known = ", ".join(names[:30]) + (f", ... ({len(names) - 30} more)" if len(names) > 30 else "")
+            raise CatalogError(self.path, f"unknown type '{name}' (known: {known})") from None
 
     def relation(self, name: str) -> RelationSpec:
         """The relation called ``name`` (e.g. ``ON-TOP-OF-DESK``)."""

@@ -225,3 +225,120 @@ def test_alpha_is_validated_and_used(cat):
     assert kb.interval("NEAR-DESK", "Cup") == pytest.approx(
         tuple(float(v) for v in intervals.interval(1, 1, 0.05))
     )
+
+
+# ---- the compact storage against a plain reference model ---------------------------------------
+class DictModel:
+    """The obvious implementation: dicts of counts."""
+
+    def __init__(self, cat: Catalog):
+        self.cat = cat
+        self.n = dict.fromkeys(cat.type_names, 0)
+        self.y: dict[tuple[str, str], int] = {}
+
+    def record(self, ref: str, pairs) -> None:
+        self.n[ref] += 1
+        for key in set(pairs):
+            self.y[key] = self.y.get(key, 0) + 1
+
+
+def test_random_operations_match_a_dict_model():
+    rng = np.random.default_rng(42)
+    spec = {f"Ty{i}": ["NEAR", "UNDER", "ON-TOP-OF", "LEFT-OF"][: i % 5] for i in range(40)}
+    cat = make_catalog(spec)
+    kb, model = KnowledgeBase(cat), DictModel(cat)
+    refs = [t for t in cat.type_names if cat.type(t).relations]
+    for step in range(600):
+        ref = refs[rng.integers(len(refs))]
+        rels = cat.type(ref).relation_names
+        pairs = [
+            (rels[rng.integers(len(rels))], cat.type_names[rng.integers(8)])
+            for _ in range(rng.integers(0, 6))
+        ]
+        kb.record_examination(ref, pairs)
+        model.record(ref, pairs)
+        if step % 97 == 0:
+            for t in cat.type_names:
+                assert kb.type_impact(t) == pytest.approx(brute_force_score(kb, t), abs=1e-12)
+    for t in cat.type_names:
+        assert kb.n(t) == model.n[t]
+        expect = {k: v for k, v in model.y.items() if cat.relation(k[0]).ref == t}
+        assert kb.nonzero(t) == expect
+        assert kb.nnz(t) == len(expect)
+    for (rel, t), v in model.y.items():
+        assert kb.y(rel, t) == v
+    assert kb.nnz() == len(model.y)
+    assert kb.total_examinations == 600
+
+
+def test_fast_impact_equals_intervals_impact():
+    from knowledge.base import _impact_fixed_n
+
+    for alpha in (0.10, 0.05):
+        for n in (0, 1, 2, 3, 7, 50, 999):
+            y = np.arange(n + 1, dtype=float)
+            np.testing.assert_allclose(
+                _impact_fixed_n(y, n, alpha), intervals.impact(y, n, alpha), rtol=0, atol=1e-14
+            )
+
+
+def test_large_n_with_few_nonzero_and_dtype_promotion(cat):
+    kb = KnowledgeBase(cat)
+    kb.add_counts("Desk", 5000, {("NEAR-DESK", "Cup"): 4999, ("UNDER-DESK", "Chair"): 3})
+    assert kb.type_impact("Desk") == pytest.approx(brute_force_score(kb, "Desk"), abs=1e-12)
+    kb.add_counts("Cup", 65535, {("NEAR-CUP", "Desk"): 65535})
+    kb.record_examination("Cup", [("NEAR-CUP", "Desk")])  # n and y pass 65535 (uint16)
+    kb.record_examination("Cup", [("NEAR-CUP", "Book")])
+    assert kb.n("Cup") == 65537
+    assert kb.y("NEAR-CUP", "Desk") == 65536 and kb.y("NEAR-CUP", "Book") == 1
+    kb.add_counts("Chair", 10**10, {("NEAR-CHAIR", "Desk"): 10**10 - 1})
+    assert kb.y("NEAR-CHAIR", "Desk") == 10**10 - 1
+    assert kb.type_impact("Chair") == pytest.approx(brute_force_score(kb, "Chair"), abs=1e-12)
+
+
+def test_add_count_arrays_sums_repeats_and_validates(cat):
+    kb = KnowledgeBase(cat)
+    names = cat.type_names  # Desk, Cup, Book, Chair
+    kb.add_count_arrays("Desk", 10, [2, 0, 2, 1], [1, 3, 1, 0], [3, 1, 4, 0])
+    assert kb.n("Desk") == 10
+    assert kb.nonzero("Desk") == {("NEAR-DESK", "Cup"): 7, ("ON-TOP-OF-DESK", "Chair"): 1}
+    kb.add_count_arrays("Desk", 2, [2], [names.index("Cup")], [1])
+    assert kb.y("NEAR-DESK", "Cup") == 8 and kb.n("Desk") == 12
+    before = kb.nonzero("Desk")
+    for bad in (
+        dict(n=1, rel_index=[3], type_index=[0], y=[1]),  # Desk has 3 relations
+        dict(n=1, rel_index=[0], type_index=[4], y=[1]),  # 4 types
+        dict(n=1, rel_index=[0], type_index=[0], y=[-1]),
+        dict(n=0, rel_index=[2], type_index=[1], y=[5]),  # y would exceed n
+        dict(n=1, rel_index=[0, 1], type_index=[0], y=[1]),
+    ):
+        with pytest.raises(CtxsearchError):
+            kb.add_count_arrays("Desk", **bad)
+    assert kb.nonzero("Desk") == before and kb.n("Desk") == 12
+    with pytest.raises(CtxsearchError, match="not a relation of Desk"):
+        kb.add_counts("Desk", 1, {("NEAR-CUP", "Desk"): 1})
+
+
+def test_more_than_65536_types():
+    from knowledge.bench import synthetic_catalog
+
+    cat = synthetic_catalog(70_000, relations_per_type=1)
+    kb = KnowledgeBase(cat)
+    last, first = cat.type_names[-1], cat.type_names[0]
+    rel = cat.type(first).relation_names[0]
+    kb.record_examination(first, [(rel, last), (rel, cat.type_names[66_000])])
+    assert kb.y(rel, last) == 1 and kb.y(rel, cat.type_names[66_000]) == 1 and kb.y(rel, first) == 0
+    assert kb.type_impact(first) == pytest.approx(
+        ((70_000 - 2) * float(intervals.impact(0, 1)) + 2 * float(intervals.impact(1, 1))) / 70_000
+    )
+    assert kb.choose([last, first]) == last  # unseen: impact(0, 0) is the largest
+
+
+def test_clear_cache_forces_recomputation(cat):
+    kb = KnowledgeBase(cat)
+    kb.record_examination("Desk", [("NEAR-DESK", "Cup")])
+    s = kb.type_impact("Desk")
+    kb._score_cache[0][intervals.impact] = -1.0
+    assert kb.type_impact("Desk") == -1.0
+    kb.clear_cache()
+    assert kb.type_impact("Desk") == s
