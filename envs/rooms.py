@@ -60,6 +60,8 @@ WALL_PROB = {"desk": 0.75, "shelf": 1.0, "cabinet": 0.95, "counter": 1.0, "bed":
 FRONTED = {"desk", "shelf", "cabinet", "counter", "sofa", "bed"}
 # Small objects that face the way their support or reference faces (screens, keyboards...).
 ALIGNED = {"monitor", "laptop", "keyboard", "microscope"}
+# Small objects that stand in the back half of the surface they rest on.
+BACK_HALF = {"monitor"}
 WALLS = ("north", "south", "east", "west")
 
 
@@ -336,6 +338,8 @@ class _Builder:
         if region is not None:  # proposal rect (u0, u1, v0, v1) in the surface frame
             lo_u, hi_u = max(lo_u, region[0] - ex), min(hi_u, region[1] + ex)
             lo_v, hi_v = max(lo_v, region[2] - ey), min(hi_v, region[3] + ey)
+        if ot.shape in BACK_HALF and surf.owner >= 0 and abs(_wrap(yaw - surf.yaw)) < 0.5:
+            hi_u = min(hi_u, 0.0)  # screens stand in the back half of a desk, facing its front
         if lo_u > hi_u or lo_v > hi_v:
             return False
         u, v = float(self.rng.uniform(lo_u, hi_u)), float(self.rng.uniform(lo_v, hi_v))
