@@ -23,6 +23,7 @@ COMMAND_MODULES = [
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
 BENCH_MODULES = [
     "scripts.cmd_kb",
+    "scripts.cmd_sim",
 ]
 
 

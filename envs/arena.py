@@ -1,0 +1,196 @@
+"""The room's shell as a composer Arena: floor, four walls with a door gap, a ceiling, lights.
+
+Room frame as in ``envs/layout.py``: the floor is z = 0 and the room spans x in [-w/2, w/2], y in
+[-d/2, d/2]. Walls stand just outside that boundary (the interior is exactly the layout's room).
+
+Geom groups: the floor and walls are group ``ROOM_GEOM_GROUP`` (0); the ceiling and the lintel
+over the door are group ``OVERHEAD_GEOM_GROUP`` (3), which the head camera shows and the top-down
+overview hides (so the map shows the door gap). Lights
+cast no shadows by default (on a CPU shadows cost about 8x per frame); ``World(shadows=True)``
+turns them on at run time.
+
+Physics options chosen for cheap stepping: the robot's joints are the only degrees of freedom and
+nothing collides, so contacts are disabled and the servos run with ``implicitfast`` at a 10 ms
+step.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
+
+from dm_control import composer, mjcf
+
+from envs.layout import RoomLayout
+
+ROOM_GEOM_GROUP = 0
+OVERHEAD_GEOM_GROUP = 3
+WALL_THICKNESS = 0.1  # m
+DOOR_HEIGHT = 2.1  # m
+PHYSICS_TIMESTEP = 0.01  # s
+MAX_IMAGE_SIZE = (1280, 960)  # off-screen framebuffer (width, height): the largest image rendered
+VIEW_EXTENT = 10.0  # m: fixed model extent, so znear/zfar below are metric and room-independent
+
+_FLOOR_RGB = ((0.62, 0.58, 0.52), (0.56, 0.52, 0.47))
+_WALL_RGBA = (0.86, 0.85, 0.80, 1.0)
+_CEILING_RGBA = (0.93, 0.93, 0.92, 1.0)
+
+
+class RoomArena(composer.Arena):
+    """Floor, walls with a door gap, ceiling and lights, sized per layout by ``set_layout``."""
+
+    def _build(self, name: str = "room") -> None:
+        super()._build(name=name)
+        root = self._mjcf_root
+        root.option.timestep = PHYSICS_TIMESTEP
+        root.option.integrator = "implicitfast"
+        root.option.flag.contact = "disable"
+        root.statistic.extent = VIEW_EXTENT
+        root.statistic.center = [0, 0, 1]
+        vis = root.visual
+        vis.__getattr__("global").offwidth = MAX_IMAGE_SIZE[0]
+        vis.__getattr__("global").offheight = MAX_IMAGE_SIZE[1]
+        vis.__getattr__("global").fovy = 45
+        vis.map.znear = 0.03 / VIEW_EXTENT  # 3 cm
+        vis.map.zfar = 60.0 / VIEW_EXTENT  # 60 m
+        vis.quality.shadowsize = 2048
+        vis.headlight.ambient = [0.32, 0.32, 0.32]
+        vis.headlight.diffuse = [0.28, 0.28, 0.28]
+        vis.headlight.specular = [0, 0, 0]
+        root.default.geom.set_attributes(contype=0, conaffinity=0)
+
+        root.asset.add(
+            "texture",
+            name="floor",
+            type="2d",
+            builtin="checker",
+            width=256,
+            height=256,
+            rgb1=_FLOOR_RGB[0],
+            rgb2=_FLOOR_RGB[1],
+            mark="edge",
+            markrgb=[0.5, 0.47, 0.42],
+        )
+        floor_mat = root.asset.add(
+            "material",
+            name="floor",
+            texture="floor",
+            texrepeat=[1, 1],
+            texuniform=True,
+            reflectance=0.0,
+            specular=0.1,
+        )
+        self._floor = root.worldbody.add(
+            "geom",
+            name="floor",
+            type="plane",
+            size=[5, 5, 0.1],
+            material=floor_mat,
+            group=ROOM_GEOM_GROUP,
+        )
+        root.asset.add(
+            "texture",
+            name="sky",
+            type="skybox",
+            builtin="gradient",
+            width=64,
+            height=64,
+            rgb1=[0.80, 0.84, 0.88],
+            rgb2=[0.55, 0.58, 0.62],
+        )
+        # Two oblique key lights from above and a weak upward "bounce" light for the ceiling and
+        # the undersides of table tops (MuJoCo lights pass through geometry when unshadowed).
+        self._lights = [
+            root.worldbody.add(
+                "light",
+                name=name,
+                directional=True,
+                castshadow=False,
+                pos=[0, 0, 3],
+                dir=d,
+                diffuse=[c] * 3,
+                specular=[0.05] * 3,
+            )
+            for name, d, c in (
+                ("key0", [0.5, 0.3, -0.8], 0.45),
+                ("key1", [-0.4, -0.55, -0.75], 0.40),
+                ("bounce", [0.1, 0.2, 1.0], 0.22),
+            )
+        ]
+        self._shell: list[mjcf.Element] = []
+        self._layout: RoomLayout | None = None
+
+    @property
+    def layout(self) -> RoomLayout | None:
+        """The layout the shell is sized for (None before ``set_layout``)."""
+        return self._layout
+
+    def set_layout(self, layout: RoomLayout) -> None:
+        """Resize the floor, rebuild the walls (door gap included) and ceiling for ``layout``."""
+        for el in self._shell:
+            el.remove()
+        self._shell = []
+        self._layout = layout
+        hw, hd, h = layout.width / 2, layout.depth / 2, layout.height
+        self._floor.size = [hw + WALL_THICKNESS, hd + WALL_THICKNESS, 0.1]
+        for light in self._lights:
+            light.pos = [0, 0, h]
+        wb = self._mjcf_root.worldbody
+        t = WALL_THICKNESS
+        for name, center, half in _wall_boxes(layout):
+            group = OVERHEAD_GEOM_GROUP if name.endswith("lintel") else ROOM_GEOM_GROUP
+            self._shell.append(
+                wb.add(
+                    "geom",
+                    name=name,
+                    type="box",
+                    pos=center,
+                    size=half,
+                    rgba=_WALL_RGBA,
+                    group=group,
+                )
+            )
+        self._shell.append(
+            wb.add(
+                "geom",
+                name="ceiling",
+                type="box",
+                pos=[0, 0, h + t / 2],
+                size=[hw + t, hd + t, t / 2],
+                rgba=_CEILING_RGBA,
+                group=OVERHEAD_GEOM_GROUP,
+            )
+        )
+
+
+def _wall_boxes(layout: RoomLayout) -> list[tuple[str, list[float], list[float]]]:
+    """(name, centre, half extents) of every wall box: two pieces and a lintel at the door."""
+    hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, WALL_THICKNESS
+    door = layout.door
+    # Each wall: (name, along-axis 'x' or 'y', span lo..hi along it, fixed coordinate of its centre).
+    walls = {
+        "north": ("x", -hw - t, hw + t, hd + t / 2),
+        "south": ("x", -hw - t, hw + t, -hd - t / 2),
+        "east": ("y", -hd, hd, hw + t / 2),
+        "west": ("y", -hd, hd, -hw - t / 2),
+    }
+    out = []
+    for name, (axis, lo, hi, fixed) in walls.items():
+        if door.wall == name:
+            g0, g1 = door.center - door.width / 2, door.center + door.width / 2
+            pieces = [(f"wall_{name}_a", lo, g0, 0.0, h), (f"wall_{name}_b", g1, hi, 0.0, h)]
+            if h > DOOR_HEIGHT:
+                pieces.append((f"wall_{name}_lintel", g0, g1, DOOR_HEIGHT, h))
+        else:
+            pieces = [(f"wall_{name}", lo, hi, 0.0, h)]
+        for pname, a, b, z0, z1 in pieces:
+            if b - a < 1e-3:
+                continue
+            mid, half_len = (a + b) / 2, (b - a) / 2
+            if axis == "x":
+                center, half = [mid, fixed, (z0 + z1) / 2], [half_len, t / 2, (z1 - z0) / 2]
+            else:
+                center, half = [fixed, mid, (z0 + z1) / 2], [t / 2, half_len, (z1 - z0) / 2]
+            out.append((pname, center, half))
+    return out

@@ -1,0 +1,209 @@
+"""The robot as a dm_control composer Entity, built with ``mjcf`` from ``RobotSpec``.
+
+Kinematic tree (modelled on Hello Robot Stretch's head, MJCF conventions of mujoco_menagerie)::
+
+    base  [slide x, slide y, hinge yaw]    round base + mast
+      head_pan  [hinge pan, axis +z]        at camera_height above the floor
+        head_tilt  [hinge tilt, axis -y]    positive tilt looks up
+          camera head_cam                   on both head axes, looks along the head's +x
+
+The camera sits on the pan and on the tilt axis, so its position is (x, y, camera_height)
+whatever the head does; at pan = tilt = 0 it looks along the base's heading. MuJoCo cameras look
+along their local -z with +y up: ``xyaxes="0 -1 0 0 0 1"`` makes image-right the head's -y and
+image-up its +z, hence the view direction -z = +x.
+
+Every joint is driven by a position actuator (``ctrlrange`` = the joint's limits; the yaw hinge is
+unlimited) whose stiffness gives each joint the same servo bandwidth, critically damped
+(``dampratio=1``). Robot geoms neither collide (contype = conaffinity = 0: the planner guarantees
+free paths, and stepping stays cheap) nor show in the head camera: they live in geom group
+``ROBOT_GEOM_GROUP``, which the head camera's render option hides.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
+
+import numpy as np
+from dm_control import composer, mjcf
+
+from envs.robot_spec import RobotPose, RobotSpec, wrap_angle
+
+ROBOT_GEOM_GROUP = 2  # hidden from the head camera
+JOINTS = ("x", "y", "yaw", "pan", "tilt")  # qpos order of the robot (and of its actuators)
+
+SERVO_BANDWIDTH = 30.0  # rad/s: natural frequency of every position servo
+BASE_MASS, PAN_MASS, TILT_MASS = 25.0, 0.6, 0.4  # kg
+HEAD_ARMATURE = 0.01  # kg m^2 of reflected motor inertia on pan and tilt
+DEFAULT_WORKSPACE = (-10.0, 10.0)  # m, slide limits until a room sets them
+
+
+def _cylinder_inertia(mass: float, radius: float, height: float) -> list[float]:
+    ixx = mass * (3 * radius**2 + height**2) / 12
+    return [ixx, ixx, 0.5 * mass * radius**2]
+
+
+class Robot(composer.Entity):
+    """The mobile pan-tilt camera robot (see the module docstring)."""
+
+    def _build(self, spec: RobotSpec | None = None, name: str = "robot") -> None:
+        spec = spec or RobotSpec()
+        self._spec = spec
+        root = mjcf.RootElement(model=name)
+        self._mjcf_root = root
+        r, hb = spec.base_radius, spec.base_height
+
+        # Effective inertia each servo drives, for equal bandwidth on every joint.
+        base_izz = _cylinder_inertia(BASE_MASS, r, hb)[2]
+        head_i = 0.002
+        inertia = {
+            "slide": BASE_MASS + PAN_MASS + TILT_MASS,
+            "yaw": base_izz + 2 * head_i,
+            "pan": 2 * head_i + HEAD_ARMATURE,
+            "tilt": head_i + HEAD_ARMATURE,
+        }
+        d = root.default
+        d.geom.set_attributes(group=ROBOT_GEOM_GROUP, contype=0, conaffinity=0, density=0)
+        for cls in ("slide", "yaw", "pan", "tilt"):
+            c = d.add("default", dclass=cls)
+            c.joint.set_attributes(
+                type="slide" if cls == "slide" else "hinge",
+                armature=HEAD_ARMATURE if cls in ("pan", "tilt") else 0.0,
+                damping=0.0,
+            )
+            c.position.set_attributes(kp=inertia[cls] * SERVO_BANDWIDTH**2, dampratio=1.0)
+
+        base = root.worldbody.add("body", name="base")
+        base.add(
+            "inertial",
+            pos=[0, 0, hb / 2],
+            mass=BASE_MASS,
+            diaginertia=_cylinder_inertia(BASE_MASS, r, hb),
+        )
+        self._x = base.add(
+            "joint", name="x", dclass="slide", axis=[1, 0, 0], range=DEFAULT_WORKSPACE
+        )
+        self._y = base.add(
+            "joint", name="y", dclass="slide", axis=[0, 1, 0], range=DEFAULT_WORKSPACE
+        )
+        self._yaw = base.add("joint", name="yaw", dclass="yaw", axis=[0, 0, 1], limited=False)
+        dark, light = [0.18, 0.18, 0.2, 1], [0.85, 0.85, 0.88, 1]
+        base.add(
+            "geom", name="base", type="cylinder", size=[r, hb / 2], pos=[0, 0, hb / 2], rgba=dark
+        )
+        base.add(
+            "geom",
+            name="nose",
+            type="box",
+            size=[0.04, 0.06, 0.01],
+            pos=[r * 0.7, 0, hb + 0.01],
+            rgba=[0.9, 0.5, 0.1, 1],
+        )
+        mast_top = spec.camera_height - 0.06
+        base.add(
+            "geom",
+            name="mast",
+            type="cylinder",
+            size=[spec.mast_radius, (mast_top - hb) / 2],
+            pos=[0, 0, (mast_top + hb) / 2],
+            rgba=light,
+        )
+
+        pan = base.add("body", name="head_pan", pos=[0, 0, spec.camera_height])
+        pan.add("inertial", pos=[0, 0, 0], mass=PAN_MASS, diaginertia=[head_i] * 3)
+        self._pan = pan.add("joint", name="pan", dclass="pan", axis=[0, 0, 1], range=spec.pan_range)
+        pan.add(
+            "geom",
+            name="pan_bracket",
+            type="box",
+            size=[0.03, 0.05, 0.02],
+            pos=[0, 0, -0.04],
+            rgba=dark,
+        )
+
+        tilt = pan.add("body", name="head_tilt")
+        tilt.add("inertial", pos=[0, 0, 0], mass=TILT_MASS, diaginertia=[head_i / 2] * 3)
+        self._tilt = tilt.add(
+            "joint", name="tilt", dclass="tilt", axis=[0, -1, 0], range=spec.tilt_range
+        )
+        tilt.add("geom", name="head", type="box", size=[0.035, 0.09, 0.025], rgba=dark)
+        tilt.add(
+            "geom",
+            name="lens",
+            type="cylinder",
+            size=[0.015, 0.005],
+            pos=[0.04, 0, 0],
+            quat=[math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0],
+            rgba=[0.05, 0.05, 0.05, 1],
+        )
+        self._camera = tilt.add(
+            "camera", name="head_cam", pos=[0, 0, 0], xyaxes=[0, -1, 0, 0, 0, 1], fovy=spec.fovy_deg
+        )
+
+        self._joints = (self._x, self._y, self._yaw, self._pan, self._tilt)
+        self._actuators = []
+        for joint in self._joints:
+            act = root.actuator.add("position", name=joint.name, joint=joint, dclass=joint.dclass)
+            if joint.range is not None:
+                act.ctrlrange = joint.range
+            else:
+                act.ctrllimited = False
+            self._actuators.append(act)
+        root.keyframe.add("key", name="home", qpos=[0.0] * 5, ctrl=[0.0] * 5)
+
+    @property
+    def mjcf_model(self) -> mjcf.RootElement:
+        return self._mjcf_root
+
+    @property
+    def spec(self) -> RobotSpec:
+        """The dimensions this robot was built from."""
+        return self._spec
+
+    @property
+    def joints(self) -> tuple[mjcf.Element, ...]:
+        """The joints x, y, yaw, pan, tilt (in that order)."""
+        return self._joints
+
+    @property
+    def actuators(self) -> tuple[mjcf.Element, ...]:
+        """The position actuators, one per joint, same order."""
+        return tuple(self._actuators)
+
+    @property
+    def camera(self) -> mjcf.Element:
+        """The head camera."""
+        return self._camera
+
+    def set_workspace(self, x_range: tuple[float, float], y_range: tuple[float, float]) -> None:
+        """Limit the base's slides (and their actuators' ctrlrange) to a room's extent."""
+        for joint, act, rng in zip(
+            self._joints[:2], self._actuators[:2], (x_range, y_range), strict=True
+        ):
+            joint.range = rng
+            act.ctrlrange = rng
+
+    def set_pose(self, physics: mjcf.Physics, pose: RobotPose) -> None:
+        """Teleport the robot: joint positions and servo targets to ``pose``, velocities zero."""
+        q = pose_to_qpos(pose, self._spec)
+        physics.bind(self._joints).qpos = q
+        physics.bind(self._joints).qvel = 0.0
+        physics.bind(self._actuators).ctrl = q
+
+    def get_pose(self, physics: mjcf.Physics) -> RobotPose:
+        """The robot's current pose read from qpos (yaw wrapped to (-pi, pi])."""
+        return qpos_to_pose(physics.bind(self._joints).qpos)
+
+
+def pose_to_qpos(pose: RobotPose, spec: RobotSpec) -> np.ndarray:
+    """Joint positions (x, y, yaw, pan, tilt) of ``pose``, head clipped to its limits."""
+    pan, tilt = spec.clip_head(pose.pan, pose.tilt)
+    return np.array([pose.x, pose.y, wrap_angle(pose.yaw), pan, tilt], float)
+
+
+def qpos_to_pose(q: np.ndarray) -> RobotPose:
+    """The RobotPose of joint positions (x, y, yaw, pan, tilt)."""
+    q = np.asarray(q, float)
+    return RobotPose(float(q[0]), float(q[1]), wrap_angle(float(q[2])), float(q[3]), float(q[4]))

@@ -1,0 +1,440 @@
+"""The World: one furnished room in MuJoCo with the robot in it; the facade the agent uses.
+
+Every action happens in MuJoCo and is charged simulated seconds by the one ``TimeModel``:
+
+- ``drive(path, final_yaw)`` and ``move_head(pan, tilt)`` move the servo targets along the path
+  (turn in place towards each segment, drive it, turn to the final heading) or the head slew at
+  the time model's speeds, stepping the physics through the motion, then hold the final target
+  until the joints settle within 1 mm / 1 mrad. The physics clock therefore runs about as long as
+  the charged time (plus the settle); ``sim_time`` is charged exactly the time model's figure.
+- ``capture()`` renders from the head camera where the joints really are after the motion, and
+  charges ``TimeModel.image_cost``.
+
+Rendering is off-screen (``MUJOCO_GL=egl``; on a CPU Mesa's llvmpipe does it). One
+``mujoco.Renderer`` per image size is kept for the World's life. Segmentation and depth come
+from ONE pass (MuJoCo's segmentation colours and the depth buffer of the same draw); RGB, only
+when asked, is a second pass. The head camera's render option hides the robot's geom group and
+shows the ceiling; the top-down overview (orthographic) shows the robot and hides the ceiling. Depth is the
+distance along the optical axis in metres (as ``mujoco.Renderer`` gives it).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco/dm_control are first imported
+
+import logging
+import math
+import weakref
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from dm_control import mjcf
+
+from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
+from envs.layout import RoomLayout
+from envs.robot import ROBOT_GEOM_GROUP, pose_to_qpos, qpos_to_pose
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.task import RoomTask
+from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
+
+log = logging.getLogger(__name__)
+
+CONTROL_STEPS = 5  # physics steps per servo-target update (50 ms at the 10 ms physics step)
+SETTLE_POS_TOL = 1e-3  # m / rad: the joints count as settled within this of the target ...
+SETTLE_VEL_TOL = 1e-2  # ... and slower than this (m/s, rad/s)
+MAX_SETTLE_S = 3.0  # give up settling after this much physics time (never reached in practice)
+EGL_HINT = "apt-get install -y libegl1 libgl1-mesa-dri"
+
+_gl_renderer: str | None = None  # the GL renderer string, once a renderer has been made
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """A pinhole camera in the world: position (3,), world rotation ``xmat`` (3, 3) whose columns
+    are the camera's x (image right), y (image up) and z axes (MuJoCo: it looks along -z),
+    vertical field of view and image size.
+
+    Pixel coordinates: u to the right, v down, the image's top-left corner at (0, 0), so pixel
+    (row i, column j) has its centre at (j + 0.5, i + 0.5).
+    """
+
+    position: np.ndarray
+    xmat: np.ndarray
+    fovy_deg: float
+    width: int
+    height: int
+
+    @property
+    def focal(self) -> float:
+        """Focal length in pixels (square pixels)."""
+        return (self.height / 2) / math.tan(math.radians(self.fovy_deg) / 2)
+
+    @property
+    def forward(self) -> np.ndarray:
+        """The viewing direction (3,), a unit vector."""
+        return -self.xmat[:, 2]
+
+    def intrinsics(self) -> np.ndarray:
+        """The 3x3 intrinsic matrix K (OpenCV convention: x right, y down, z forward)."""
+        f = self.focal
+        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World points (N, 3) -> pixel coordinates (N, 2) (u, v) and depth (N,) along the optical
+        axis; points at or behind the camera get NaN pixels and depth <= 0."""
+        p = (np.atleast_2d(np.asarray(points, float)) - self.position) @ self.xmat
+        depth = -p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.where(depth > 1e-9, 1.0 / depth, np.nan)
+        f = self.focal
+        uv = np.column_stack(
+            [self.width / 2 + f * p[:, 0] * inv, self.height / 2 - f * p[:, 1] * inv]
+        )
+        return uv, depth
+
+    def pixel_rays(self) -> np.ndarray:
+        """(H, W, 3) world-frame unit rays through every pixel centre."""
+        f = self.focal
+        x = (np.arange(self.width) + 0.5 - self.width / 2) / f
+        y = -(np.arange(self.height) + 0.5 - self.height / 2) / f
+        local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), axis=-1)
+        local /= np.linalg.norm(local, axis=-1, keepdims=True)
+        return local @ self.xmat.T
+
+    def backproject(self, depth: np.ndarray) -> np.ndarray:
+        """(H, W, 3) world points of a depth image (distance along the optical axis)."""
+        f = self.focal
+        x = (np.arange(self.width) + 0.5 - self.width / 2) / f
+        y = -(np.arange(self.height) + 0.5 - self.height / 2) / f
+        local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), axis=-1)
+        return self.position + (local * np.asarray(depth, float)[..., None]) @ self.xmat.T
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One image from the head camera: RGB (only when asked), depth in metres along the optical
+    axis (when asked), the object instance id of every pixel (-1: floor, walls, ceiling,
+    background), the camera it was taken with and the robot's pose at the time."""
+
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    instance_ids: np.ndarray
+    camera: CameraInfo
+    pose: RobotPose
+
+
+class _Renderer(mujoco.Renderer):
+    """``mujoco.Renderer`` that also reads segmentation and depth from a single draw."""
+
+    def render_ids_depth(
+        self, geom_instance: np.ndarray, depth: bool
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Instance ids (H, W) int32 via ``geom_instance`` (geom id -> instance id) and, if
+        ``depth``, the depth image (H, W) float32 in metres, from one segmentation draw of the
+        scene last passed to ``update_scene``."""
+        if self._mjr_context is None:
+            raise RuntimeError("render cannot be called after close.")
+        scn, h, w = self._scene, self._height, self._width
+        flags = scn.flags
+        saved = flags.copy()
+        flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+        flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+        if self._gl_context:
+            self._gl_context.make_current()
+        seg = np.empty((h, w, 3), np.uint8)
+        zbuf = np.empty((h, w), np.float32) if depth else None
+        try:
+            mujoco.mjr_render(self._rect, scn, self._mjr_context)
+            mujoco.mjr_readPixels(seg, zbuf, self._rect, self._mjr_context)
+        finally:
+            np.copyto(flags, saved)
+        # Segmentation colour = scene-geom index + 1 (0: background), 24 bits over r, g, b.
+        segid = seg[::-1, :, 0].astype(np.int32)
+        segid |= seg[::-1, :, 1].astype(np.int32) << 8
+        if scn.ngeom >= 1 << 16:
+            segid |= seg[::-1, :, 2].astype(np.int32) << 16
+        geoms = scn.geoms[: scn.ngeom]
+        objtype = np.fromiter((g.objtype for g in geoms), np.int32, scn.ngeom)
+        objid = np.fromiter((g.objid for g in geoms), np.int32, scn.ngeom)
+        seg_to_inst = np.full(scn.ngeom + 1, -1, np.int32)
+        is_geom = objtype == int(mujoco.mjtObj.mjOBJ_GEOM)
+        seg_to_inst[1:][is_geom] = geom_instance[objid[is_geom]]
+        ids = seg_to_inst[segid]
+        return ids, (self._linear_depth(zbuf[::-1]) if depth else None)
+
+    def _linear_depth(self, z: np.ndarray) -> np.ndarray:
+        """Metric depth from the (reversed-Z) depth buffer, as ``mujoco.Renderer`` computes it."""
+        extent = self._model.stat.extent
+        near = np.float32(self._model.vis.map.znear * extent)
+        far = np.float32(self._model.vis.map.zfar * extent)
+        c_coef = -(far + near) / (far - near)
+        d_coef = -(np.float32(2) * far * near) / (far - near)
+        c_coef = np.float32(-0.5) * c_coef - np.float32(0.5)
+        d_coef = np.float32(-0.5) * d_coef
+        return (d_coef / (z.astype(np.float64) + c_coef)).astype(np.float32)
+
+    def render_rgb(self) -> np.ndarray:
+        """An RGB image (H, W, 3) uint8 of the scene last passed to ``update_scene``."""
+        self.disable_depth_rendering()
+        self.disable_segmentation_rendering()
+        return self.render()
+
+
+def _close_renderers(renderers: dict) -> None:
+    for r in renderers.values():
+        r.close()
+    renderers.clear()
+
+
+class World:
+    """A room built in MuJoCo with the robot in it (see the module docstring)."""
+
+    def __init__(
+        self,
+        layout: RoomLayout,
+        catalog: Catalog | None = None,
+        *,
+        width: int = 320,
+        height: int = 240,
+        shadows: bool = False,
+        spec: RobotSpec | None = None,
+        time_model: TimeModel | None = None,
+    ) -> None:
+        _check_size(width, height)
+        self.layout = layout
+        self.catalog = catalog or load_catalog()
+        self.spec = spec or RobotSpec()
+        self.time_model = time_model or TimeModel()
+        self.width, self.height = int(width), int(height)
+        self.sim_time = 0.0
+        self.task = RoomTask(self.catalog, layout=layout, spec=self.spec)
+        rng = np.random.RandomState(layout.seed % (2**32))
+        self.task.initialize_episode_mjcf(rng)
+        self.physics = mjcf.Physics.from_mjcf_model(self.task.root_entity.mjcf_model)
+        self.task.initialize_episode(self.physics, rng)
+        self._m, self._d = self.physics.model.ptr, self.physics.data.ptr
+        robot = self.task.robot
+        self._qadr = self.physics.bind(robot.joints).qposadr.astype(int)
+        self._vadr = self.physics.bind(robot.joints).dofadr.astype(int)
+        self._act = self.physics.bind(robot.actuators).element_id.astype(int)
+        self._cam_id = int(self.physics.bind(robot.camera).element_id)
+        self._geom_instance = self.task.objects.geom_instance_ids(self.physics)
+        self._m.light_castshadow[:] = 1 if shadows else 0
+        self._head_option = mujoco.MjvOption()
+        self._head_option.geomgroup[ROBOT_GEOM_GROUP] = 0
+        self._head_option.geomgroup[OVERHEAD_GEOM_GROUP] = 1
+        self._overview_option = mujoco.MjvOption()
+        self._overview_option.geomgroup[ROBOT_GEOM_GROUP] = 1
+        self._overview_option.geomgroup[OVERHEAD_GEOM_GROUP] = 0
+        self._renderers: dict[tuple[int, int], _Renderer] = {}
+        self._finalizer = weakref.finalize(self, _close_renderers, self._renderers)
+        mujoco.mj_forward(self._m, self._d)
+
+    @classmethod
+    def from_style(cls, style_name: str, seed: int, catalog: Catalog | None = None, **kw) -> World:
+        """A World for the room ``generate_room`` makes from style ``style_name`` and ``seed``."""
+        from envs.rooms import generate_room
+        from envs.styles import load_style
+
+        catalog = catalog or load_catalog()
+        return cls(generate_room(load_style(style_name, catalog), seed, catalog), catalog, **kw)
+
+    # -- pose and motion ---------------------------------------------------------------------
+
+    def pose(self) -> RobotPose:
+        """The robot's pose, read from the joint positions."""
+        return qpos_to_pose(self._d.qpos[self._qadr])
+
+    def reset_pose(self, pose: RobotPose) -> None:
+        """Teleport the robot to ``pose`` (episode start); no time charged."""
+        q = pose_to_qpos(pose, self.spec)
+        self._d.qpos[self._qadr] = q
+        self._d.qvel[self._vadr] = 0.0
+        self._d.ctrl[self._act] = q
+        mujoco.mj_forward(self._m, self._d)
+
+    def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
+        """Follow the polyline ``path`` (K, 2): turn in place towards each segment, drive it, then
+        turn to ``final_yaw`` (if given). A path not starting at the robot gets the robot's
+        position prepended. Returns the seconds charged (``TimeModel.drive_time``)."""
+        path = np.asarray(path, float).reshape(-1, 2)
+        q0 = self._d.qpos[self._qadr].copy()
+        if len(path) == 0 or np.hypot(*(path[0] - q0[:2])) > 0.01:
+            path = np.vstack([q0[:2], path])
+        knots_t, knots_q = [0.0], [q0]
+        q = q0.copy()
+        tm = self.time_model
+        for a, b in zip(path[:-1], path[1:], strict=True):
+            length = float(np.hypot(*(b - a)))
+            if length < 1e-9:
+                continue
+            turn = wrap_angle(math.atan2(b[1] - a[1], b[0] - a[0]) - q[2])
+            q = q.copy()
+            q[2] += turn
+            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            knots_q.append(q)
+            q = q.copy()
+            q[:2] = b
+            knots_t.append(knots_t[-1] + length / tm.drive_speed)
+            knots_q.append(q)
+        if final_yaw is not None:
+            q = q.copy()
+            turn = wrap_angle(final_yaw - q[2])
+            q[2] += turn
+            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            knots_q.append(q)
+        self._execute(np.asarray(knots_t), np.asarray(knots_q))
+        seconds = float(tm.drive_time(path, wrap_angle(q0[2]), final_yaw))
+        self.sim_time += seconds
+        return seconds
+
+    def move_head(self, pan: float, tilt: float) -> float:
+        """Slew the head to (pan, tilt), clipped to the joint limits. Returns the seconds charged
+        (``TimeModel.head_time``)."""
+        pan, tilt = self.spec.clip_head(pan, tilt)
+        q0 = self._d.qpos[self._qadr].copy()
+        q1 = q0.copy()
+        q1[3:] = pan, tilt
+        seconds = float(self.time_model.head_time(q0[3], q0[4], pan, tilt))
+        self._execute(np.array([0.0, seconds]), np.stack([q0, q1]))
+        self.sim_time += seconds
+        return seconds
+
+    def _execute(self, knots_t: np.ndarray, knots_q: np.ndarray) -> None:
+        """Step the physics while the servo targets follow the piecewise-linear joint trajectory
+        (knots_t (K,), knots_q (K, 5)), then hold the last knot until the joints settle."""
+        m, d = self._m, self._d
+        dt = CONTROL_STEPS * m.opt.timestep
+        total = float(knots_t[-1])
+        n = math.ceil(total / dt - 1e-9) if total > 0 else 0
+        for k in range(1, n + 1):
+            t = min(k * dt, total)
+            d.ctrl[self._act] = [np.interp(t, knots_t, knots_q[:, j]) for j in range(5)]
+            mujoco.mj_step(m, d, CONTROL_STEPS)
+        target = knots_q[-1]
+        d.ctrl[self._act] = target
+        for _ in range(math.ceil(MAX_SETTLE_S / dt)):
+            if (
+                np.abs(d.qpos[self._qadr] - target).max() < SETTLE_POS_TOL
+                and np.abs(d.qvel[self._vadr]).max() < SETTLE_VEL_TOL
+            ):
+                break
+            mujoco.mj_step(m, d, CONTROL_STEPS)
+        mujoco.mj_forward(m, d)
+
+    # -- images --------------------------------------------------------------------------------
+
+    def camera_info(self) -> CameraInfo:
+        """The head camera where it is now."""
+        return CameraInfo(
+            position=self._d.cam_xpos[self._cam_id].copy(),
+            xmat=self._d.cam_xmat[self._cam_id].reshape(3, 3).copy(),
+            fovy_deg=float(self._m.cam_fovy[self._cam_id]),
+            width=self.width,
+            height=self.height,
+        )
+
+    def capture(self, rgb: bool = False, depth: bool = True) -> Frame:
+        """An image from the head camera at the robot's actual pose: instance ids always, depth
+        and RGB as asked. Charges ``TimeModel.image_cost``."""
+        r = self._renderer(self.width, self.height)
+        r.update_scene(self._d, self._cam_id, self._head_option)
+        ids, dep = r.render_ids_depth(self._geom_instance, depth)
+        color = r.render_rgb() if rgb else None
+        self.sim_time += self.time_model.image_cost
+        return Frame(color, dep, ids, self.camera_info(), self.pose())
+
+    def render_overview(self, width: int = 640, height: int = 480) -> np.ndarray:
+        """A top-down orthographic RGB image (H, W, 3) of the whole room, robot included (image
+        right = +x, image up = +y; ``overview_pixels`` maps points onto it); no time charged."""
+        _check_size(width, height)
+        r = self._renderer(width, height)
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        cam.orthographic = 1  # a map: walls do not lean; the free camera's fovy is then metres
+        cam.distance = self.layout.height + 5.0
+        cam.lookat[:] = 0.0, 0.0, 0.0
+        cam.azimuth, cam.elevation = 90.0, -90.0  # image right = +x, image up = +y
+        vis = self._m.vis.global_
+        saved = vis.fovy, vis.orthographic
+        vis.fovy, vis.orthographic = 2 * self._overview_half_height(width, height), 1
+        try:
+            r.update_scene(self._d, cam, self._overview_option)
+        finally:
+            vis.fovy, vis.orthographic = saved
+        return r.render_rgb()
+
+    def overview_pixels(
+        self, points: np.ndarray, width: int = 640, height: int = 480
+    ) -> np.ndarray:
+        """World points (N, 3) or (N, 2) -> their pixels (N, 2) (u right, v down) in
+        ``render_overview(width, height)``."""
+        pts = np.atleast_2d(np.asarray(points, float))
+        px_per_m = height / (2 * self._overview_half_height(width, height))
+        return np.column_stack(
+            [width / 2 + px_per_m * pts[:, 0], height / 2 - px_per_m * pts[:, 1]]
+        )
+
+    def _overview_half_height(self, width: int, height: int) -> float:
+        """Half the overview's height in metres: the room, its walls and a 0.2 m border fit."""
+        hw = self.layout.width / 2 + WALL_THICKNESS + 0.2
+        hd = self.layout.depth / 2 + WALL_THICKNESS + 0.2
+        return max(hd, hw * height / width)
+
+    def _renderer(self, width: int, height: int) -> _Renderer:
+        if not self._finalizer.alive:
+            raise RuntimeError("this World is closed")
+        key = (width, height)
+        if key not in self._renderers:
+            self._renderers[key] = _make_renderer(self.physics.model.ptr, width, height)
+        return self._renderers[key]
+
+    # -- lifetime ------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Free the renderers (GL contexts). The World cannot render afterwards."""
+        self._finalizer()
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _check_size(width: int, height: int) -> None:
+    if not (0 < width <= MAX_IMAGE_SIZE[0] and 0 < height <= MAX_IMAGE_SIZE[1]):
+        raise ValueError(
+            f"image size {width}x{height} outside 1x1..{MAX_IMAGE_SIZE[0]}x{MAX_IMAGE_SIZE[1]}"
+        )
+
+
+def _make_renderer(model: mujoco.MjModel, width: int, height: int) -> _Renderer:
+    """A renderer, with a one-line CtxsearchError when off-screen OpenGL cannot start."""
+    global _gl_renderer
+    try:
+        r = _Renderer(model, height=height, width=width)
+    except Exception as exc:  # EGL/GL loading fails with ImportError, OSError, RuntimeError...
+        detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise CtxsearchError(
+            f"off-screen rendering (MUJOCO_GL={os.environ.get('MUJOCO_GL')}) could not start "
+            f"({detail}); install Mesa's EGL: {EGL_HINT}"
+        ) from None
+    if _gl_renderer is None:
+        try:
+            from OpenGL import GL
+
+            _gl_renderer = GL.glGetString(GL.GL_RENDERER).decode()
+        except Exception as exc:  # informative only: never fail a render for it
+            _gl_renderer = f"unknown ({type(exc).__name__})"
+        log.info("OpenGL renderer: %s", _gl_renderer)
+    return r
+
+
+def gl_renderer() -> str | None:
+    """The OpenGL renderer string (e.g. Mesa's llvmpipe), once any World has rendered."""
+    return _gl_renderer

@@ -1,0 +1,53 @@
+"""``ctxsearch bench sim``: speed of the simulated world (layouts, compile, gazes, render overhead)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def register_bench(sub: argparse._SubParsersAction) -> None:
+    """Add the ``bench sim`` benchmark."""
+    p = sub.add_parser(
+        "sim",
+        help="simulator speed: layouts/s, build+compile ms, gazes/s, render overhead",
+        description="Time the room generator, the MJCF build and compile per room, and gazes "
+        "(move the head in MuJoCo, render segmentation and depth, detect) against the same "
+        "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json and DIR/bench_sim.md.",
+    )
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--rooms", type=_positive_int, default=5, help="rooms to build (default: 5)")
+    p.add_argument("--gazes", type=_positive_int, default=100, help="gazes per room (default: 100)")
+    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
+    p.add_argument("--width", type=_positive_int, default=320, help="image width (default: 320)")
+    p.add_argument("--height", type=_positive_int, default=240, help="image height (default: 240)")
+    p.set_defaults(func=run_bench)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench sim``."""
+    from envs.bench_sim import format_table, run
+
+    results = run(
+        args.out,
+        rooms=args.rooms,
+        gazes=args.gazes,
+        style=args.style,
+        seed=args.seed,
+        width=args.width,
+        height=args.height,
+    )
+    print(format_table(results))
+    print(f"wrote {args.out / 'bench_sim.json'} and {args.out / 'bench_sim.md'}")
+    return 0
