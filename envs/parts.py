@@ -85,17 +85,42 @@ class Surface:
 def _box(name: str, lo, hi, color_scale: float = 1.0, color: Vec3 | None = None) -> Part:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     c, h = (lo + hi) / 2, (hi - lo) / 2
-    return Part(name, tuple(float(v) for v in c), tuple(float(v) for v in h), "box", color_scale, color)
+    return Part(
+        name, tuple(float(v) for v in c), tuple(float(v) for v in h), "box", color_scale, color
+    )
 
 
-def _cyl(name: str, cx: float, cy: float, zlo: float, zhi: float, r: float,
-         color_scale: float = 1.0, color: Vec3 | None = None) -> Part:
-    return Part(name, (float(cx), float(cy), float((zlo + zhi) / 2)),
-                (float(r), float(r), float((zhi - zlo) / 2)), "cylinder", color_scale, color)
+def _cyl(
+    name: str,
+    cx: float,
+    cy: float,
+    zlo: float,
+    zhi: float,
+    r: float,
+    color_scale: float = 1.0,
+    color: Vec3 | None = None,
+) -> Part:
+    return Part(
+        name,
+        (float(cx), float(cy), float((zlo + zhi) / 2)),
+        (float(r), float(r), float((zhi - zlo) / 2)),
+        "cylinder",
+        color_scale,
+        color,
+    )
 
 
-def _legs(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, t: float,
-          scale: float = 0.7, prefix: str = "leg") -> list[Part]:
+def _legs(
+    x0: float,
+    x1: float,
+    y0: float,
+    y1: float,
+    z0: float,
+    z1: float,
+    t: float,
+    scale: float = 0.7,
+    prefix: str = "leg",
+) -> list[Part]:
     """Four square legs of side t in the corners of [x0,x1] x [y0,y1], from z0 to z1."""
     out = []
     for i, (xa, ya) in enumerate(((x1 - t, y1 - t), (x1 - t, y0), (x0, y1 - t), (x0, y0))):
@@ -123,7 +148,9 @@ def _desk(sx, sy, sz, *, drawer: bool) -> list[Part]:
         dy = min(0.42, sy * 0.3)
         dz = min(0.25, (sz - t) * 0.4)
         y0 = -Y + 0.02 + leg
-        parts.append(_box("drawer", (-X + 0.02 + leg, y0, Z - t - dz), (X - 0.03, y0 + dy, Z - t), 0.85))
+        parts.append(
+            _box("drawer", (-X + 0.02 + leg, y0, Z - t - dz), (X - 0.03, y0 + dy, Z - t), 0.85)
+        )
     return parts
 
 
@@ -180,7 +207,12 @@ def _cabinet(sx, sy, sz, *, counter: bool) -> list[Part]:
     return [
         _box("body", (-X, -Y, -Z), (X - over, Y, Z - top_t), 0.9),
         _box("top", (-X, -Y, Z - top_t), (X, Y, Z)),
-        _box("handle", (X - over, -0.02, Z - top_t - min(0.2, sz * 0.2)), (X - over + min(0.02, over), 0.02, Z - top_t - min(0.05, sz * 0.05)), 0.4),
+        _box(
+            "handle",
+            (X - over, -0.02, Z - top_t - min(0.2, sz * 0.2)),
+            (X - over + min(0.02, over), 0.02, Z - top_t - min(0.05, sz * 0.05)),
+            0.4,
+        ),
     ]
 
 
@@ -212,8 +244,12 @@ def _bed(sx, sy, sz) -> list[Part]:
     frame, mattress, head = _bed_dims(sx, sy, sz)
     return [
         _box("frame", (-X + head, -Y, -Z), (X, Y, -Z + frame), 0.6),
-        _box("mattress", (-X + head, -Y + 0.02, -Z + frame), (X - 0.02, Y - 0.02, -Z + mattress),
-             color=(0.92, 0.92, 0.95)),
+        _box(
+            "mattress",
+            (-X + head, -Y + 0.02, -Z + frame),
+            (X - 0.02, Y - 0.02, -Z + mattress),
+            color=(0.92, 0.92, 0.95),
+        ),
         _box("headboard", (-X, -Y, -Z), (-X + head, Y, Z), 0.6),
     ]
 
@@ -228,10 +264,19 @@ def _monitor(sx, sy, sz) -> list[Part]:
     inset = min(0.015, (Z - screen_z0) * 0.2, Y * 0.1)
     return [
         _box("base", (-X, -min(0.12, Y), -Z), (X, min(0.12, Y), -Z + plate_t), 0.8),
-        _box("neck", (neck_x0, -min(0.03, Y), -Z + plate_t), (neck_x1, min(0.03, Y), min(screen_z0 + 0.05, Z)), 0.8),
+        _box(
+            "neck",
+            (neck_x0, -min(0.03, Y), -Z + plate_t),
+            (neck_x1, min(0.03, Y), min(screen_z0 + 0.05, Z)),
+            0.8,
+        ),
         _box("screen", (neck_x1, -Y, screen_z0), (neck_x1 + screen_t, Y, Z)),
-        _box("display", (neck_x1 + screen_t, -Y + inset, screen_z0 + inset),
-             (min(X, neck_x1 + screen_t + 0.002), Y - inset, Z - inset), color=(0.12, 0.22, 0.38)),
+        _box(
+            "display",
+            (neck_x1 + screen_t, -Y + inset, screen_z0 + inset),
+            (min(X, neck_x1 + screen_t + 0.002), Y - inset, Z - inset),
+            color=(0.12, 0.22, 0.38),
+        ),
     ]
 
 
@@ -242,8 +287,12 @@ def _laptop(sx, sy, sz) -> list[Part]:
     return [
         _box("base", (-X, -Y, -Z), (X, Y, -Z + base_t)),
         _box("lid", (-X, -Y, -Z + base_t), (-X + lid_t, Y, Z)),
-        _box("display", (-X + lid_t, -Y + 0.01, -Z + base_t + 0.01), (-X + lid_t + 0.002, Y - 0.01, Z - 0.01),
-             color=(0.12, 0.22, 0.38)),
+        _box(
+            "display",
+            (-X + lid_t, -Y + 0.01, -Z + base_t + 0.01),
+            (-X + lid_t + 0.002, Y - 0.01, Z - 0.01),
+            color=(0.12, 0.22, 0.38),
+        ),
     ]
 
 
@@ -262,11 +311,26 @@ def _microscope(sx, sy, sz) -> list[Part]:
     stage_z = -Z + sz * 0.4
     return [
         _box("base", (-X, -Y, -Z), (X, Y, -Z + 0.08 * sz), 0.5),
-        _box("pillar", (-X, -min(0.04, Y), -Z + 0.08 * sz), (-X + pillar, min(0.04, Y), Z - 0.08 * sz)),
-        _box("stage", (-X + pillar, -Y * 0.8, stage_z - 0.03 * sz), (X * 0.7, Y * 0.8, stage_z + 0.03 * sz), 0.4),
-        _box("arm", (-X + pillar, -min(0.03, Y), Z - 0.22 * sz), (X * 0.3, min(0.03, Y), Z - 0.08 * sz)),
+        _box(
+            "pillar",
+            (-X, -min(0.04, Y), -Z + 0.08 * sz),
+            (-X + pillar, min(0.04, Y), Z - 0.08 * sz),
+        ),
+        _box(
+            "stage",
+            (-X + pillar, -Y * 0.8, stage_z - 0.03 * sz),
+            (X * 0.7, Y * 0.8, stage_z + 0.03 * sz),
+            0.4,
+        ),
+        _box(
+            "arm",
+            (-X + pillar, -min(0.03, Y), Z - 0.22 * sz),
+            (X * 0.3, min(0.03, Y), Z - 0.08 * sz),
+        ),
         _cyl("eyepiece", -X + pillar * 1.5, 0.0, Z - 0.08 * sz, Z, min(0.02, pillar / 2), 0.5),
-        _cyl("objective", X * 0.15, 0.0, stage_z + 0.1 * sz, Z - 0.22 * sz, min(0.015, X * 0.15), 0.6),
+        _cyl(
+            "objective", X * 0.15, 0.0, stage_z + 0.1 * sz, Z - 0.22 * sz, min(0.015, X * 0.15), 0.6
+        ),
     ]
 
 
@@ -349,7 +413,13 @@ def support_surfaces(shape: str, size) -> list[Surface]:
         return [Surface((back / 2, 0.0, -Z + seat), ((sx - back) / 2, sy / 2 - arm), 0.5)]
     if shape == "bed":
         _, mattress, head = _bed_dims(sx, sy, sz)
-        return [Surface(((head - 0.02) / 2, 0.0, -Z + mattress), ((sx - head - 0.02) / 2, sy / 2 - 0.02), 0.6)]
+        return [
+            Surface(
+                ((head - 0.02) / 2, 0.0, -Z + mattress),
+                ((sx - head - 0.02) / 2, sy / 2 - 0.02),
+                0.6,
+            )
+        ]
     if shape == "box":
         return [Surface((0.0, 0.0, Z), (X, sy / 2), 0.3)]
     if shape in SHAPES:
@@ -367,7 +437,9 @@ def _shape_of(obj: ObjectInstance, catalog: Catalog | None) -> str:
 
 
 @functools.lru_cache(maxsize=4096)
-def _local_parts_array(shape: str, size: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+def _local_parts_array(
+    shape: str, size: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
     parts = solid_parts(shape, size)
     return np.array([p.center for p in parts], float), np.array([p.half for p in parts], float)
 
@@ -416,9 +488,17 @@ def world_surfaces(obj: ObjectInstance, catalog: Catalog | None = None) -> list[
     out = []
     for surf in support_surfaces(_shape_of(obj, catalog), obj.size):
         lx, ly, lz = surf.center
-        out.append(WorldSurface(
-            owner=obj.id,
-            center=(obj.position[0] + c * lx - s * ly, obj.position[1] + s * lx + c * ly, obj.position[2] + lz),
-            yaw=float(obj.yaw), half_xy=surf.half_xy, clearance=surf.clearance,
-        ))
+        out.append(
+            WorldSurface(
+                owner=obj.id,
+                center=(
+                    obj.position[0] + c * lx - s * ly,
+                    obj.position[1] + s * lx + c * ly,
+                    obj.position[2] + lz,
+                ),
+                yaw=float(obj.yaw),
+                half_xy=surf.half_xy,
+                clearance=surf.clearance,
+            )
+        )
     return out

@@ -54,8 +54,16 @@ MAX_ROOM_ATTEMPTS = 12
 FURNITURE_TRIES = 60
 OBJECT_TRIES = 30
 # Probability that a piece of furniture of this shape stands with its back to a wall.
-WALL_PROB = {"desk": 0.75, "shelf": 1.0, "cabinet": 0.95, "counter": 1.0, "bed": 1.0,
-             "sofa": 0.5, "table": 0.15, "chair": 0.1}
+WALL_PROB = {
+    "desk": 0.75,
+    "shelf": 1.0,
+    "cabinet": 0.95,
+    "counter": 1.0,
+    "bed": 1.0,
+    "sofa": 0.5,
+    "table": 0.15,
+    "chair": 0.1,
+}
 # Shapes whose front matters for reachability; others can be reached from any side.
 FRONTED = {"desk", "shelf", "cabinet", "counter", "sofa", "bed"}
 # Small objects that face the way their support or reference faces (screens, keyboards...).
@@ -112,7 +120,9 @@ class _Builder:
         ys = -self.depth / 2 + (np.arange(ny) + 0.5) * self.depth / ny
         self.gx, self.gy = np.meshgrid(xs, ys, indexing="ij")
         wall = self.clear + GRID_SLACK
-        self.wall_free = (np.abs(self.gx) <= self.width / 2 - wall) & (np.abs(self.gy) <= self.depth / 2 - wall)
+        self.wall_free = (np.abs(self.gx) <= self.width / 2 - wall) & (
+            np.abs(self.gy) <= self.depth / 2 - wall
+        )
         self.dmin = np.full(self.gx.shape, np.inf)
         self.obstacles: list[_Obstacle] = []
         ex, ey = self._door_entry()
@@ -131,8 +141,12 @@ class _Builder:
     def _inward(self, wall: str) -> tuple[float, float, float, float]:
         """(x, y of the wall's centre line point at along=0, inward unit normal nx, ny)."""
         W, D = self.width / 2, self.depth / 2
-        return {"north": (0.0, D, 0.0, -1.0), "south": (0.0, -D, 0.0, 1.0),
-                "east": (W, 0.0, -1.0, 0.0), "west": (-W, 0.0, 1.0, 0.0)}[wall]
+        return {
+            "north": (0.0, D, 0.0, -1.0),
+            "south": (0.0, -D, 0.0, 1.0),
+            "east": (W, 0.0, -1.0, 0.0),
+            "west": (-W, 0.0, 1.0, 0.0),
+        }[wall]
 
     def _wall_point(self, wall: str, along: float, inset: float) -> tuple[float, float]:
         x0, y0, nx, ny = self._inward(wall)
@@ -161,9 +175,11 @@ class _Builder:
     def parts(self) -> BoxArray:
         if self._parts_cache is None:
             if self._parts:
-                self._parts_cache = BoxArray(np.concatenate([p.centers for p in self._parts]),
-                                             np.concatenate([p.yaws for p in self._parts]),
-                                             np.concatenate([p.halves for p in self._parts]))
+                self._parts_cache = BoxArray(
+                    np.concatenate([p.centers for p in self._parts]),
+                    np.concatenate([p.yaws for p in self._parts]),
+                    np.concatenate([p.halves for p in self._parts]),
+                )
             else:
                 self._parts_cache = BoxArray(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
         return self._parts_cache
@@ -182,8 +198,11 @@ class _Builder:
         cx, cy = (lo[:, 0].min() + hi[:, 0].max()) / 2, (lo[:, 1].min() + hi[:, 1].max()) / 2
         r = math.hypot(hi[:, 0].max() - lo[:, 0].min(), hi[:, 1].max() - lo[:, 1].min()) / 2
         d = np.hypot(allp.centers[:, 0] - cx, allp.centers[:, 1] - cy)
-        near = (d < r + self._radius_cache) & (allp.centers[:, 2] - allp.halves[:, 2] < hi[:, 2].max() - EPS) & (
-            allp.centers[:, 2] + allp.halves[:, 2] > lo[:, 2].min() + EPS)
+        near = (
+            (d < r + self._radius_cache)
+            & (allp.centers[:, 2] - allp.halves[:, 2] < hi[:, 2].max() - EPS)
+            & (allp.centers[:, 2] + allp.halves[:, 2] > lo[:, 2].min() + EPS)
+        )
         idx = np.flatnonzero(near)
         if len(idx) == 0:
             return False
@@ -191,15 +210,23 @@ class _Builder:
 
     def inside_room(self, obj: ObjectInstance) -> bool:
         xy = obj.box().corners_xy()
-        return bool(np.all(np.abs(xy[:, 0]) <= self.width / 2 + 1e-9)
-                    and np.all(np.abs(xy[:, 1]) <= self.depth / 2 + 1e-9)
-                    and obj.top <= self.height)
+        return bool(
+            np.all(np.abs(xy[:, 0]) <= self.width / 2 + 1e-9)
+            and np.all(np.abs(xy[:, 1]) <= self.depth / 2 + 1e-9)
+            and obj.top <= self.height
+        )
 
     def in_door_zone(self, obj: ObjectInstance) -> bool:
         return box_overlap(obj.box(), self.door_box)
 
-    def add(self, obj: ObjectInstance, parts: BoxArray, surface: WorldSurface | None,
-            obstacle: _Obstacle | None = None, placed_by: tuple[int, str] | None = None) -> None:
+    def add(
+        self,
+        obj: ObjectInstance,
+        parts: BoxArray,
+        surface: WorldSurface | None,
+        obstacle: _Obstacle | None = None,
+        placed_by: tuple[int, str] | None = None,
+    ) -> None:
         self.objects.append(obj)
         self._parts.append(parts)
         self._parts_cache = None
@@ -243,8 +270,10 @@ class _Builder:
                 return False
         reachable = labels == main
         obstacles = self.obstacles if extra is None else [*self.obstacles, extra]
-        return all(not (o.reach_mask is not None and not np.any(o.reach_mask & reachable))
-                   for o in obstacles)
+        return all(
+            not (o.reach_mask is not None and not np.any(o.reach_mask & reachable))
+            for o in obstacles
+        )
 
     # -- furniture ------------------------------------------------------------------------------
     def try_furniture(self, obj: ObjectInstance, placed_by: tuple[int, str] | None = None) -> bool:
@@ -277,8 +306,16 @@ class _Builder:
             yaw = math.atan2(ny, nx)
         else:
             r = math.hypot(sx, sy) / 2
-            x = float(rng.uniform(-self.width / 2 + r, self.width / 2 - r)) if self.width > 2 * r else 0.0
-            y = float(rng.uniform(-self.depth / 2 + r, self.depth / 2 - r)) if self.depth > 2 * r else 0.0
+            x = (
+                float(rng.uniform(-self.width / 2 + r, self.width / 2 - r))
+                if self.width > 2 * r
+                else 0.0
+            )
+            y = (
+                float(rng.uniform(-self.depth / 2 + r, self.depth / 2 - r))
+                if self.depth > 2 * r
+                else 0.0
+            )
             yaw = float(rng.integers(4)) * math.pi / 2
             if rng.random() < 0.3:
                 yaw += float(rng.uniform(-0.15, 0.15))
@@ -305,7 +342,11 @@ class _Builder:
             v = float(self.rng.uniform(-vol.half[1], vol.half[1]))
             x, y = vol.center[0] + c * u - s * v, vol.center[1] + s * u + c * v
             if ot.shape == "chair":  # sits facing its reference
-                yaw = math.atan2(ref.position[1] - y, ref.position[0] - x) + float(self.rng.uniform(-0.2, 0.2))
+                yaw = math.atan2(ref.position[1] - y, ref.position[0] - x) + float(
+                    self.rng.uniform(-0.2, 0.2)
+                )
+            elif ot.shape in FRONTED:  # faces the way its reference faces (nightstand by a bed)
+                yaw = ref.yaw
             else:
                 yaw = ref.yaw + float(self.rng.integers(4)) * math.pi / 2
             obj = ObjectInstance(ot.name, oid, (float(x), float(y), size[2] / 2), _wrap(yaw), size)
@@ -315,17 +356,30 @@ class _Builder:
 
     # -- small objects ----------------------------------------------------------------------------
     def floor_surface(self) -> WorldSurface:
-        return WorldSurface(owner=-1, center=(0.0, 0.0, 0.0), yaw=0.0,
-                            half_xy=(self.width / 2, self.depth / 2), clearance=self.height)
+        return WorldSurface(
+            owner=-1,
+            center=(0.0, 0.0, 0.0),
+            yaw=0.0,
+            half_xy=(self.width / 2, self.depth / 2),
+            clearance=self.height,
+        )
 
     def small_yaw(self, ot: ObjectType, facing: float | None) -> float:
         if ot.shape in ALIGNED and facing is not None:
             return _wrap(facing + float(self.rng.uniform(-0.25, 0.25)))
         return float(self.rng.uniform(-math.pi, math.pi))
 
-    def try_small(self, ot: ObjectType, size, yaw: float, surf: WorldSurface, oid: int,
-                  region: tuple[float, float, float, float] | None,
-                  check=None, placed_by: tuple[int, str] | None = None) -> bool:
+    def try_small(
+        self,
+        ot: ObjectType,
+        size,
+        yaw: float,
+        surf: WorldSurface,
+        oid: int,
+        region: tuple[float, float, float, float] | None,
+        check=None,
+        placed_by: tuple[int, str] | None = None,
+    ) -> bool:
         """Sample a spot for a small object on ``surf`` and add it if it is valid."""
         sx, sy, sz = size
         if sz > surf.clearance:
@@ -374,9 +428,17 @@ class _Builder:
         def reaches(z: float) -> bool:  # an object resting at z overlaps the volume in z
             return min(z + h, zhi) - max(z, zlo) > EPS
 
-        own = [s for s in world_surfaces(ref, self.catalog) if reaches(s.center[2]) and s.clearance >= h]
+        own = [
+            s
+            for s in world_surfaces(ref, self.catalog)
+            if reaches(s.center[2]) and s.clearance >= h
+        ]
         below = self.resting.get(ref.id)
-        sup = [below] if below is not None and reaches(below.center[2]) and below.clearance >= h else []
+        sup = (
+            [below]
+            if below is not None and reaches(below.center[2]) and below.clearance >= h
+            else []
+        )
         floor = [self.floor_surface()] if reaches(0.0) else []
         if rule.on == "floor":
             tiers = [floor]
@@ -396,7 +458,9 @@ class _Builder:
             return box_overlap(obj.box(), vol)
 
         for _ in range(OBJECT_TRIES):
-            surf = cands[int(self.rng.choice(len(cands), p=weights))] if len(cands) > 1 else cands[0]
+            surf = (
+                cands[int(self.rng.choice(len(cands), p=weights))] if len(cands) > 1 else cands[0]
+            )
             yaw = self.small_yaw(ot, facing)
             region = _volume_region(vol, surf)
             if self.try_small(ot, size, yaw, surf, oid, region, check, (ref.id, rel.name)):
@@ -429,8 +493,14 @@ def overlap_any(a: BoxArray, b: BoxArray, eps: float = EPS) -> bool:
     """
     if len(a) == 0 or len(b) == 0:
         return False
-    alo, ahi = a.centers[:, None, 2] - a.halves[:, None, 2], a.centers[:, None, 2] + a.halves[:, None, 2]
-    blo, bhi = b.centers[None, :, 2] - b.halves[None, :, 2], b.centers[None, :, 2] + b.halves[None, :, 2]
+    alo, ahi = (
+        a.centers[:, None, 2] - a.halves[:, None, 2],
+        a.centers[:, None, 2] + a.halves[:, None, 2],
+    )
+    blo, bhi = (
+        b.centers[None, :, 2] - b.halves[None, :, 2],
+        b.centers[None, :, 2] + b.halves[None, :, 2],
+    )
     ok = np.minimum(ahi, bhi) - np.maximum(alo, blo) > eps
     if not ok.any():
         return False
@@ -460,10 +530,12 @@ def box_overlap(a: Box, b: Box, eps: float = EPS) -> bool:
     C, S = abs(ca * cb + sa * sb), abs(sa * cb - ca * sb)
     dx, dy = float(b.center[0] - a.center[0]), float(b.center[1] - a.center[1])
     ha0, ha1, hb0, hb1 = float(ah[0]), float(ah[1]), float(bh[0]), float(bh[1])
-    return (ha0 + C * hb0 + S * hb1 - abs(dx * ca + dy * sa) > eps
-            and ha1 + S * hb0 + C * hb1 - abs(-dx * sa + dy * ca) > eps
-            and hb0 + C * ha0 + S * ha1 - abs(dx * cb + dy * sb) > eps
-            and hb1 + S * ha0 + C * ha1 - abs(-dx * sb + dy * cb) > eps)
+    return (
+        ha0 + C * hb0 + S * hb1 - abs(dx * ca + dy * sa) > eps
+        and ha1 + S * hb0 + C * hb1 - abs(-dx * sa + dy * ca) > eps
+        and hb0 + C * ha0 + S * ha1 - abs(dx * cb + dy * sb) > eps
+        and hb1 + S * ha0 + C * ha1 - abs(-dx * sb + dy * cb) > eps
+    )
 
 
 def _wrap(a: float) -> float:
@@ -489,8 +561,9 @@ def _furniture_order(style: Style, catalog: Catalog, rng: np.random.Generator) -
     return sorted(names, key=lambda t: -area[t])  # stable: file order among equals
 
 
-def _build(style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec,
-           strict: bool) -> _Builder | None:
+def _build(
+    style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec, strict: bool
+) -> _Builder | None:
     b = _Builder(style, catalog, rng, robot)
     placed: dict[str, int] = {}
     for tname in _furniture_order(style, catalog, rng):
@@ -515,8 +588,21 @@ def _build(style: Style, catalog: Catalog, rng: np.random.Generator, robot: Robo
     return b
 
 
-def generate_room(style: Style, seed: int, catalog: Catalog | None = None,
-                  robot: RobotSpec | None = None) -> RoomLayout:
+def door_entry(layout: RoomLayout, inset: float = 0.6) -> tuple[float, float, float]:
+    """A pose (x, y, yaw) just inside the door, facing into the room: kept free by the generator
+    and inside the robot's connected free space (a natural start pose)."""
+    W, D, d = layout.width / 2, layout.depth / 2, layout.door
+    return {
+        "north": (d.center, D - inset, -math.pi / 2),
+        "south": (d.center, -D + inset, math.pi / 2),
+        "east": (W - inset, d.center, math.pi),
+        "west": (-W + inset, d.center, 0.0),
+    }[d.wall]
+
+
+def generate_room(
+    style: Style, seed: int, catalog: Catalog | None = None, robot: RobotSpec | None = None
+) -> RoomLayout:
     """A furnished room of ``style``, the same for the same (style, seed)."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
@@ -527,6 +613,14 @@ def generate_room(style: Style, seed: int, catalog: Catalog | None = None,
         if b is not None:
             break
     assert b is not None
-    return RoomLayout(style=style.name, seed=int(seed), width=b.width, depth=b.depth,
-                      height=b.height, door=b.door, objects=tuple(b.objects),
-                      support=dict(b.support), placed_by=dict(b.placed_by))
+    return RoomLayout(
+        style=style.name,
+        seed=int(seed),
+        width=b.width,
+        depth=b.depth,
+        height=b.height,
+        door=b.door,
+        objects=tuple(b.objects),
+        support=dict(b.support),
+        placed_by=dict(b.placed_by),
+    )

@@ -110,7 +110,9 @@ def _range(path, field: str, value, *, integer: bool, lo_min: float) -> tuple:
     if ok(value):
         value = [value, value]
     if not isinstance(value, list) or len(value) != 2 or not all(ok(v) for v in value):
-        raise StyleError(path, f"expected a number or a [min, max] pair of {kind}, got {value!r}", field=field)
+        raise StyleError(
+            path, f"expected a number or a [min, max] pair of {kind}, got {value!r}", field=field
+        )
     a, b = value
     if a > b:
         raise StyleError(path, f"min {a} is larger than max {b}", field=field)
@@ -126,9 +128,15 @@ def _counts(path, section: str, raw, catalog: Catalog, *, furniture: bool) -> tu
     for tname, val in raw.items():
         field = f"{section}.{tname}"
         if tname not in catalog:
-            raise StyleError(path, f"unknown type '{tname}' (known: {', '.join(catalog.type_names)})", field=field)
+            raise StyleError(
+                path,
+                f"unknown type '{tname}' (known: {', '.join(catalog.type_names)})",
+                field=field,
+            )
         if furniture and not catalog.type(tname).is_furniture:
-            raise StyleError(path, f"'{tname}' is a small object: put it in [clutter] or a [[rule]]", field=field)
+            raise StyleError(
+                path, f"'{tname}' is a small object: put it in [clutter] or a [[rule]]", field=field
+            )
         rng = _range(path, field, val, integer=True, lo_min=0)
         if rng[1] > MAX_COUNT:
             raise StyleError(path, f"at most {MAX_COUNT} instances, got {rng[1]}", field=field)
@@ -142,35 +150,58 @@ def _rule(path, i: int, raw, catalog: Catalog, present: set[str]) -> Rule:
         raise StyleError(path, "a rule must be a table [[rule]]", field=where)
     unknown = set(raw) - RULE_FIELDS
     if unknown:
-        raise StyleError(path, f"unknown field(s) {sorted(unknown)} (allowed: {sorted(RULE_FIELDS)})",
-                         field=f"{where}.{sorted(unknown)[0]}")
+        raise StyleError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(RULE_FIELDS)})",
+            field=f"{where}.{sorted(unknown)[0]}",
+        )
     for req in ("ref", "relation", "type", "p"):
         if req not in raw:
             raise StyleError(path, "missing", field=f"{where}.{req}")
     ref, rel, tname = raw["ref"], raw["relation"], raw["type"]
     for fname, v in (("ref", ref), ("type", tname)):
         if not isinstance(v, str) or v not in catalog:
-            raise StyleError(path, f"unknown type {v!r} (known: {', '.join(catalog.type_names)})",
-                             field=f"{where}.{fname}")
+            raise StyleError(
+                path,
+                f"unknown type {v!r} (known: {', '.join(catalog.type_names)})",
+                field=f"{where}.{fname}",
+            )
     if not isinstance(rel, str) or not catalog.has_relation(rel):
         raise StyleError(path, f"unknown relation {rel!r}", field=f"{where}.relation")
     if catalog.relation(rel).ref != ref:
-        raise StyleError(path, f"'{rel}' is not a relation of {ref} (its relations: "
-                         f"{', '.join(catalog.type(ref).relation_names)})", field=f"{where}.relation")
+        raise StyleError(
+            path,
+            f"'{rel}' is not a relation of {ref} (its relations: "
+            f"{', '.join(catalog.type(ref).relation_names)})",
+            field=f"{where}.relation",
+        )
     p = raw["p"]
-    if isinstance(p, bool) or not isinstance(p, int | float) or not (0.0 <= p <= 1.0) or math.isnan(p):
+    if (
+        isinstance(p, bool)
+        or not isinstance(p, int | float)
+        or not (0.0 <= p <= 1.0)
+        or math.isnan(p)
+    ):
         raise StyleError(path, f"probability must be in [0, 1], got {p!r}", field=f"{where}.p")
     count = _range(path, f"{where}.count", raw.get("count", 1), integer=True, lo_min=0)
     if count[1] > MAX_COUNT:
-        raise StyleError(path, f"at most {MAX_COUNT} instances, got {count[1]}", field=f"{where}.count")
+        raise StyleError(
+            path, f"at most {MAX_COUNT} instances, got {count[1]}", field=f"{where}.count"
+        )
     on = raw.get("on", "auto")
     if on not in ON_CHOICES:
         raise StyleError(path, f"must be one of {ON_CHOICES}, got {on!r}", field=f"{where}.on")
     if catalog.type(tname).is_furniture and on == "surface":
-        raise StyleError(path, f"furniture ({tname}) stands on the floor, not on a surface", field=f"{where}.on")
+        raise StyleError(
+            path, f"furniture ({tname}) stands on the floor, not on a surface", field=f"{where}.on"
+        )
     if ref not in present:
-        raise StyleError(path, f"'{ref}' never occurs before this rule (not in [furniture] "
-                         "nor placed by an earlier rule)", field=f"{where}.ref")
+        raise StyleError(
+            path,
+            f"'{ref}' never occurs before this rule (not in [furniture] "
+            "nor placed by an earlier rule)",
+            field=f"{where}.ref",
+        )
     return Rule(ref=ref, relation=rel, type=tname, p=float(p), count=count, on=on)
 
 
@@ -180,27 +211,40 @@ def _check_fill(path, style: Style, catalog: Catalog, clearance: float) -> None:
     n_mean: dict[str, float] = {t: (c[0] + c[1]) / 2 for t, c in style.furniture}
     for r in style.rules:
         if catalog.type(r.type).is_furniture:
-            n_mean[r.type] = n_mean.get(r.type, 0.0) + n_mean.get(r.ref, 0.0) * r.p * sum(r.count) / 2
+            n_mean[r.type] = (
+                n_mean.get(r.type, 0.0) + n_mean.get(r.ref, 0.0) * r.p * sum(r.count) / 2
+            )
     need = 0.0
     for t, n in n_mean.items():
         sx, sy = catalog.type(t).size_max[0], catalog.type(t).size_max[1]
         need += n * (sx + clearance) * (sy + clearance)
         if min(sx, sy) + 2 * clearance > min(style.width[0], style.depth[0]) - 0.2:
-            raise StyleError(path, f"a {t} does not fit in a {style.width[0]} x {style.depth[0]} m room "
-                             "with room to drive around it", field="room")
+            raise StyleError(
+                path,
+                f"a {t} does not fit in a {style.width[0]} x {style.depth[0]} m room "
+                "with room to drive around it",
+                field="room",
+            )
     floor = style.width[0] * style.depth[0]
     if need > MAX_FILL * floor:
-        raise StyleError(path, f"room too small for its furniture: {need:.1f} m^2 of furniture on "
-                         f"average (largest sizes, with robot clearance) on a {floor:.1f} m^2 floor "
-                         f"(max {MAX_FILL:.0%})", field="furniture")
+        raise StyleError(
+            path,
+            f"room too small for its furniture: {need:.1f} m^2 of furniture on "
+            f"average (largest sizes, with robot clearance) on a {floor:.1f} m^2 floor "
+            f"(max {MAX_FILL:.0%})",
+            field="furniture",
+        )
 
 
 def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None = None) -> Style:
     """Validate a parsed style document; StyleError naming file and field on any problem."""
     unknown = set(doc) - TOP_FIELDS
     if unknown:
-        raise StyleError(path, f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TOP_FIELDS)})",
-                         field=sorted(unknown)[0])
+        raise StyleError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TOP_FIELDS)})",
+            field=sorted(unknown)[0],
+        )
     sname = doc.get("name", name or Path(path).stem)
     if not isinstance(sname, str) or not sname:
         raise StyleError(path, "must be a non-empty string", field="name")
@@ -209,11 +253,16 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
         raise StyleError(path, "must be a string", field="description")
     room = doc.get("room")
     if not isinstance(room, dict):
-        raise StyleError(path, "missing [room] table (width, depth, height, door_width)", field="room")
+        raise StyleError(
+            path, "missing [room] table (width, depth, height, door_width)", field="room"
+        )
     unknown = set(room) - ROOM_FIELDS
     if unknown:
-        raise StyleError(path, f"unknown field(s) {sorted(unknown)} (allowed: {sorted(ROOM_FIELDS)})",
-                         field=f"room.{sorted(unknown)[0]}")
+        raise StyleError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(ROOM_FIELDS)})",
+            field=f"room.{sorted(unknown)[0]}",
+        )
     for req in ("width", "depth"):
         if req not in room:
             raise StyleError(path, "missing", field=f"room.{req}")
@@ -222,8 +271,11 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
     height = _range(path, "room.height", room.get("height", [2.6, 3.0]), integer=False, lo_min=2.2)
     door = _range(path, "room.door_width", room.get("door_width", 0.9), integer=False, lo_min=0.7)
     if door[1] > min(width[0], depth[0]) - 1.0:
-        raise StyleError(path, f"a {door[1]} m door does not fit a {min(width[0], depth[0])} m wall",
-                         field="room.door_width")
+        raise StyleError(
+            path,
+            f"a {door[1]} m door does not fit a {min(width[0], depth[0])} m wall",
+            field="room.door_width",
+        )
     furniture = _counts(path, "furniture", doc.get("furniture", {}), catalog, furniture=True)
     present = {t for t, c in furniture if c[1] > 0}
     raw_rules = doc.get("rule", [])
@@ -238,10 +290,21 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
     clutter = _counts(path, "clutter", doc.get("clutter", {}), catalog, furniture=False)
     for t, _ in clutter:
         if catalog.type(t).is_furniture:
-            raise StyleError(path, f"'{t}' is furniture: put it in [furniture]", field=f"clutter.{t}")
-    style = Style(name=sname, path=str(path), description=desc, width=width, depth=depth,
-                  height=height, door_width=door, furniture=furniture, rules=tuple(rules),
-                  clutter=clutter)
+            raise StyleError(
+                path, f"'{t}' is furniture: put it in [furniture]", field=f"clutter.{t}"
+            )
+    style = Style(
+        name=sname,
+        path=str(path),
+        description=desc,
+        width=width,
+        depth=depth,
+        height=height,
+        door_width=door,
+        furniture=furniture,
+        rules=tuple(rules),
+        clutter=clutter,
+    )
     _check_fill(path, style, catalog, RobotSpec().clearance)
     return style
 
@@ -254,7 +317,11 @@ def load_style(path_or_name: str | Path, catalog: Catalog | None = None) -> Styl
         with open(path, "rb") as f:
             doc = tomllib.load(f)
     except FileNotFoundError:
-        hint = f" (available: {', '.join(available_styles())})" if not Path(path_or_name).suffix else ""
+        hint = (
+            f" (available: {', '.join(available_styles())})"
+            if not Path(path_or_name).suffix
+            else ""
+        )
         raise StyleError(path, f"no such style file{hint}") from None
     except tomllib.TOMLDecodeError as exc:
         raise StyleError(path, f"TOML syntax error: {exc}") from None

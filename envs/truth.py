@@ -33,7 +33,9 @@ from knowledge.catalog import Catalog, load_catalog
 from knowledge.geometry import related
 
 
-def room_counts(layout: RoomLayout, catalog: Catalog) -> tuple[dict[str, int], dict[tuple[str, str, str], int]]:
+def room_counts(
+    layout: RoomLayout, catalog: Catalog
+) -> tuple[dict[str, int], dict[tuple[str, str, str], int]]:
     """One room's counts: instances per type, and per (A, rel, B) how many A instances had a B."""
     n: dict[str, int] = {}
     y: dict[tuple[str, str, str], int] = {}
@@ -46,8 +48,9 @@ def room_counts(layout: RoomLayout, catalog: Catalog) -> tuple[dict[str, int], d
     return n, y
 
 
-def estimate(rooms: Iterable[tuple[dict[str, int], dict[tuple[str, str, str], int]]],
-             catalog: Catalog) -> list[dict]:
+def estimate(
+    rooms: Iterable[tuple[dict[str, int], dict[tuple[str, str, str], int]]], catalog: Catalog
+) -> list[dict]:
     """Entries {ref, relation, type, p, se, n, y, se_room} from per-room counts, for every
     (A, rel, B) of the catalog with n > 0 (p = 0 ones included)."""
     rooms = list(rooms)
@@ -75,13 +78,28 @@ def estimate(rooms: Iterable[tuple[dict[str, int], dict[tuple[str, str, str], in
                     se_room = math.sqrt(k / (k - 1) * float(np.sum(resid**2))) / n
                 else:
                     se_room = float("nan")
-                entries.append({"ref": a_type, "relation": rel, "type": b_type, "p": p, "se": se,
-                                "n": n, "y": y, "se_room": se_room})
+                entries.append(
+                    {
+                        "ref": a_type,
+                        "relation": rel,
+                        "type": b_type,
+                        "p": p,
+                        "se": se,
+                        "n": n,
+                        "y": y,
+                        "se_room": se_room,
+                    }
+                )
     return entries
 
 
-def ground_truth(style: Style | str | Path, samples: int, seed: int = 0,
-                 catalog: Catalog | None = None, progress: bool = False) -> dict:
+def ground_truth(
+    style: Style | str | Path,
+    samples: int,
+    seed: int = 0,
+    catalog: Catalog | None = None,
+    progress: bool = False,
+) -> dict:
     """P(rel(B)) for every (A, rel, B) over ``samples`` rooms of ``style`` (seeds seed .. seed+N-1).
 
     Returns ``{"style", "samples", "seed", "catalog", "entries": [{"ref", "relation", "type",
@@ -96,8 +114,13 @@ def ground_truth(style: Style | str | Path, samples: int, seed: int = 0,
 
         seeds = tqdm(seeds, desc=f"truth {style.name}", unit="room")
     rooms = [room_counts(generate_room(style, s, catalog), catalog) for s in seeds]
-    return {"style": style.name, "samples": int(samples), "seed": int(seed),
-            "catalog": catalog.fingerprint, "entries": estimate(rooms, catalog)}
+    return {
+        "style": style.name,
+        "samples": int(samples),
+        "seed": int(seed),
+        "catalog": catalog.fingerprint,
+        "entries": estimate(rooms, catalog),
+    }
 
 
 def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:

@@ -11,11 +11,36 @@ from envs.parts import solid_parts, support_surfaces, world_parts, world_surface
 from knowledge.catalog import SHAPES, load_catalog
 from knowledge.geometry import BoxArray, ObjectInstance, overlaps
 
-FURNITURE_SIZES = [(0.7, 1.4, 0.74), (0.6, 1.2, 0.72), (0.35, 1.0, 1.8), (0.3, 0.8, 1.2),
-                   (0.5, 0.5, 0.9), (0.9, 2.0, 0.85), (2.0, 1.4, 1.0), (0.6, 0.6, 0.9)]
-SMALL_SIZES = [(0.09, 0.09, 0.11), (0.2, 0.5, 0.4), (0.3, 0.35, 0.24), (0.15, 0.45, 0.03),
-               (0.3, 0.25, 0.45), (0.07, 0.07, 0.25), (0.2, 0.2, 0.3)]
-SMALL_SHAPES = {"monitor", "laptop", "keyboard", "microscope", "plant", "mug", "cylinder", "bottle", "box"}
+FURNITURE_SIZES = [
+    (0.7, 1.4, 0.74),
+    (0.6, 1.2, 0.72),
+    (0.35, 1.0, 1.8),
+    (0.3, 0.8, 1.2),
+    (0.5, 0.5, 0.9),
+    (0.9, 2.0, 0.85),
+    (2.0, 1.4, 1.0),
+    (0.6, 0.6, 0.9),
+]
+SMALL_SIZES = [
+    (0.09, 0.09, 0.11),
+    (0.2, 0.5, 0.4),
+    (0.3, 0.35, 0.24),
+    (0.15, 0.45, 0.03),
+    (0.3, 0.25, 0.45),
+    (0.07, 0.07, 0.25),
+    (0.2, 0.2, 0.3),
+]
+SMALL_SHAPES = {
+    "monitor",
+    "laptop",
+    "keyboard",
+    "microscope",
+    "plant",
+    "mug",
+    "cylinder",
+    "bottle",
+    "box",
+}
 
 
 def sizes_for(shape):
@@ -50,8 +75,10 @@ def test_surfaces_inside_bbox_and_on_a_part(shape):
             assert np.all(np.abs(c[:2]) + s.half_xy <= half[:2] + 1e-9)
             assert -half[2] < c[2] <= half[2] + 1e-9
             # Some part's top is at the surface height under its centre.
-            assert any(abs(p.hi[2] - c[2]) < 1e-9 and np.all(np.abs(c[:2] - p.center[:2]) <= p.half[:2])
-                       for p in parts), (shape, size, s)
+            assert any(
+                abs(p.hi[2] - c[2]) < 1e-9 and np.all(np.abs(c[:2] - p.center[:2]) <= p.half[:2])
+                for p in parts
+            ), (shape, size, s)
 
 
 def test_furniture_has_surfaces_and_shelf_boards():
@@ -66,9 +93,13 @@ def test_furniture_has_surfaces_and_shelf_boards():
 
 def test_desk_knee_space_is_open():
     size = (0.7, 1.5, 0.74)
-    parts = BoxArray(np.array([p.center for p in solid_parts("desk", size)]), np.zeros(len(solid_parts("desk", size))),
-                     np.array([p.half for p in solid_parts("desk", size)]))
+    parts = BoxArray(
+        np.array([p.center for p in solid_parts("desk", size)]),
+        np.zeros(len(solid_parts("desk", size))),
+        np.array([p.half for p in solid_parts("desk", size)]),
+    )
     from knowledge.geometry import Box
+
     knee = Box(np.array([0.0, 0.3, -0.1]), 0.0, np.array([0.2, 0.2, 0.2]))
     assert not overlaps(parts, knee).any()
 
@@ -85,4 +116,3 @@ def test_world_parts_follow_pose():
         assert b.yaw == desk.yaw
     top = world_surfaces(desk, cat)[0]
     assert np.isclose(top.center[2], 0.74) and top.owner == 1
-

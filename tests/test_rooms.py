@@ -10,12 +10,12 @@ from scipy import ndimage
 
 from envs.parts import world_parts, world_surfaces
 from envs.robot_spec import RobotSpec
-from envs.rooms import box_overlap, generate_room, overlap_any
+from envs.rooms import box_overlap, door_entry, generate_room, overlap_any
 from envs.styles import available_styles, load_style
 from knowledge.catalog import load_catalog
 from knowledge.geometry import Box, BoxArray, holds, overlaps
 
-STYLES = ("office", "biology_lab", "living_room", "kitchen")
+STYLES = ("office", "biology_lab", "living_room", "kitchen", "bedroom")
 SEEDS = range(30)
 
 
@@ -65,8 +65,11 @@ def test_nothing_interpenetrates(style):
             for b in world_parts(o, cat):
                 boxes.append(b)
                 owner.append(o.id)
-        arr = BoxArray(np.array([b.center for b in boxes]), np.array([b.yaw for b in boxes]),
-                       np.array([b.half for b in boxes]))
+        arr = BoxArray(
+            np.array([b.center for b in boxes]),
+            np.array([b.yaw for b in boxes]),
+            np.array([b.half for b in boxes]),
+        )
         owner = np.array(owner)
         for b, oid in zip(boxes, owner, strict=True):
             hit = overlaps(arr, b) & (owner != oid)
@@ -104,7 +107,11 @@ def test_everything_rests_on_floor_or_a_surface(style):
                 c, si = np.cos(s.yaw), np.sin(s.yaw)
                 d = np.asarray(o.position[:2]) - np.asarray(s.center[:2])
                 u, v = c * d[0] + si * d[1], -si * d[0] + c * d[1]
-                if abs(o.bottom - s.center[2]) < 1e-9 and abs(u) <= s.half_xy[0] and abs(v) <= s.half_xy[1]:
+                if (
+                    abs(o.bottom - s.center[2]) < 1e-9
+                    and abs(u) <= s.half_xy[0]
+                    and abs(v) <= s.half_xy[1]
+                ):
                     ok = True
             assert ok, (lay.seed, o)
 
@@ -138,6 +145,11 @@ def test_robot_free_space_is_connected(style):
         assert n >= 1
         big = sizes >= 40  # pockets under ~0.2 m^2 are not places (x2 for grid discretisation)
         assert big.sum() == 1, (lay.seed, sorted(sizes))
+        # The door entry lies in the big region.
+        x, y, _ = door_entry(lay)
+        i = int(np.argmin(np.abs(np.arange(-lay.width / 2 + 0.05, lay.width / 2, 0.1) - x)))
+        j = int(np.argmin(np.abs(np.arange(-lay.depth / 2 + 0.05, lay.depth / 2, 0.1) - y)))
+        assert labels[i, j] == 1 + int(np.argmax(sizes)), lay.seed
         # Roughly half the floor or more stays drivable.
         assert sizes.max() * 0.01 > 0.2 * lay.width * lay.depth * 0.5
 
@@ -163,8 +175,13 @@ def test_fast_overlap_matches_geometry():
         b = Box(rng.uniform(-1, 1, 3), float(rng.uniform(-3, 3)), rng.uniform(0.05, 0.8, 3))
         ref = bool(overlaps(BoxArray(a.center[None], np.array([a.yaw]), a.half[None]), b)[0])
         assert box_overlap(a, b) == ref
-        assert overlap_any(BoxArray(a.center[None], np.array([a.yaw]), a.half[None]),
-                           BoxArray(b.center[None], np.array([b.yaw]), b.half[None])) == ref
+        assert (
+            overlap_any(
+                BoxArray(a.center[None], np.array([a.yaw]), a.half[None]),
+                BoxArray(b.center[None], np.array([b.yaw]), b.half[None]),
+            )
+            == ref
+        )
 
 
 def test_styles_differ_in_content():

@@ -57,13 +57,17 @@ def test_bare_name_and_path_agree(tmp_path):
 @pytest.mark.parametrize(
     "old,new,field",
     [
-        ('Desk = [1, 2]', 'Dsek = [1, 2]', "furniture.Dsek"),
-        ('Desk = [1, 2]', 'Desk = [2, 1]', "furniture.Desk"),
-        ('Desk = [1, 2]', 'Desk = [1, 2]\nPen = 1', "furniture.Pen"),
+        ("Desk = [1, 2]", "Dsek = [1, 2]", "furniture.Dsek"),
+        ("Desk = [1, 2]", "Desk = [2, 1]", "furniture.Desk"),
+        ("Desk = [1, 2]", "Desk = [1, 2]\nPen = 1", "furniture.Pen"),
         ('relation = "ON-TOP-OF-DESK"', 'relation = "ON-TOP-OF-DESKK"', "rule[0].relation"),
         ('relation = "ON-TOP-OF-DESK"', 'relation = "ON-SHELF"', "rule[0].relation"),
         ('type = "Monitor"', 'type = "Monitr"', "rule[0].type"),
-        ('ref = "Desk"\nrelation = "ON-TOP-OF-DESK"', 'ref = "Sofa"\nrelation = "ON-SOFA"', "rule[0].ref"),
+        (
+            'ref = "Desk"\nrelation = "ON-TOP-OF-DESK"',
+            'ref = "Sofa"\nrelation = "ON-SOFA"',
+            "rule[0].ref",
+        ),
         ("p = 0.5", "p = 1.5", "rule[0].p"),
         ("p = 0.5", "p = -0.1", "rule[0].p"),
         ("p = 0.5", 'p = "high"', "rule[0].p"),
@@ -78,7 +82,7 @@ def test_bare_name_and_path_agree(tmp_path):
         ("Pen = [0, 2]", "Pan = [0, 2]", "clutter.Pan"),
         ("width = [5.0, 6.0]", "width = [1.0, 6.0]", "room.width"),
         ("door_width = 0.9", "door_width = 4.4", "room.door_width"),
-        ('Desk = [1, 2]', 'Desk = [12, 14]', "furniture"),
+        ("Desk = [1, 2]", "Desk = [12, 14]", "furniture"),
     ],
 )
 def test_bad_style_one_line_error(tmp_path, old, new, field):
@@ -94,7 +98,9 @@ def test_bad_style_one_line_error(tmp_path, old, new, field):
 
 
 def test_room_too_small(tmp_path):
-    text = GOOD.replace("width = [5.0, 6.0]", "width = [2.5, 3.0]").replace("depth = [4.5, 5.0]", "depth = 2.5")
+    text = GOOD.replace("width = [5.0, 6.0]", "width = [2.5, 3.0]").replace(
+        "depth = [4.5, 5.0]", "depth = 2.5"
+    )
     with pytest.raises(StyleError, match="room too small|does not fit"):
         load_style(write(tmp_path, text))
 

@@ -29,7 +29,9 @@ def test_cli_writes_schema(tmp_path, capsys):
     parser = argparse.ArgumentParser()
     cmd_truth.register(parser.add_subparsers())
     out = tmp_path / "t.json"
-    args = parser.parse_args(["truth", "--style", "kitchen", "--samples", "5", "--out", str(out), "--seed", "3"])
+    args = parser.parse_args(
+        ["truth", "--style", "kitchen", "--samples", "5", "--out", str(out), "--seed", "3"]
+    )
     assert args.func(args) == 0
     doc = json.loads(out.read_text())
     assert doc["style"] == "kitchen" and doc["samples"] == 5
@@ -49,8 +51,13 @@ def test_deterministic_and_matches_direct_count():
     st = load_style("office", catalog())
     layouts = [generate_room(st, s, catalog()) for s in range(11, 17)]
     desks = [(lay, d) for lay in layouts for d in lay.of_type("Desk")]
-    y = sum(any(rel == "ON-TOP-OF-DESK" and o.type == "Monitor" for rel, o in related(catalog(), d, lay.objects))
-            for lay, d in desks)
+    y = sum(
+        any(
+            rel == "ON-TOP-OF-DESK" and o.type == "Monitor"
+            for rel, o in related(catalog(), d, lay.objects)
+        )
+        for lay, d in desks
+    )
     e = lookup(a, "Desk", "ON-TOP-OF-DESK", "Monitor")
     assert e["n"] == len(desks) and e["y"] == y
 
@@ -58,7 +65,10 @@ def test_deterministic_and_matches_direct_count():
 def test_counts_at_least_one_per_instance():
     cat = catalog()
     desk = ObjectInstance("Desk", 1, (0.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))
-    pens = [ObjectInstance("Pen", i, (0.1 * i - 0.3, 0.0, 0.747), 0.0, (0.14, 0.014, 0.014)) for i in (2, 3, 4)]
+    pens = [
+        ObjectInstance("Pen", i, (0.1 * i - 0.3, 0.0, 0.747), 0.0, (0.14, 0.014, 0.014))
+        for i in (2, 3, 4)
+    ]
 
     class Lay:
         objects = (desk, *pens)
