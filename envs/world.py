@@ -10,12 +10,13 @@ Every action happens in MuJoCo and is charged simulated seconds by the one ``Tim
 - ``capture()`` renders from the head camera where the joints really are after the motion, and
   charges ``TimeModel.image_cost``.
 
-Rendering is off-screen (``MUJOCO_GL=egl``; on a CPU Mesa's llvmpipe does it). One
-``mujoco.Renderer`` per image size is kept for the World's life. Segmentation and depth come
-from ONE pass (MuJoCo's segmentation colours and the depth buffer of the same draw); RGB, only
-when asked, is a second pass. The head camera's render option hides the robot's geom group and
-shows the ceiling; the top-down overview (orthographic) shows the robot and hides the ceiling. Depth is the
-distance along the optical axis in metres (as ``mujoco.Renderer`` gives it).
+Rendering is off-screen (``MUJOCO_GL=egl``; on a CPU Mesa's llvmpipe does it). One renderer per
+image size is kept for the World's life, and all renderers of the process share one GL context
+(render from one thread). Segmentation and depth come from ONE pass (MuJoCo's segmentation
+colours and the depth buffer of the same draw); RGB, only when asked, is a second pass. The head camera's render option hides the robot's geom group and
+shows the ceiling; the top-down overview (orthographic) shows the robot and hides the ceiling.
+Depth is the distance along the optical axis in metres (as ``mujoco.Renderer`` gives it). No
+multisampling (see ``envs/arena.py``): RGB edges are aliased, segmentation is exact.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco/dm_control are first imported
 
+import atexit
 import logging
 import math
 import weakref
@@ -127,8 +129,55 @@ class Frame:
     pose: RobotPose
 
 
+_shared_gl = None  # the process's one GL context, shared by every renderer (see _Renderer)
+
+
+def _shared_gl_context():
+    """The process's GL context, created on first use."""
+    global _shared_gl
+    if _shared_gl is None:
+        from mujoco.rendering.classic import gl_context
+
+        _shared_gl = gl_context.GLContext(*MAX_IMAGE_SIZE)
+        # Registered after the GL backend's own exit hook (EGL registers eglTerminate when its
+        # first context is made), so it runs before it: hooks run last-registered first.
+        atexit.register(_shutdown_gl)
+    return _shared_gl
+
+
 class _Renderer(mujoco.Renderer):
-    """``mujoco.Renderer`` that also reads segmentation and depth from a single draw."""
+    """``mujoco.Renderer`` on the process's shared GL context that also reads segmentation and
+    depth from a single draw.
+
+    ``mujoco.Renderer`` makes a GL context per renderer; on llvmpipe a fresh context costs about
+    150 ms before its first frame (shader compilation), paid again for every room. Here every
+    renderer of every World shares one context and owns only its ``MjrContext`` and scene, so
+    ``__init__`` sets up what ``mujoco.Renderer.__init__`` does, with that context, and ``close``
+    frees the ``MjrContext`` only.
+    """
+
+    def __init__(self, model: mujoco.MjModel, height: int, width: int) -> None:
+        self._gl_context = None
+        self._mjr_context = None
+        self._width, self._height, self._model = width, height, model
+        self._scene = mujoco.MjvScene(model=model, maxgeom=max(1000, 2 * model.ngeom))
+        self._scene_option = mujoco.MjvOption()
+        self._rect = mujoco.MjrRect(0, 0, width, height)
+        self._gl_context = _shared_gl_context()
+        self._gl_context.make_current()
+        self._mjr_context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._mjr_context)
+        self._mjr_context.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+        self._depth_rendering = False
+        self._segmentation_rendering = False
+
+    def close(self) -> None:
+        """Free this renderer's MjrContext (the shared GL context stays)."""
+        if self._mjr_context is not None and self._gl_context is not None:
+            self._gl_context.make_current()
+            self._mjr_context.free()
+        self._mjr_context = None
+        self._gl_context = None
 
     def render_ids_depth(
         self, geom_instance: np.ndarray, depth: bool
@@ -143,8 +192,7 @@ class _Renderer(mujoco.Renderer):
         saved = flags.copy()
         flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
         flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
-        if self._gl_context:
-            self._gl_context.make_current()
+        self._gl_context.make_current()
         seg = np.empty((h, w, 3), np.uint8)
         zbuf = np.empty((h, w), np.float32) if depth else None
         try:
@@ -184,10 +232,25 @@ class _Renderer(mujoco.Renderer):
         return self.render()
 
 
+# The renderers of every World not closed yet, closed at exit before the GL context goes.
+_open_renderers: dict[int, dict] = {}
+
+
 def _close_renderers(renderers: dict) -> None:
+    _open_renderers.pop(id(renderers), None)
     for r in renderers.values():
         r.close()
     renderers.clear()
+
+
+def _shutdown_gl() -> None:
+    """At exit: close every World's renderers, then free the shared GL context."""
+    global _shared_gl
+    for renderers in list(_open_renderers.values()):
+        _close_renderers(renderers)
+    if _shared_gl is not None:
+        _shared_gl.free()
+        _shared_gl = None
 
 
 class World:
@@ -232,6 +295,7 @@ class World:
         self._overview_option.geomgroup[OVERHEAD_GEOM_GROUP] = 0
         self._renderers: dict[tuple[int, int], _Renderer] = {}
         self._finalizer = weakref.finalize(self, _close_renderers, self._renderers)
+        _open_renderers[id(self._renderers)] = self._renderers
         mujoco.mj_forward(self._m, self._d)
 
     @classmethod
