@@ -1,0 +1,860 @@
+"""Object search with learned context (paper, section 3): the policies and one episode's run.
+
+An *episode* (``Episode``) is a room (style and seed), a start pose, a target type and a time
+budget in simulated seconds. It ends when the detector (agent.perception, on rendered
+segmentation) reports an instance of the target type, or when the budget is spent. Every policy
+drives, moves the head and takes images through the same World, so the seconds are the one
+TimeModel's (envs.robot_spec) and comparable across policies.
+
+Held-out rooms. Search rooms are never rooms the robot learned in: ``ctxsearch learn`` derives
+its room seeds from (seed, index) with ``agent.acquisition.room_seed``; search episodes use
+``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the benchmark
+skips any seed the store lists among its learned rooms.
+
+Policies (``POLICIES``; ``make_policy(name)``, one-line error for unknown names), each a small
+class with a ``name`` and ``run(ctx) -> SearchResult``:
+
+- ``exhaustive``: no context. Covers the room for the target's effective detection range:
+  viewpoints from a greedy set cover, visited in a short tour, with pan/tilt sweeps that skip
+  what the depth images already showed (agent.search_space).
+- ``location``: location constraint. Knows the furniture (a map of the room's furniture poses,
+  not the small objects) and every object detected so far; candidate regions are their relation
+  volumes, ranked by P(T in the unseen part) per expected second (agent.search_space), each
+  looked into with the view planner's gazes; falls back to ``exhaustive`` when no candidate
+  has probability left.
+- ``indirect``: detectability-driven. Knows nothing at start; compares the expected cost of
+  looking for T directly with looking first for an intermediate type I that is detected from
+  further away and likely related to T (``search_space.indirect_plan``); if I wins it sweeps for
+  I, then applies the location constraint around what it detected, then falls back.
+- ``oracle-prior``: ``location`` with the ground-truth probabilities (envs.truth) instead of
+  the learned intervals; ``oracle-prior-indirect`` likewise for ``indirect``.
+- ``oracle``: knows where the target's instances are and looks at the cheapest one: the lower
+  bound on time to find.
+
+Which value of the interval ranks candidates is ``rank`` (``low``, ``p0`` or ``high``; default
+``search_space.DEFAULT_RANK``, chosen by measurement: see README, "Object search").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from agent import search_space as ss
+from agent.navigation import OccupancyGrid, nearest_free, plan_path
+from agent.recording import Recorder
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from knowledge.catalog import Catalog
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import Box, ObjectInstance
+
+DEFAULT_BUDGET_S = 300.0
+HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
+MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a look
+
+
+# =========================================================================== episodes and results
+def held_out_seed(seed: int, index: int) -> int:
+    """The room seed of search episode ``index`` for benchmark seed ``seed`` (31-bit, spread out,
+    never produced for the same (seed, index) by ``agent.acquisition.room_seed``)."""
+    return int(
+        np.random.SeedSequence([int(seed), int(index), HELD_OUT_TAG]).generate_state(1)[0]
+        & 0x7FFFFFFF
+    )
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One search task: the room, where the robot starts, what it looks for, how long it may."""
+
+    index: int
+    style: str
+    room_seed: int
+    target: str
+    start: RobotPose
+    budget_s: float = DEFAULT_BUDGET_S
+
+    def to_json(self) -> dict:
+        """A JSON-serialisable dict."""
+        s = self.start
+        return {
+            "index": self.index,
+            "style": self.style,
+            "room_seed": self.room_seed,
+            "target": self.target,
+            "start": [s.x, s.y, s.yaw],
+            "budget_s": self.budget_s,
+        }
+
+
+@dataclass(frozen=True)
+class GazeRecord:
+    """One image of a search: when (seconds since the start, after the image), from where, why,
+    and what the detector reported (type, instance id)."""
+
+    t: float
+    pose: RobotPose
+    purpose: str
+    detections: tuple[tuple[str, int], ...]
+
+
+@dataclass
+class SearchResult:
+    """How an episode went for one policy. ``sim_time`` is the simulated seconds until the
+    target was detected (or until the policy stopped); ``success`` requires the detection within
+    the budget."""
+
+    policy: str
+    episode: int
+    target: str
+    found: bool
+    found_id: int | None
+    sim_time: float
+    gazes: int
+    path_m: float
+    budget_s: float
+    trace: list[GazeRecord] = field(default_factory=list)
+    log: list[str] = field(default_factory=list)
+
+    @property
+    def success(self) -> bool:
+        """Found within the budget."""
+        return self.found and self.sim_time <= self.budget_s + 1e-9
+
+    @property
+    def time_to_find(self) -> float:
+        """Seconds to find; a failure counts as the budget."""
+        return self.sim_time if self.success else self.budget_s
+
+    def summary(self) -> str:
+        """One line for the terminal."""
+        what = (
+            f"found {self.target} #{self.found_id}"
+            if self.success
+            else f"did not find {self.target}"
+        )
+        return (
+            f"{self.policy}: {what} in {self.sim_time:.1f} simulated s "
+            f"({self.gazes} gazes, {self.path_m:.1f} m driven; budget {self.budget_s:.0f} s)"
+        )
+
+
+def random_start(layout: RoomLayout, grid: OccupancyGrid, rng: np.random.Generator) -> RobotPose:
+    """A start pose: a uniformly drawn free cell of the largest free region, random heading."""
+    labels = grid.labels
+    sizes = np.bincount(labels.ravel())
+    if len(sizes) <= 1:
+        raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
+    sizes[0] = 0
+    rows, cols = np.nonzero(labels == int(np.argmax(sizes)))
+    k = int(rng.integers(len(rows)))
+    xy = grid.to_xy(int(rows[k]), int(cols[k]))
+    return RobotPose(float(xy[0]), float(xy[1]), float(rng.uniform(-math.pi, math.pi)))
+
+
+def small_types_present(layout: RoomLayout, catalog: Catalog) -> list[str]:
+    """The small-object (kind=object) types with an instance in the room, in catalog order."""
+    present = {o.type for o in layout.objects}
+    return [t.name for t in catalog.types if t.name in present and not t.is_furniture]
+
+
+# =========================================================================== the running episode
+class _Stop(Exception):
+    """Raised inside a policy when the target is found or the budget is spent."""
+
+
+class _PathMeter:
+    """Wraps a World (or KinematicBody) to add up the metres driven."""
+
+    def __init__(self, body: Any):
+        self._body = body
+        self.metres = 0.0
+
+    def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
+        p = self._body.pose()
+        pts = np.vstack([p.xy[None, :], np.asarray(path, float).reshape(-1, 2)])
+        self.metres += TimeModel.path_length(pts)
+        return self._body.drive(path, final_yaw)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._body, name)
+
+
+class SearchContext:
+    """One policy's run of one episode on a built world: the body, the map, what has been seen,
+    what is known, the clock, the trace and the recording.
+
+    ``body`` is an envs.world.World (or anything with its interface: ``sim_time``, ``pose``,
+    ``reset_pose``, ``drive``, ``move_head``, ``capture``, ``spec``). ``detector(frame)`` returns
+    agent.perception Detections; the default runs the detector on the frame against the layout.
+    """
+
+    def __init__(
+        self,
+        episode: Episode,
+        layout: RoomLayout,
+        catalog: Catalog,
+        body: Any,
+        *,
+        grid: OccupancyGrid | None = None,
+        probs: ss.ProbabilitySource | None = None,
+        recorder: Recorder | None = None,
+        detector: Callable[[Any], list] | None = None,
+        seen: ss.SeenMap | None = None,
+        policy: str = "?",
+    ):
+        self.episode, self.layout, self.catalog = episode, layout, catalog
+        self.spec: RobotSpec = body.spec
+        self.time_model: TimeModel = getattr(body, "time_model", TimeModel())
+        self.body = _PathMeter(body)
+        self.grid = grid or OccupancyGrid.from_layout(layout, self.spec)
+        self.probs = probs
+        self.recorder = recorder or Recorder(None)
+        self.policy = policy
+        self.width = int(getattr(body, "width", 320))
+        self.height = int(getattr(body, "height", 240))
+        if detector is None:
+            from agent.perception import detect, objects_by_id
+
+            objs = objects_by_id(layout)
+            detector = lambda frame: detect(frame, objs, catalog)  # noqa: E731
+        self.detector = detector
+        self.seen = seen.copy() if seen is not None else ss.SeenMap.for_room(layout, catalog)
+        self.target = episode.target
+        catalog.type(self.target)
+        self.target_range = ss.effective_range(
+            catalog.type(self.target), self.spec, self.width, self.height
+        )
+        self.known: dict[int, ObjectInstance] = {}
+        self.trace: list[GazeRecord] = []
+        self.log: list[str] = []
+        self.found_id: int | None = None
+        self.found_at: float | None = None
+        body.reset_pose(episode.start)
+        self.t0 = float(body.sim_time)
+        self._step = 0
+        self._range_cache: dict[str, float] = {}
+
+    # ----------------------------------------------------------------- clock and knowledge
+    @property
+    def elapsed(self) -> float:
+        """Simulated seconds since the episode started."""
+        return float(self.body.sim_time) - self.t0
+
+    def check(self) -> None:
+        """Stop the policy if the target was found or the budget is spent."""
+        if self.found_id is not None or self.elapsed >= self.episode.budget_s:
+            raise _Stop
+
+    def range_of(self, type_name: str) -> float:
+        """The effective detection range of a type (cached)."""
+        r = self._range_cache.get(type_name)
+        if r is None:
+            r = ss.effective_range(self.catalog.type(type_name), self.spec, self.width, self.height)
+            self._range_cache[type_name] = r
+        return r
+
+    def furniture_map(self) -> list[ObjectInstance]:
+        """The map the location constraint may assume: the poses of the room's furniture."""
+        return [o for o in self.layout.objects if self.catalog.type(o.type).is_furniture]
+
+    def note(self, msg: str) -> None:
+        """A line in the result's log and the recording's text log."""
+        self.log.append(f"[{self.elapsed:7.1f} s] {msg}")
+        self.recorder.log_text(f"{self.policy}: {msg}")
+
+    # ----------------------------------------------------------------- acting
+    def _after_image(self, frame: Any, purpose: str) -> list:
+        dets = self.detector(frame)
+        depth = getattr(frame, "depth", None)
+        if depth is not None:
+            self.seen.update(frame.camera, depth)
+        else:
+            self.seen.mark_frustum(frame.camera, self.target_range)
+        for d in dets:
+            self.known.setdefault(d.instance_id, d.pose)
+        hit = next((d for d in dets if d.type == self.target), None)
+        self._step += 1
+        pose = self.body.pose()
+        self.trace.append(
+            GazeRecord(self.elapsed, pose, purpose, tuple((d.type, d.instance_id) for d in dets))
+        )
+        rec = self.recorder
+        if rec.enabled:
+            rec.set_time(self.elapsed, step=self._step)
+            rec.log_robot(pose, self.spec)
+            rec.log_camera(frame, dets)
+            rec.log_scalar(
+                f"search/{self.policy}/seen_fraction", self.seen.seen_fraction(self.target_range)
+            )
+        if hit is not None and self.found_id is None:
+            self.found_id, self.found_at = hit.instance_id, self.elapsed
+            self.note(
+                f"FOUND {self.target} #{hit.instance_id} ({hit.pixels} px at {hit.distance:.1f} m) "
+                f"after {len(self.trace)} gazes"
+            )
+            if rec.enabled:
+                rec.log_volumes(
+                    "world/search/found",
+                    [hit.pose.box()],
+                    [f"{self.target} #{hit.instance_id}"],
+                    color=(0.1, 0.9, 0.2),
+                )
+        return dets
+
+    def capture(self, purpose: str) -> list:
+        """Take an image where the head points now; detections. Stops when found or out of time."""
+        self.check()
+        frame = self.body.capture(rgb=self.recorder.enabled, depth=True)
+        dets = self._after_image(frame, purpose)
+        self.check()
+        return dets
+
+    def drive_to(self, xy: np.ndarray, final_yaw: float | None = None) -> bool:
+        """Drive along a planned path to ``xy``; False if it cannot be reached."""
+        self.check()
+        pose = self.body.pose()
+        path = plan_path(self.grid, pose.xy, np.asarray(xy, float))
+        if path is None:
+            return False
+        if len(path) >= 2 or final_yaw is not None:
+            yaw = final_yaw
+            if yaw is None:
+                seg = path[-1] - path[-2]
+                yaw = math.atan2(seg[1], seg[0]) if np.hypot(*seg) > 1e-9 else pose.yaw
+            self.recorder.log_path(path)
+            self.body.drive(path, yaw)
+        return True
+
+    def look_heading(self, heading: float, tilt: float, purpose: str) -> list:
+        """Point the camera along world ``heading`` with ``tilt`` (turning the base when the pan
+        limit requires it) and take an image."""
+        self.check()
+        pose = self.body.pose()
+        pan = wrap_angle(heading - pose.yaw)
+        lo, hi = self.spec.pan_range
+        if not lo <= pan <= hi:
+            self.body.drive(pose.xy[None, :], heading)
+            pan = 0.0
+        self.body.move_head(pan, tilt)
+        return self.capture(purpose)
+
+    def look_gaze(self, gaze: Any, purpose: str) -> list:
+        """Execute a view planner Gaze (drive, turn, aim) and take an image."""
+        self.check()
+        from agent.viewplan import execute_gaze
+
+        if gaze.path is not None and len(gaze.path) >= 2:
+            self.recorder.log_path(gaze.path)
+        frame = execute_gaze(self.body, self.grid, gaze, rgb=self.recorder.enabled, depth=True)
+        dets = self._after_image(frame, purpose)
+        self.check()
+        return dets
+
+    # ----------------------------------------------------------------- shared behaviours
+    def cover(
+        self,
+        type_name: str | None = None,
+        *,
+        tilts: Sequence[float] = ss.SWEEP_TILTS,
+        until: Callable[[], bool] | None = None,
+        rounds: int = 3,
+        purpose: str = "sweep",
+    ) -> None:
+        """Exhaustive coverage for ``type_name`` (default: the target): tour the coverage
+        viewpoints and sweep at each (see the module docstring). Returns when ``until()`` turns
+        true after a sweep, or when nothing coverable is left."""
+        name = type_name or self.target
+        rng = self.range_of(name)
+        for _ in range(rounds):
+            unseen = self.seen.unseen(rng)
+            sites = ss.coverage_viewpoints(
+                self.grid, self.seen.points[unseen], self.body.pose().xy, rng, self.spec
+            )
+            if len(sites) == 0:
+                return
+            self.note(
+                f"coverage for {name} (range {rng:.1f} m): {len(sites)} viewpoints, "
+                f"{100 * self.seen.seen_fraction(rng):.0f}% seen"
+            )
+            took = 0
+            for xy in sites:
+                unseen = self.seen.unseen(rng)
+                cam = np.array([xy[0], xy[1], self.spec.camera_height])
+                if (np.linalg.norm(self.seen.points[unseen] - cam, axis=1) <= rng).sum() < 8:
+                    continue
+                if not self.drive_to(xy):
+                    continue
+                took += self.sweep(rng, tilts=tilts, purpose=purpose)
+                if until is not None and until():
+                    return
+            if took == 0:
+                return
+
+    def sweep(
+        self, rng: float, *, tilts: Sequence[float] = ss.SWEEP_TILTS, purpose: str = "sweep"
+    ) -> int:
+        """A pan/tilt sweep here, skipping images predicted to add little; images taken."""
+        pose = self.body.pose()
+        plan = ss.sweep_gazes(
+            pose.xy,
+            pose.yaw + pose.pan,
+            self.seen.points,
+            self.seen.unseen(rng),
+            self.spec,
+            rng,
+            tilts=tilts,
+        )
+        n = 0
+        for g in plan:
+            # Re-check against what the images so far really showed.
+            cam = np.array([pose.x, pose.y, self.spec.camera_height])
+            m = ss.frustum_mask(
+                cam, g.heading, g.tilt, self.seen.points, self.spec, rng
+            ) & self.seen.unseen(rng)
+            if m.sum() < 8:
+                continue
+            self.look_heading(g.heading, g.tilt, purpose)
+            n += 1
+        return n
+
+    def search_regions(
+        self, probs: ss.ProbabilitySource, *, known: Callable[[], Sequence[ObjectInstance]]
+    ) -> None:
+        """The location constraint: look into the best candidate region (probability per second)
+        until none has probability left (see agent.search_space)."""
+        from agent.viewplan import plan_gazes
+
+        visited: set[tuple] = set()
+        costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
+        builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target)
+        round_ = 0
+        while True:
+            self.check()
+            regions = [r for r in builder.regions(known()) if r.key not in visited]
+            ranked = ss.score_regions(
+                regions, self.seen, self.target_range, costs, self.body.pose().xy
+            )
+            ranked = [r for r in ranked if r.score >= MIN_REGION_SCORE]
+            round_ += 1
+            self._log_candidates(ranked)
+            if not ranked:
+                self.note("no candidate region left")
+                return
+            best = ranked[0]
+            visited.add(best.key)
+            gazes = plan_gazes(
+                self.grid,
+                best.box,
+                self.body.pose(),
+                self.spec,
+                self.time_model,
+                max_distance=min(self.target_range, 2.5),
+                facing=best.facing,
+            )
+            self.note(
+                f"look into {best.label}: P={best.score:.2f}, ~{best.cost:.1f} s, {len(gazes)} gazes "
+                f"({len(ranked)} candidates)"
+            )
+            for g in gazes:
+                self.look_gaze(g, f"region {best.label}")
+
+    def _log_candidates(self, ranked: Sequence[ss.Region], top: int = 12) -> None:
+        rec = self.recorder
+        if not rec.enabled:
+            return
+        rec.set_time(self.elapsed, step=self._step)
+        show = list(ranked[:top])
+        rec.log_volumes(
+            "world/search/candidates",
+            [r.box for r in show],
+            [f"#{i + 1} {r.label} P={r.score:.2f} {r.rate:.3f}/s" for i, r in enumerate(show)],
+            color=(0.95, 0.75, 0.1),
+        )
+        rec.log_volumes(
+            "world/search/best",
+            [r.box for r in show[:1]],
+            [f"next: {r.label}" for r in show[:1]],
+            color=(0.95, 0.2, 0.1),
+        )
+
+    def result(self) -> SearchResult:
+        """The episode's outcome so far."""
+        found = self.found_id is not None
+        t = self.found_at if found else self.elapsed
+        return SearchResult(
+            self.policy,
+            self.episode.index,
+            self.target,
+            found,
+            self.found_id,
+            float(t),
+            len(self.trace),
+            float(self.body.metres),
+            self.episode.budget_s,
+            list(self.trace),
+            list(self.log),
+        )
+
+
+# =========================================================================== the policies
+class SearchPolicy:
+    """A search policy: ``name`` and ``run(ctx) -> SearchResult`` (subclasses write ``search``)."""
+
+    name: ClassVar[str] = "?"
+    needs: ClassVar[str] = "none"  # which probabilities: "none", "kb" (learned) or "truth"
+
+    def run(self, ctx: SearchContext) -> SearchResult:
+        """Run the episode until found or out of time; the result."""
+        ctx.policy = self.name
+        ctx.note(
+            f"{self.name}: looking for {ctx.target} (detection range {ctx.target_range:.1f} m)"
+        )
+        try:
+            self.search(ctx)
+            ctx.note("nothing left to look at")
+        except _Stop:
+            pass
+        if ctx.found_id is None and ctx.elapsed >= ctx.episode.budget_s:
+            ctx.note("time budget spent")
+        return ctx.result()
+
+    def search(self, ctx: SearchContext) -> None:  # pragma: no cover - interface
+        """The policy's behaviour; raises _Stop (via ctx) when done."""
+        raise NotImplementedError
+
+
+class Exhaustive(SearchPolicy):
+    """No context: cover the room with sweeps from a short tour of viewpoints."""
+
+    name = "exhaustive"
+
+    def search(self, ctx: SearchContext) -> None:
+        ctx.cover()
+
+
+class Location(SearchPolicy):
+    """Location constraint around the furniture map and everything detected so far."""
+
+    name = "location"
+    needs = "kb"
+
+    def search(self, ctx: SearchContext) -> None:
+        base = ctx.furniture_map()
+
+        def known() -> list[ObjectInstance]:
+            objs = {o.id: o for o in base}
+            objs.update(ctx.known)
+            return list(objs.values())
+
+        ctx.search_regions(_probs(ctx), known=known)
+        ctx.note("falling back to exhaustive coverage")
+        ctx.cover()
+
+
+class Indirect(SearchPolicy):
+    """Detectability-driven: maybe find an easier intermediate type first, then search around it."""
+
+    name = "indirect"
+    needs = "kb"
+    min_q = 0.05  # intermediate types less related than this are not considered
+
+    def search(self, ctx: SearchContext) -> None:
+        probs = _probs(ctx)
+        options = self.options(ctx, probs)
+        best = options[0]
+        ctx.note(
+            "plans: "
+            + "; ".join(
+                f"{o.via or 'direct'} {o.cost:.0f} s" + (f" (q={o.q:.2f})" if o.via else "")
+                for o in options[:5]
+            )
+        )
+        if best.via is None:
+            ctx.note(f"look for {ctx.target} directly")
+            ctx.cover()
+            return
+        via = best.via
+        ctx.note(f"look first for {via} (q={best.q:.2f}, find ~{best.find_s:.0f} s)")
+        furniture = ctx.catalog.type(via).is_furniture
+        tilts = (-0.35,) if furniture else ss.SWEEP_TILTS
+        ctx.cover(
+            via,
+            tilts=tilts,
+            until=lambda: any(o.type == via for o in ctx.known.values()),
+            rounds=1,
+            purpose=f"find {via}",
+        )
+        ctx.search_regions(probs, known=lambda: list(ctx.known.values()))
+        ctx.note("falling back to exhaustive coverage")
+        ctx.cover()
+
+    def options(self, ctx: SearchContext, probs: ss.ProbabilitySource) -> list[ss.IndirectOption]:
+        """The candidate plans with their expected costs, cheapest first."""
+        cat = ctx.catalog
+        start = ctx.body.pose().xy
+        cands = [
+            t.name
+            for t in cat.types
+            if t.name != ctx.target
+            and ss.relation_probability(cat, probs, t.name, ctx.target) >= self.min_q
+            and self._present(ctx, t.name)
+        ]
+        cover_s: dict[str, float] = {}
+        cache: dict[float, float] = {}
+        for name in [ctx.target, *cands]:
+            r = round(ctx.range_of(name) * 4) / 4
+            if r not in cache:
+                cache[r] = estimate_cover_seconds(
+                    ctx.grid, ctx.seen, start, r, ctx.spec, ctx.time_model
+                )
+            cover_s[name] = cache[r]
+        look_s = {name: self._look_seconds(ctx, probs, name) for name in cands}
+        return ss.indirect_plan(ctx.target, cat, probs, cover_s, look_s, cands)
+
+    @staticmethod
+    def _present(ctx: SearchContext, type_name: str) -> bool:
+        """Only types the knowledge base has evidence about (n > 0) are worth looking for."""
+        kb = getattr(ctx.probs, "kb", None)
+        return kb is None or kb.n(type_name) > 0
+
+    @staticmethod
+    def _look_seconds(ctx: SearchContext, probs: ss.ProbabilitySource, via: str) -> float:
+        """Seconds to reach a found ``via`` and look into its relation volumes that matter: a
+        typical drive (half the room's diagonal) plus two images per relevant relation."""
+        tm = ctx.time_model
+        drive = 0.5 * math.hypot(ctx.layout.width, ctx.layout.depth) / tm.drive_speed
+        rels = [
+            r
+            for r in ctx.catalog.type(via).relations
+            if probs.p(r.name, ctx.target) >= MIN_REGION_SCORE
+        ]
+        return drive + 2 * len(rels) * (0.6 + tm.image_cost)
+
+
+class OraclePrior(Location):
+    """``location`` with the ground-truth probabilities."""
+
+    name = "oracle-prior"
+    needs = "truth"
+
+
+class OraclePriorIndirect(Indirect):
+    """``indirect`` with the ground-truth probabilities."""
+
+    name = "oracle-prior-indirect"
+    needs = "truth"
+
+
+class Oracle(SearchPolicy):
+    """Knows where the target's instances are and goes to see the one that is cheapest to see:
+    the lower bound. For every instance it considers aiming the head from where the robot stands
+    (if the instance is within the detection range) and the view planner's gazes from nearer;
+    it takes the cheapest option, and the next one if that image did not show the target (an
+    occluded view)."""
+
+    name = "oracle"
+
+    def search(self, ctx: SearchContext) -> None:
+        from agent.viewplan import Gaze, aim, plan_gazes
+
+        tm, spec = ctx.time_model, ctx.spec
+        tried: set[tuple[int, str]] = set()
+        instances = list(ctx.layout.of_type(ctx.target))
+        while True:
+            ctx.check()
+            pose = ctx.body.pose()
+            cam = np.array([pose.x, pose.y, spec.camera_height])
+            options = []
+            for o in instances:
+                if (o.id, "here") not in tried and np.linalg.norm(
+                    np.asarray(o.position) - cam
+                ) <= ctx.target_range:
+                    pan, tilt = aim(
+                        pose.xy, pose.yaw, spec.camera_height, np.asarray(o.position), spec
+                    )
+                    g = Gaze(
+                        RobotPose(pose.x, pose.y, pose.yaw, pan, tilt),
+                        np.asarray(o.position, float),
+                    )
+                    options.append(
+                        (
+                            tm.head_time(pose.pan, pose.tilt, pan, tilt) + tm.image_cost,
+                            o.id,
+                            "here",
+                            [g],
+                        )
+                    )
+                if (o.id, "near") not in tried:
+                    box = o.box()
+                    box = Box(box.center, box.yaw, np.maximum(box.half, 0.03))
+                    gz = plan_gazes(
+                        ctx.grid,
+                        box,
+                        pose,
+                        spec,
+                        tm,
+                        max_distance=min(ctx.target_range, 2.5),
+                        coverage_goal=0.5,
+                        max_gazes=2,
+                    )
+                    options.append((sum(x.cost for x in gz) if gz else math.inf, o.id, "near", gz))
+            options = [opt for opt in options if opt[3] and math.isfinite(opt[0])]
+            if not options:
+                break
+            options.sort(key=lambda x: (x[0], x[1], x[2]))
+            cost, oid, how, gazes = options[0]
+            tried.add((oid, how))
+            ctx.note(
+                f"go and see {ctx.target} #{oid} ({'from here' if how == 'here' else 'from nearer'}, "
+                f"~{cost:.1f} s)"
+            )
+            for g in gazes:
+                ctx.look_gaze(g, f"oracle {ctx.target} #{oid}")
+        ctx.note("every instance looked at; falling back to exhaustive coverage")
+        ctx.cover()
+
+
+def _probs(ctx: SearchContext) -> ss.ProbabilitySource:
+    if ctx.probs is None:
+        raise CtxsearchError(
+            f"policy '{ctx.policy}' needs probabilities (a knowledge base or ground truth)"
+        )
+    return ctx.probs
+
+
+def estimate_cover_seconds(
+    grid: OccupancyGrid,
+    seen: ss.SeenMap,
+    start_xy: np.ndarray,
+    rng: float,
+    spec: RobotSpec,
+    tm: TimeModel,
+    head_s: float = 0.6,
+) -> float:
+    """Seconds a coverage of the room for detection range ``rng`` would take from ``start_xy``:
+    the tour plus the sweeps' images (predicted without occlusion)."""
+    unseen = seen.unseen(rng)
+    sites = ss.coverage_viewpoints(grid, seen.points[unseen], start_xy, rng, spec)
+    t = ss.tour_seconds(grid, sites, start_xy, tm)
+    todo = unseen.copy()
+    heading = 0.0
+    for xy in sites:
+        g = ss.sweep_gazes(xy, heading, seen.points, todo, spec, rng)
+        t += len(g) * (head_s + tm.image_cost)
+        cam = np.array([xy[0], xy[1], spec.camera_height])
+        for x in g:
+            todo &= ~ss.frustum_mask(cam, x.heading, x.tilt, seen.points, spec, rng)
+    return t
+
+
+POLICIES: dict[str, type[SearchPolicy]] = {
+    cls.name: cls
+    for cls in (Exhaustive, Location, Indirect, OraclePrior, OraclePriorIndirect, Oracle)
+}
+
+
+def make_policy(name: str) -> SearchPolicy:
+    """A policy by name; a one-line error naming the known ones otherwise."""
+    cls = POLICIES.get(name)
+    if cls is None:
+        raise CtxsearchError(f"unknown search policy '{name}' (known: {', '.join(POLICIES)})")
+    return cls()
+
+
+def parse_policies(text: str) -> list[str]:
+    """A comma-separated list of policy names (each optionally ``name@rank``), checked."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise CtxsearchError("no search policy given")
+    for n in names:
+        base, _, rank = n.partition("@")
+        make_policy(base)
+        if rank and rank not in ss.RANK_MODES:
+            raise CtxsearchError(
+                f"unknown rank '{rank}' in '{n}' (known: {', '.join(ss.RANK_MODES)})"
+            )
+    if len(set(names)) != len(names):
+        raise CtxsearchError(f"a policy is listed twice in '{text}'")
+    return names
+
+
+def check_target(catalog: Catalog, target: str) -> None:
+    """A one-line error unless ``target`` is a small-object type of the catalog."""
+    if target not in catalog:
+        small = [t.name for t in catalog.types if not t.is_furniture]
+        raise CtxsearchError(
+            f"unknown target type '{target}' (small-object types: {', '.join(small)})"
+        )
+
+
+def nearest_free_start(grid: OccupancyGrid, pose: RobotPose) -> RobotPose:
+    """``pose`` moved to the nearest free cell (a start pose must be drivable)."""
+    p = nearest_free(grid, pose.xy)
+    if p is None:
+        raise CtxsearchError("the room has no free space for the robot")
+    return RobotPose(float(p[0]), float(p[1]), pose.yaw, pose.pan, pose.tilt)
+
+
+# =========================================================================== knowledge and truth
+def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
+    """The knowledge base of the evidence store at ``path`` and the room seeds it learned in.
+
+    One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
+    from the store), a store without examinations."""
+    from pathlib import Path
+
+    from knowledge.store import EvidenceStore
+
+    p = Path(path)
+    if not p.is_file():
+        raise CtxsearchError(
+            f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
+        )
+    with EvidenceStore.open(p, catalog, alpha=alpha, create=False) as store:
+        kb = store.knowledge_base()
+        learned = _learned_seeds(store)
+    if kb.total_examinations == 0:
+        raise CtxsearchError(
+            f"{p}: the knowledge store is empty (no examinations); run ctxsearch learn first"
+        )
+    return kb, learned
+
+
+def _learned_seeds(store) -> set[int]:
+    """Room seeds the store has evidence from (any run, any style: stricter than needed)."""
+    return {int(seed) for _run, _style, seed, _status in store.rooms()}
+
+
+def truth_probabilities(
+    style, catalog: Catalog, samples: int = 200, seed: int = 0, path=None
+) -> ss.TableProbabilities:
+    """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
+    at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
+    import json
+    from pathlib import Path
+
+    if path is not None:
+        p = Path(path)
+        try:
+            doc = json.loads(p.read_text())
+        except FileNotFoundError:
+            raise CtxsearchError(
+                f"{p}: no such ground-truth file (make one with: ctxsearch truth)"
+            ) from None
+        except (OSError, ValueError) as exc:
+            raise CtxsearchError(f"{p}: not a ground-truth JSON file ({exc})") from None
+        style_name = getattr(style, "name", style)
+        if doc.get("style") not in (None, style_name):
+            raise CtxsearchError(
+                f"{p}: ground truth of style '{doc.get('style')}', not '{style_name}'"
+            )
+        return ss.TableProbabilities.from_truth(doc)
+    from envs.truth import ground_truth
+
+    return ss.TableProbabilities.from_truth(ground_truth(style, samples, seed, catalog))

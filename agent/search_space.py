@@ -1,0 +1,685 @@
+"""The pure parts of object search: detectability, where has been seen, candidate regions and
+their scores, coverage tours, and the expected-cost decision of detectability-driven search.
+
+Nothing here renders or steps MuJoCo; ``agent/search.py`` runs the policies on the world.
+
+Seen map. The room's volume is sampled on a lattice (``SeenMap``: 0.2 m in x and y, 0.15 m in z
+from 5 cm to 1.85 m, minus the points inside the solid parts of furniture, which no object can
+occupy and no camera can see). After every image, the points that the depth image shows are
+*visible* (inside the frustum and not behind the rendered surface by more than 10 cm) get their
+viewing distance recorded; a point counts as *seen for type T* once it was visible from within
+T's effective detection range (``effective_range``). This is bookkeeping of where the robot has
+looked, from the real rendered depth, so occlusion by furniture is respected.
+
+Effective range. An object of type T is detected with at least ``min_pixels`` visible pixels
+within ``max_range``. Its projected area at distance d is about f^2 A / d^2 (f: focal length in
+pixels, A: the mean of its three face areas, an orientation average), so the pixel rule alone
+allows d up to f sqrt(A / min_pixels); ``effective_range`` takes ``RANGE_SAFETY`` (0.8) of that
+(partial occlusion, oblique views) and caps it at ``max_range``. A cup: about 3.0 m, a pen
+1.9 m, a desk 9 m (rendered detections reach further: this errs on the side of looking again).
+
+Candidate regions (location constraint, paper section 3). Every known object b (the furniture
+map, plus everything detected so far) and every rel in RELATIONS(type(b)) gives a region, the
+relation volume v_rel(b), with p = P(rel(T)) read from a ``ProbabilitySource`` (the knowledge
+base's interval: its lower bound, p0 or upper bound, by ``rank``; or ground truth). Regions
+whose lattice points nearly coincide (Jaccard >= 0.6) are merged into one candidate (noisy-or of
+their p). A region's score is the probability that T is in its *unseen* part, counting every
+region that overlaps it:
+
+    P(r) = 1 - prod_{r'} (1 - p_{r'} |r & r' & U| / |r'|)       U: points not yet seen for T
+
+(T uniformly placed inside r' given rel'(T); independent evidence), so the space near both a
+monitor and a desk ranks above the space near only one, a region already looked into scores
+little, and two regions that share space count it once. Candidates are ranked by P(r) per
+expected second to look there (drive over the grid, turns, head slews and images, TimeModel):
+the classic optimal order for searching independent places.
+
+Coverage (exhaustive search and the fallback). ``coverage_viewpoints``: base positions on a
+0.5 m lattice of reachable free cells, chosen by greedy set cover of the unseen points within
+the type's effective range, then ordered by a nearest-neighbour tour (grid distances) improved
+by 2-opt. At each viewpoint the head sweeps (``sweep_gazes``): headings 60 degrees apart and
+three tilts, each kept only if its frustum still holds enough unseen points.
+
+Detectability-driven search (``indirect_plan``). With nothing known, looking for T directly
+costs about half a coverage tour at T's range, C_T = cover(r_T) / 2. Looking first for an
+intermediate type I costs cover(r_I) / 2 to find one, then the time to look into its best
+relation volumes; with probability q_I = max_{rel in RELATIONS(I)} P(rel(T)) T is there, else
+the direct search remains: C_I = cover(r_I)/2 + look_I + (1 - q_I) C_T. The cheapest plan wins.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.navigation import OccupancyGrid, nearest_free
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec, TimeModel
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, ObjectType
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import Box, ObjectInstance, relation_volume
+
+RANK_MODES = ("low", "p0", "high")
+DEFAULT_RANK = "p0"  # chosen by measurement, see README "Object search"
+RANGE_SAFETY = 0.8
+LATTICE_XY = 0.2  # m
+LATTICE_Z = (0.05, 1.85, 0.15)  # first, last, step (m)
+VISIBLE_TOL = 0.10  # m a point may lie behind the rendered surface and still count as visible
+MIN_REGION_HALF = 0.1  # m: thin volumes (TOUCHING-BOTTOM-OF-CUP) are thickened to catch points
+MERGE_JACCARD = 0.6
+SWEEP_HEADING_STEP = math.radians(60.0)
+SWEEP_TILTS = (-0.95, -0.35, 0.25)
+
+
+# =========================================================================== detectability
+def focal_px(spec: RobotSpec, height: int = 240) -> float:
+    """The head camera's focal length in pixels for images ``height`` pixels high."""
+    return (height / 2) / math.tan(math.radians(spec.fovy_deg) / 2)
+
+
+def mean_face_area(typ: ObjectType) -> float:
+    """The mean of the three face areas of a type's mid-range size (m^2): an orientation average
+    of the area it shows the camera."""
+    s = (np.asarray(typ.size_min, float) + np.asarray(typ.size_max, float)) / 2
+    return float((s[0] * s[1] + s[0] * s[2] + s[1] * s[2]) / 3)
+
+
+def effective_range(
+    typ: ObjectType,
+    spec: RobotSpec | None = None,
+    width: int = 320,
+    height: int = 240,
+    safety: float = RANGE_SAFETY,
+) -> float:
+    """How far (m) an instance of ``typ`` is reliably detected (see the module docstring)."""
+    spec = spec or RobotSpec()
+    from agent.perception import min_pixels_at
+
+    mp = min_pixels_at(typ.min_pixels, width, height)
+    pixel_range = focal_px(spec, height) * math.sqrt(mean_face_area(typ) / mp) * safety
+    return float(min(typ.max_range, pixel_range))
+
+
+# =========================================================================== probabilities
+class ProbabilitySource:
+    """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
+
+    name = "none"
+
+    def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
+        """The probability used to rank rel's volume when looking for ``type_name``."""
+        raise NotImplementedError
+
+
+class KBProbabilities(ProbabilitySource):
+    """The learned intervals: lower bound, p0 (the Wilson centre) or upper bound, by ``rank``."""
+
+    def __init__(self, kb: KnowledgeBase, rank: str = DEFAULT_RANK):
+        if rank not in RANK_MODES:
+            raise CtxsearchError(f"unknown rank '{rank}' (known: {', '.join(RANK_MODES)})")
+        self.kb, self.rank = kb, rank
+        self.name = f"kb-{rank}"
+        self._cache: dict[tuple[str, str], float] = {}
+
+    def p(self, relation: str, type_name: str) -> float:
+        key = (relation, type_name)
+        v = self._cache.get(key)
+        if v is None:
+            if self.rank == "p0":
+                from knowledge import intervals
+
+                rel = self.kb.catalog.relation(relation)
+                v = float(
+                    intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
+                )
+            else:
+                lo, hi = self.kb.interval(relation, type_name)
+                v = lo if self.rank == "low" else hi
+            self._cache[key] = v
+        return v
+
+
+class TableProbabilities(ProbabilitySource):
+    """Fixed probabilities from a table {(relation, type): p} (ground truth, or a test's)."""
+
+    def __init__(self, table: Mapping[tuple[str, str], float], name: str = "table"):
+        self.table = {k: float(v) for k, v in table.items()}
+        self.name = name
+
+    @classmethod
+    def from_truth(cls, doc: Mapping) -> TableProbabilities:
+        """From ``ctxsearch truth``'s JSON document ({"entries": [{"relation", "type", "p"}, ...]})."""
+        return cls(
+            {(e["relation"], e["type"]): float(e["p"]) for e in doc.get("entries", [])},
+            name="truth",
+        )
+
+    def p(self, relation: str, type_name: str) -> float:
+        return self.table.get((relation, type_name), 0.0)
+
+
+# =========================================================================== the seen map
+@dataclass
+class SeenMap:
+    """Lattice points of the room's free volume and the distance each was best seen from."""
+
+    points: np.ndarray  # (N, 3)
+    best: np.ndarray  # (N,) metres; inf: never visible
+
+    @classmethod
+    def for_room(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        step_xy: float = LATTICE_XY,
+        z: tuple[float, float, float] = LATTICE_Z,
+    ) -> SeenMap:
+        """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
+        from envs.parts import world_parts_array
+
+        hw, hd = layout.width / 2, layout.depth / 2
+        xs = np.arange(-hw + step_xy / 2, hw, step_xy)
+        ys = np.arange(-hd + step_xy / 2, hd, step_xy)
+        zs = np.arange(z[0], z[1] + 1e-9, z[2])
+        zs = zs[zs < layout.height]
+        gx, gy, gz = np.meshgrid(xs, ys, zs, indexing="ij")
+        pts = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
+        keep = np.ones(len(pts), bool)
+        for o in layout.objects:
+            if not catalog.type(o.type).is_furniture:
+                continue
+            arr = world_parts_array(o, catalog)
+            for c, yaw, h in zip(arr.centers, arr.yaws, arr.halves, strict=True):
+                keep &= ~Box(c, float(yaw), h).contains_points(pts)
+        return cls(pts[keep], np.full(int(keep.sum()), np.inf))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def copy(self) -> SeenMap:
+        """An independent copy."""
+        return SeenMap(self.points.copy(), self.best.copy())
+
+    def update(self, camera, depth: np.ndarray) -> np.ndarray:
+        """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
+        ``camera`` (anything with position, xmat, fovy_deg, width, height). Returns their mask."""
+        from agent.viewplan import project
+
+        depth = np.asarray(depth, float)
+        h, w = depth.shape
+        uv, z = project(camera, self.points)
+        ok = z > 0.05
+        with np.errstate(invalid="ignore"):
+            ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        idx = np.flatnonzero(ok)
+        if len(idx):
+            col = np.clip(uv[idx, 0].astype(int), 0, w - 1)
+            row = np.clip(uv[idx, 1].astype(int), 0, h - 1)
+            vis = z[idx] <= depth[row, col] + VISIBLE_TOL
+            idx = idx[vis]
+        dist = np.linalg.norm(self.points[idx] - np.asarray(camera.position, float), axis=1)
+        self.best[idx] = np.minimum(self.best[idx], dist)
+        mask = np.zeros(len(self.points), bool)
+        mask[idx] = True
+        return mask
+
+    def mark_frustum(self, camera, max_distance: float) -> None:
+        """Record an image without depth: every point inside the frustum within ``max_distance``
+        (no occlusion; for bodies that render nothing)."""
+        from agent.viewplan import points_in_view
+
+        m = points_in_view(camera, self.points, max_distance)
+        d = np.linalg.norm(self.points[m] - np.asarray(camera.position, float), axis=1)
+        self.best[m] = np.minimum(self.best[m], d)
+
+    def unseen(self, max_range: float) -> np.ndarray:
+        """(N,) bool: points not yet seen from within ``max_range``."""
+        return ~(self.best <= max_range)
+
+    def seen_fraction(self, max_range: float) -> float:
+        """The share of points seen from within ``max_range``."""
+        return float(np.mean(self.best <= max_range)) if len(self.best) else 1.0
+
+    def in_box(self, box: Box, min_half: float = MIN_REGION_HALF) -> np.ndarray:
+        """Indices of the points inside ``box`` (each half extent at least ``min_half``)."""
+        half = np.maximum(np.asarray(box.half, float), min_half)
+        return np.flatnonzero(
+            Box(np.asarray(box.center, float), float(box.yaw), half).contains_points(self.points)
+        )
+
+
+# =========================================================================== candidate regions
+@dataclass
+class Region:
+    """A candidate place to look: one relation volume (or several merged), its probability."""
+
+    box: Box
+    p: float  # P(rel(T)) (noisy-or of the merged relations)
+    members: list[tuple[str, int]]  # (relation, reference instance id)
+    points: np.ndarray  # indices into the SeenMap
+    facing: np.ndarray | None = None  # the side to look from (viewplan.facing_for), if any
+    score: float = 0.0  # P(T in the unseen part) (set by score_regions)
+    cost: float = 0.0  # expected seconds to look (set by score_regions)
+
+    @property
+    def key(self) -> tuple[tuple[str, int], ...]:
+        """A stable identity: the sorted members."""
+        return tuple(sorted(self.members))
+
+    @property
+    def label(self) -> str:
+        """e.g. ``ON-TOP-OF-DESK #3 + NEAR-MONITOR #7``."""
+        return " + ".join(f"{r} #{i}" for r, i in self.members)
+
+    @property
+    def rate(self) -> float:
+        """Probability per second: the ranking key."""
+        return self.score / max(self.cost, 1e-6)
+
+
+def object_regions(
+    b: ObjectInstance,
+    target: str,
+    catalog: Catalog,
+    probs: ProbabilitySource,
+    seen: SeenMap,
+    min_p: float = 1e-6,
+) -> list[Region]:
+    """One region per rel in RELATIONS(type(b)) with P(rel(target)) > ``min_p`` whose volume
+    holds lattice points (none for an instance of the target type itself)."""
+    from agent.viewplan import facing_for
+
+    if b.type == target:
+        return []
+    out = []
+    for rel in catalog.type(b.type).relations:
+        p = float(probs.p(rel.name, target))
+        if p <= min_p:
+            continue
+        box = relation_volume(rel, b)
+        pts = seen.in_box(box)
+        if len(pts):
+            out.append(Region(box, p, [(rel.name, b.id)], pts, facing_for(rel, b)))
+    return out
+
+
+def build_regions(
+    known: Iterable[ObjectInstance],
+    target: str,
+    catalog: Catalog,
+    probs: ProbabilitySource,
+    seen: SeenMap,
+    min_p: float = 1e-6,
+) -> list[Region]:
+    """The candidate regions of every known object (``object_regions``), near-duplicates merged.
+    Deterministic order."""
+    raw = [
+        r
+        for b in sorted(known, key=lambda o: o.id)
+        for r in object_regions(b, target, catalog, probs, seen, min_p)
+    ]
+    return merge_regions(raw)
+
+
+class RegionBuilder:
+    """``build_regions`` with the per-object regions cached (objects do not move)."""
+
+    def __init__(self, catalog: Catalog, probs: ProbabilitySource, seen: SeenMap, target: str):
+        self.catalog, self.probs, self.seen, self.target = catalog, probs, seen, target
+        self._per_object: dict[int, list[Region]] = {}
+        self._merged: tuple[tuple[int, ...], list[Region]] | None = None
+
+    def regions(self, known: Iterable[ObjectInstance]) -> list[Region]:
+        """The merged candidate regions of ``known`` (fresh Region objects every call)."""
+        objs = sorted(known, key=lambda o: o.id)
+        ids = tuple(o.id for o in objs)
+        if self._merged is None or self._merged[0] != ids:
+            raw = []
+            for b in objs:
+                if b.id not in self._per_object:
+                    self._per_object[b.id] = object_regions(
+                        b, self.target, self.catalog, self.probs, self.seen
+                    )
+                raw.extend(self._per_object[b.id])
+            self._merged = (ids, merge_regions(raw))
+        return [Region(r.box, r.p, list(r.members), r.points, r.facing) for r in self._merged[1]]
+
+
+def merge_regions(regions: Sequence[Region], jaccard: float = MERGE_JACCARD) -> list[Region]:
+    """Merge regions whose point sets overlap with Jaccard index >= ``jaccard`` (greedy, in
+    order of decreasing p): the merged region keeps the larger box and the union of the points,
+    and p becomes the noisy-or 1 - prod(1 - p_i)."""
+    order = sorted(range(len(regions)), key=lambda i: (-regions[i].p, regions[i].key))
+    out: list[Region] = []
+    bounds: list[np.ndarray] = []  # index-space bounds of each merged set, for a cheap pre-test
+    for i in order:
+        r = regions[i]
+        lo_r, hi_r = int(r.points.min()), int(r.points.max())
+        for j, o in enumerate(out):
+            lo_o, hi_o = bounds[j]
+            if hi_r < lo_o or hi_o < lo_r:
+                continue
+            inter = len(np.intersect1d(r.points, o.points, assume_unique=True))
+            union = len(r.points) + len(o.points) - inter
+            if inter and inter / union >= jaccard:
+                bigger = r if len(r.points) > len(o.points) else o
+                pts = np.union1d(r.points, o.points)
+                out[j] = Region(
+                    bigger.box, 1 - (1 - o.p) * (1 - r.p), o.members + r.members, pts, bigger.facing
+                )
+                bounds[j] = np.array([int(pts[0]), int(pts[-1])])
+                break
+        else:
+            out.append(Region(r.box, r.p, list(r.members), np.sort(r.points), r.facing))
+            bounds.append(np.array([lo_r, hi_r]))
+    return out
+
+
+def region_probabilities(regions: Sequence[Region], unseen: np.ndarray) -> np.ndarray:
+    """P(T in the unseen part of each region), counting every overlapping region (see the module
+    docstring). (R,)"""
+    from scipy import sparse
+
+    if not regions:
+        return np.zeros(0)
+    n = len(unseen)
+    rows = np.concatenate([np.full(len(r.points), i) for i, r in enumerate(regions)])
+    cols = np.concatenate([r.points for r in regions])
+    m = sparse.csr_matrix((np.ones(len(cols)), (rows, cols)), shape=(len(regions), n))
+    size = np.asarray(m.sum(1)).ravel()  # |r'|
+    mu = m @ sparse.diags(unseen.astype(float))
+    inter = (mu @ m.T).toarray()  # [r, r'] = |r & r' & U|
+    p = np.array([r.p for r in regions])
+    share = np.clip(p[None, :] * inter / np.maximum(size[None, :], 1.0), 0.0, 1.0)
+    return 1.0 - np.prod(1.0 - share, axis=1)
+
+
+def _footprint_distance(box: Box, xy: np.ndarray) -> np.ndarray:
+    d = xy - np.asarray(box.center[:2], float)
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
+    ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
+    return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
+
+
+@dataclass
+class CostModel:
+    """Expected seconds to look into a box from the robot's position (drive + head + images)."""
+
+    grid: OccupancyGrid
+    time_model: TimeModel
+    view_distance: float  # the base stands at most this far from the box's footprint
+    head_s: float = 0.6  # mean head slew per image (s)
+    image_span: float = 1.2  # m of footprint one image covers (for the image count)
+    _cells: np.ndarray = field(init=False, repr=False)
+    _free: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        xs, ys = self.grid.cell_centers()
+        self._cells = np.column_stack([np.tile(xs, len(ys)), np.repeat(ys, len(xs))])
+        self._free = self.grid.free.ravel()
+
+    def images(self, box: Box) -> int:
+        """Images expected to cover ``box`` (1 to 4)."""
+        ext = 2 * float(max(box.half[0], box.half[1]))
+        return int(np.clip(math.ceil(ext / self.image_span - 1e-9), 1, 4))
+
+    def seconds(self, box: Box, xy: np.ndarray, field_: np.ndarray | None = None) -> float:
+        """Expected seconds to look into ``box`` starting at ``xy`` (``field_``: the grid's
+        distance field from ``xy``, flattened, if already computed)."""
+        if field_ is None:
+            field_ = self.grid.distances_from(xy).ravel()
+        near = self._free & (_footprint_distance(box, self._cells) <= self.view_distance)
+        d = float(field_[near].min()) if near.any() else math.inf
+        if not math.isfinite(d):
+            d = float(np.hypot(*(np.asarray(box.center[:2]) - np.asarray(xy))))
+        tm = self.time_model
+        turn = (math.pi / 2) / tm.turn_rate if d > 0.05 else 0.0
+        return d / tm.drive_speed + turn + self.images(box) * (self.head_s + tm.image_cost)
+
+
+def score_regions(
+    regions: Sequence[Region], seen: SeenMap, target_range: float, costs: CostModel, xy: np.ndarray
+) -> list[Region]:
+    """Set every region's score (P(T in its unseen part)) and cost (expected seconds from ``xy``)
+    and return them best first (score per second; ties: cheaper, then key)."""
+    if not regions:
+        return []
+    unseen = seen.unseen(target_range)
+    probs = region_probabilities(regions, unseen)
+    field_ = costs.grid.distances_from(xy).ravel()
+    for r, p in zip(regions, probs, strict=True):
+        r.score = float(p)
+        r.cost = costs.seconds(r.box, xy, field_)
+    return sorted(regions, key=lambda r: (-r.rate, r.cost, r.key))
+
+
+# =========================================================================== coverage
+def lattice_candidates(grid: OccupancyGrid, start_xy: np.ndarray, step: float = 0.5) -> np.ndarray:
+    """Reachable free cell centres on a ``step`` lattice (M, 2), the start's free cell first."""
+    start = nearest_free(grid, start_xy)
+    if start is None:
+        return np.zeros((0, 2))
+    reach = grid.reachable_mask(start)
+    k = max(1, int(round(step / grid.resolution)))
+    lat = np.zeros_like(reach)
+    lat[k // 2 :: k, k // 2 :: k] = True
+    rows, cols = np.nonzero(reach & lat)
+    xs, ys = grid.cell_centers()
+    return np.vstack([start[None, :], np.column_stack([xs[cols], ys[rows]])])
+
+
+def coverage_viewpoints(
+    grid: OccupancyGrid,
+    points: np.ndarray,
+    start_xy: np.ndarray,
+    max_range: float,
+    spec: RobotSpec | None = None,
+    goal: float = 0.95,
+    step: float = 0.5,
+    max_viewpoints: int = 40,
+) -> np.ndarray:
+    """Base positions (K, 2) from which every one of ``points`` (N, 3) is within ``max_range`` of
+    the camera (greedy set cover until ``goal`` of the coverable points), in tour order from
+    ``start_xy``. Occlusion is not modelled here: the sweeps at each viewpoint skip what the
+    depth images already showed, and a later tour covers what stayed hidden."""
+    spec = spec or RobotSpec()
+    cand = lattice_candidates(grid, start_xy, step)
+    if len(cand) == 0 or len(points) == 0:
+        return np.zeros((0, 2))
+    cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
+    cover = np.zeros((len(cand), len(points)), bool)
+    for i in range(0, len(cand), 64):
+        d = np.linalg.norm(cams[i : i + 64, None, :] - points[None, :, :], axis=-1)
+        cover[i : i + 64] = d <= max_range
+    coverable = cover.any(0)
+    need = int(math.ceil(goal * coverable.sum()))
+    got = np.zeros(len(points), bool)
+    chosen: list[int] = []
+    while got.sum() < need and len(chosen) < max_viewpoints:
+        gain = (cover & ~got).sum(1)
+        i = int(np.argmax(gain))
+        if gain[i] == 0:
+            break
+        chosen.append(i)
+        got |= cover[i]
+    return tour_order(grid, cand[chosen], start_xy)
+
+
+def tour_order(grid: OccupancyGrid, sites: np.ndarray, start_xy: np.ndarray) -> np.ndarray:
+    """``sites`` (K, 2) in the order of a short open tour from ``start_xy``: nearest neighbour on
+    grid driving distances, then 2-opt."""
+    k = len(sites)
+    if k <= 1:
+        return np.asarray(sites, float).reshape(-1, 2)
+    nodes = np.vstack([np.asarray(start_xy, float)[None, :], sites])
+    dist = np.zeros((k + 1, k + 1))
+    for i, a in enumerate(nodes):
+        f = grid.distances_from(a)
+        for j, b in enumerate(nodes):
+            r, c = grid.to_cell(b)
+            v = f[r, c] if grid.in_grid(r, c) else np.inf
+            dist[i, j] = v if np.isfinite(v) else 1e3 + float(np.hypot(*(a - b)))
+    order = [0]
+    left = set(range(1, k + 1))
+    while left:
+        nxt = min(left, key=lambda j: (dist[order[-1], j], j))
+        order.append(nxt)
+        left.remove(nxt)
+    improved = True
+    while improved:
+        improved = False
+        for i in range(1, k):
+            for j in range(i + 1, k + 1):
+                a, b = order[i - 1], order[i]
+                c = order[j]
+                d_ = order[j + 1] if j + 1 <= k else None
+                old = dist[a, b] + (dist[c, d_] if d_ is not None else 0.0)
+                new = dist[a, c] + (dist[b, d_] if d_ is not None else 0.0)
+                if new < old - 1e-9:
+                    order[i : j + 1] = order[i : j + 1][::-1]
+                    improved = True
+    return nodes[order[1:]]
+
+
+def tour_seconds(
+    grid: OccupancyGrid, sites: np.ndarray, start_xy: np.ndarray, time_model: TimeModel
+) -> float:
+    """Seconds to drive the tour through ``sites`` in order (grid distances, a quarter turn per
+    leg)."""
+    t, cur = 0.0, np.asarray(start_xy, float)
+    for s in sites:
+        r, c = grid.to_cell(s)
+        d = grid.distances_from(cur)[r, c] if grid.in_grid(r, c) else np.inf
+        if not np.isfinite(d):
+            d = float(np.hypot(*(s - cur)))
+        t += d / time_model.drive_speed + (math.pi / 2) / time_model.turn_rate
+        cur = s
+    return t
+
+
+@dataclass(frozen=True)
+class SweepGaze:
+    """One image of a sweep: world heading of the camera and tilt."""
+
+    heading: float
+    tilt: float
+    gain: int  # unseen points predicted in the frustum
+
+
+def frustum_mask(
+    cam_xyz: np.ndarray,
+    heading: float,
+    tilt: float,
+    points: np.ndarray,
+    spec: RobotSpec,
+    max_range: float,
+    width: int = 320,
+    height: int = 240,
+) -> np.ndarray:
+    """(N,) bool: points inside the frustum of a camera at ``cam_xyz`` looking along world
+    ``heading`` with ``tilt``, within ``max_range``."""
+    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
+    fwd = np.array([ct * ch, ct * sh, st])
+    right = np.array([sh, -ch, 0.0])
+    up = np.array([-st * ch, -st * sh, ct])
+    rel = points - cam_xyz
+    z, x, y = rel @ fwd, rel @ right, rel @ up
+    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
+    tan_x = tan_y * width / height
+    return (
+        (z > 0.05)
+        & (np.abs(x) <= z * tan_x)
+        & (np.abs(y) <= z * tan_y)
+        & (np.linalg.norm(rel, axis=1) <= max_range)
+    )
+
+
+def sweep_gazes(
+    xy: np.ndarray,
+    current_heading: float,
+    points: np.ndarray,
+    unseen: np.ndarray,
+    spec: RobotSpec,
+    max_range: float,
+    min_gain: int = 8,
+    tilts: Sequence[float] = SWEEP_TILTS,
+    heading_step: float = SWEEP_HEADING_STEP,
+) -> list[SweepGaze]:
+    """The images of a pan/tilt sweep at ``xy`` worth taking (each predicted to show at least
+    ``min_gain`` unseen points within ``max_range``, counting the earlier images of the sweep),
+    ordered as one turn starting from ``current_heading``."""
+    cam = np.array([xy[0], xy[1], spec.camera_height])
+    todo = unseen.copy()
+    near = np.linalg.norm(points - cam, axis=1) <= max_range
+    todo &= near
+    if todo.sum() < min_gain:
+        return []
+    n_h = max(1, int(round(2 * math.pi / heading_step)))
+    headings = [current_heading + i * 2 * math.pi / n_h for i in range(n_h)]
+    out: list[SweepGaze] = []
+    for h in headings:
+        for t in tilts:
+            t = float(np.clip(t, *spec.tilt_range))
+            m = frustum_mask(cam, h, t, points, spec, max_range) & todo
+            g = int(m.sum())
+            if g >= min_gain:
+                out.append(SweepGaze(float(math.atan2(math.sin(h), math.cos(h))), t, g))
+                todo &= ~m
+    return out
+
+
+# =========================================================================== indirect search
+@dataclass(frozen=True)
+class IndirectOption:
+    """One plan of detectability-driven search and its expected cost (s)."""
+
+    via: str | None  # the intermediate type, None: look for the target directly
+    cost: float
+    q: float = 0.0  # P(T in a relation volume of a found instance of ``via``)
+    find_s: float = 0.0  # expected seconds to find an instance of ``via``
+    look_s: float = 0.0  # expected seconds to look into its best relation volumes
+
+
+def relation_probability(
+    catalog: Catalog, probs: ProbabilitySource, via: str, target: str
+) -> float:
+    """q_I = max over rel in RELATIONS(via) of P(rel(target))."""
+    rels = catalog.type(via).relations
+    return max((float(probs.p(r.name, target)) for r in rels), default=0.0)
+
+
+def indirect_plan(
+    target: str,
+    catalog: Catalog,
+    probs: ProbabilitySource,
+    cover_s: Mapping[str, float],
+    look_s: Mapping[str, float],
+    candidates: Sequence[str] | None = None,
+) -> list[IndirectOption]:
+    """Every plan (direct, and via each candidate type) with its expected cost, cheapest first.
+
+    ``cover_s[t]``: seconds of a coverage tour at type t's effective range; ``look_s[t]``:
+    seconds to look into the relation volumes of one found t. Expected costs as in the module
+    docstring: direct C_T = cover_s[T] / 2; via I: cover_s[I] / 2 + look_s[I] + (1 - q_I) C_T.
+    Ties go to the direct plan, then to catalog order.
+    """
+    direct = cover_s[target] / 2
+    out = [IndirectOption(None, direct)]
+    names = candidates if candidates is not None else catalog.type_names
+    for name in names:
+        if name == target or name not in cover_s:
+            continue
+        q = relation_probability(catalog, probs, name, target)
+        if q <= 0:
+            continue
+        find = cover_s[name] / 2
+        look = look_s.get(name, 0.0)
+        out.append(IndirectOption(name, find + look + (1 - q) * direct, q, find, look))
+    order = {n: i for i, n in enumerate(catalog.type_names)}
+    out.sort(key=lambda o: (o.cost, o.via is not None, order.get(o.via, -1) if o.via else -1))
+    return out

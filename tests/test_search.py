@@ -1,0 +1,360 @@
+"""Object search: the pure parts (detectability, regions, scores, indirect decision, bootstrap,
+episodes) and the policies on a hand-made room (render-marked)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agent import search as S
+from agent import search_space as ss
+from agent.bench_search import aggregate, bootstrap_ci, make_episodes, run_episodes
+from agent.navigation import OccupancyGrid
+from envs.layout import Door, RoomLayout
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from knowledge.base import KnowledgeBase
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import Box, ObjectInstance
+
+# A hand-made room: a desk against the north wall with a cup on it, a shelf against the west wall.
+DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
+SHELF = ObjectInstance("Shelf", 2, (-2.2, -0.2, 0.8), 0.0, (0.35, 1.0, 1.6))
+CUP = ObjectInstance("Cup", 3, (0.2, 1.5, 0.79), 0.0, (0.08, 0.08, 0.10))
+START = RobotPose(0.0, -0.6, math.pi / 2)  # 2.1 m south of the desk, facing it
+
+
+def room(*objects: ObjectInstance) -> RoomLayout:
+    return RoomLayout(
+        style="test",
+        seed=0,
+        width=5.0,
+        depth=4.0,
+        height=2.8,
+        door=Door("south", 1.5, 0.9),
+        objects=tuple(objects),
+        support={},
+        placed_by={},
+    )
+
+
+class Cam:
+    """A minimal camera for SeenMap.update."""
+
+    def __init__(self, position, heading, tilt, width=320, height=240, fovy=58.0):
+        from agent.viewplan import camera_axes
+
+        self.position = np.asarray(position, float)
+        self.xmat = camera_axes(heading, tilt)
+        self.fovy_deg, self.width, self.height = fovy, width, height
+
+
+# =========================================================================== pure parts
+def test_effective_range_orders_types_and_respects_max_range(catalog):
+    spec = RobotSpec()
+    r = {t: ss.effective_range(catalog.type(t), spec) for t in ("Desk", "Cup", "Pen", "Monitor")}
+    assert r["Pen"] < r["Cup"] < r["Monitor"] <= r["Desk"]
+    for t in catalog.types:
+        assert 0 < ss.effective_range(t, spec) <= t.max_range
+
+
+def test_seen_map_excludes_furniture_solids_and_records_visible_points(catalog):
+    seen = ss.SeenMap.for_room(room(DESK, SHELF), catalog)
+    # No lattice point inside the desk's top board.
+    top = Box(np.array([0.0, 1.55, 0.72]), -math.pi / 2, np.array([0.35, 0.7, 0.02]))
+    assert not top.contains_points(seen.points).any()
+    cam = Cam((0.0, -0.6, 1.2), math.pi / 2, -0.4)
+    depth = np.full((240, 320), 50.0)  # nothing in the way
+    mask = seen.update(cam, depth)
+    assert mask.sum() > 100
+    assert np.isfinite(seen.best[mask]).all()
+    assert seen.seen_fraction(100.0) == pytest.approx(mask.mean())
+    # A wall 1 m away hides everything behind it.
+    seen2 = ss.SeenMap.for_room(room(DESK, SHELF), catalog)
+    m2 = seen2.update(cam, np.full((240, 320), 1.0))
+    assert m2.sum() < mask.sum()
+    assert (
+        np.linalg.norm(seen2.points[m2] - cam.position, axis=1) < 1.0 / math.cos(0.9) + 0.2
+    ).all()
+
+
+def test_regions_merge_duplicates_and_count_shared_space_once():
+    pts_a = np.arange(0, 100)
+    pts_b = np.arange(5, 100)  # nearly the same space as a
+    pts_c = np.arange(200, 260)
+    box = Box(np.zeros(3), 0.0, np.ones(3))
+    regs = [
+        ss.Region(box, 0.5, [("NEAR-DESK", 1)], pts_a),
+        ss.Region(box, 0.4, [("NEAR-MONITOR", 2)], pts_b),
+        ss.Region(box, 0.3, [("ON-SHELF", 3)], pts_c),
+    ]
+    merged = ss.merge_regions(regs)
+    assert len(merged) == 2
+    assert merged[0].p == pytest.approx(1 - 0.5 * 0.6)
+    assert sorted(merged[0].members) == [("NEAR-DESK", 1), ("NEAR-MONITOR", 2)]
+    unseen = np.ones(300, bool)
+    p = ss.region_probabilities(merged, unseen)
+    assert p == pytest.approx([0.7, 0.3])
+    # Looking into half of the first region halves what is left there.
+    unseen[:50] = False
+    p = ss.region_probabilities(merged, unseen)
+    assert p[0] == pytest.approx(0.7 * 50 / 100)
+    assert p[1] == pytest.approx(0.3)
+
+
+def test_overlapping_region_gets_mass_of_both():
+    box = Box(np.zeros(3), 0.0, np.ones(3))
+    near_desk = ss.Region(box, 0.5, [("NEAR-DESK", 1)], np.arange(0, 100))
+    near_tw = ss.Region(box, 0.5, [("NEAR-MONITOR", 2)], np.arange(80, 120))  # overlaps 20 points
+    p = ss.region_probabilities([near_desk, near_tw], np.ones(200, bool))
+    # Each region holds its own mass plus the other's share of their 20 common points.
+    assert p[0] == pytest.approx(1 - (1 - 0.5) * (1 - 0.5 * 20 / 40))
+    assert p[1] == pytest.approx(1 - (1 - 0.5) * (1 - 0.5 * 20 / 100))
+
+
+def test_kb_probabilities_rank_modes(catalog):
+    kb = KnowledgeBase(catalog)
+    for i in range(10):
+        kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")] if i < 6 else [])
+    lo, hi = kb.interval("ON-TOP-OF-DESK", "Cup")
+    assert ss.KBProbabilities(kb, "low").p("ON-TOP-OF-DESK", "Cup") == pytest.approx(lo)
+    assert ss.KBProbabilities(kb, "high").p("ON-TOP-OF-DESK", "Cup") == pytest.approx(hi)
+    p0 = ss.KBProbabilities(kb, "p0").p("ON-TOP-OF-DESK", "Cup")
+    assert lo < p0 < hi
+    with pytest.raises(CtxsearchError, match="unknown rank"):
+        ss.KBProbabilities(kb, "middle")
+
+
+def test_indirect_plan_prefers_easy_related_type_when_it_pays(catalog):
+    probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Pen"): 0.8, ("NEAR-CHAIR", "Pen"): 0.05})
+    cover = {"Pen": 200.0, "Desk": 10.0, "Chair": 10.0}
+    look = {"Desk": 8.0, "Chair": 8.0}
+    plans = ss.indirect_plan("Pen", catalog, probs, cover, look, ["Desk", "Chair"])
+    assert plans[0].via == "Desk"
+    assert plans[0].cost == pytest.approx(5 + 8 + 0.2 * 100)
+    # An easy target: looking for it directly is cheaper than any detour.
+    cover_easy = {"Pen": 12.0, "Desk": 10.0, "Chair": 10.0}
+    assert (
+        ss.indirect_plan("Pen", catalog, probs, cover_easy, look, ["Desk", "Chair"])[0].via is None
+    )
+    # Unrelated intermediates are never proposed.
+    none = ss.TableProbabilities({})
+    assert [o.via for o in ss.indirect_plan("Pen", catalog, none, cover, look, ["Desk"])] == [None]
+
+
+def test_coverage_viewpoints_cover_the_room_within_range(catalog):
+    lay = room(DESK, SHELF)
+    grid = OccupancyGrid.from_layout(lay)
+    seen = ss.SeenMap.for_room(lay, catalog)
+    for rng in (1.5, 3.0):
+        sites = ss.coverage_viewpoints(grid, seen.points, START.xy, rng)
+        assert len(sites) >= 1 and grid.free_mask(sites).all()
+        cams = np.column_stack([sites, np.full(len(sites), RobotSpec().camera_height)])
+        d = np.linalg.norm(cams[:, None, :] - seen.points[None], axis=-1).min(0)
+        assert np.mean(d <= rng) >= 0.9
+    assert len(ss.coverage_viewpoints(grid, seen.points, START.xy, 1.5)) > len(
+        ss.coverage_viewpoints(grid, seen.points, START.xy, 3.0)
+    )
+
+
+def test_sweep_skips_seen_directions():
+    spec = RobotSpec()
+    pts = np.array([[2.0, 0.0, 1.0]] * 20 + [[-2.0, 0.0, 1.0]] * 20, float)
+    unseen = np.ones(len(pts), bool)
+    g = ss.sweep_gazes(np.zeros(2), 0.0, pts, unseen, spec, 3.0)
+    assert len(g) == 2
+    unseen[:20] = False
+    g = ss.sweep_gazes(np.zeros(2), 0.0, pts, unseen, spec, 3.0)
+    assert len(g) == 1 and abs(abs(g[0].heading) - math.pi) < 0.6
+
+
+def test_bootstrap_is_seeded_and_brackets_the_median():
+    v = np.arange(1, 41, dtype=float)
+    a = bootstrap_ci(v, seed=3)
+    assert a == bootstrap_ci(v, seed=3)
+    assert a[0] <= np.median(v) <= a[1]
+    assert math.isnan(bootstrap_ci([], seed=0)[0])
+
+
+def test_aggregate_counts_failures_at_the_budget():
+    def res(policy, t, found):
+        return S.SearchResult(policy, 0, "Cup", found, 1 if found else None, t, 3, 1.0, 100.0)
+
+    stats = aggregate(
+        {
+            "exhaustive": [res("exhaustive", 40, True), res("exhaustive", 80, True)],
+            "location": [res("location", 10, True), res("location", 150, False)],
+        }
+    )
+    assert stats["location"].success_rate == 0.5
+    assert stats["location"].median_s == pytest.approx((10 + 100) / 2)
+    assert stats["location"].ratio_to_exhaustive == pytest.approx(55 / 60)
+
+
+def test_held_out_seeds_differ_from_learning_seeds():
+    from agent.acquisition import room_seed
+
+    learn = {room_seed(0, i) for i in range(200)}
+    search = {S.held_out_seed(0, i) for i in range(200)}
+    assert not learn & search
+    assert S.held_out_seed(0, 5) == S.held_out_seed(0, 5) != S.held_out_seed(1, 5)
+
+
+def test_episodes_are_deterministic_and_skip_excluded_rooms(catalog):
+    from envs.styles import load_style
+
+    style = load_style("office", catalog)
+    a = make_episodes(style, 4, 7, catalog, 60.0)
+    assert a == make_episodes(style, 4, 7, catalog, 60.0)
+    assert all(not catalog.type(e.target).is_furniture for e in a)
+    b = make_episodes(style, 4, 7, catalog, 60.0, exclude_seeds={a[0].room_seed})
+    assert a[0].room_seed not in {e.room_seed for e in b}
+    c = make_episodes(style, 2, 7, catalog, 60.0, target="Monitor")
+    assert all(e.target == "Monitor" for e in c)
+
+
+def test_unknown_policy_and_rank_are_one_line_errors():
+    with pytest.raises(CtxsearchError, match="unknown search policy 'psychic'"):
+        S.make_policy("psychic")
+    with pytest.raises(CtxsearchError, match="unknown rank"):
+        S.parse_policies("location@middle")
+    assert S.parse_policies("exhaustive, location@low") == ["exhaustive", "location@low"]
+
+
+# =========================================================================== policies (rendered)
+def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, world=None):
+    from envs.world import World
+
+    ep = S.Episode(0, "test", 0, "Cup", START, budget)
+    own = world is None
+    world = world or World(layout, catalog)
+    try:
+        ctx = S.SearchContext(ep, layout, catalog, world, probs=probs, policy=policy)
+        return S.make_policy(policy).run(ctx), ctx
+    finally:
+        if own:
+            world.close()
+
+
+@pytest.mark.render
+def test_every_policy_finds_a_cup_in_plain_sight(catalog):
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP)
+    probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Cup"): 0.8, ("ON-SHELF", "Cup"): 0.2})
+    with World(layout, catalog) as world:
+        for name in S.POLICIES:
+            res, _ = _run(name, layout, catalog, probs, world=world)
+            assert res.success, (name, res.log)
+            assert res.found_id == CUP.id
+            assert 0 < res.sim_time < 60 and res.gazes >= 1
+            assert len(res.trace) == res.gazes
+            assert res.trace[-1].detections and ("Cup", CUP.id) in res.trace[-1].detections
+
+
+@pytest.mark.render
+def test_location_looks_first_where_the_store_ranks_highest(catalog, tmp_path):
+    from knowledge.store import EvidenceStore
+
+    # A crafted store: cups are always on shelves, never on desks.
+    with EvidenceStore.open(tmp_path / "kb.sqlite", catalog, create=True) as store:
+        for i in range(12):
+            store.record(
+                run="t",
+                style="test",
+                room_seed=i,
+                object_id=1,
+                ref_type="Shelf",
+                sim_time=0.0,
+                strategy="t",
+                related=[("ON-SHELF", "Cup", 9)],
+            )
+            store.record(
+                run="t",
+                style="test",
+                room_seed=i,
+                object_id=2,
+                ref_type="Desk",
+                sim_time=0.0,
+                strategy="t",
+                related=[],
+            )
+        kb = store.knowledge_base()
+    layout = room(DESK, SHELF)  # no cup: the search keeps going, the first look is what matters
+    res, ctx = _run("location", layout, catalog, ss.KBProbabilities(kb, "p0"), budget=15.0)
+    assert not res.success
+    assert res.trace[0].purpose.startswith("region ON-SHELF #2"), res.log
+    # With the evidence reversed (cups on desks), the desk top comes first.
+    kb2 = KnowledgeBase(catalog)
+    for _ in range(12):
+        kb2.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
+        kb2.record_examination("Shelf", [])
+    res2, _ = _run("location", layout, catalog, ss.KBProbabilities(kb2, "p0"), budget=15.0)
+    assert res2.trace[0].purpose.startswith("region ON-TOP-OF-DESK #1"), res2.log
+
+
+@pytest.mark.render
+def test_paired_benchmark_gives_every_policy_the_same_episodes(catalog, monkeypatch):
+    from envs.styles import load_style
+
+    style = load_style("office", catalog)
+    eps = make_episodes(style, 2, 11, catalog, budget_s=6.0)
+    seen: list[tuple] = []
+    orig = S.SearchContext.__init__
+
+    def spy(self, episode, layout, cat, body, **kw):
+        orig(self, episode, layout, cat, body, **kw)
+        p = body.pose()
+        seen.append(
+            (
+                kw.get("policy"),
+                episode.index,
+                layout.seed,
+                episode.target,
+                (episode.start.x, episode.start.y),
+                (round(p.x, 4), round(p.y, 4), round(p.yaw, 4)),
+                len(self.known),
+                self.seen.seen_fraction(99.0),
+                tuple(sorted(o.id for o in layout.objects)),
+                round(self.elapsed, 6),
+            )
+        )
+
+    monkeypatch.setattr(S.SearchContext, "__init__", spy)
+    kb = KnowledgeBase(catalog)
+    kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
+    policies = ["exhaustive", "location", "oracle"]
+
+    def probs_for(base, rank):
+        return ss.KBProbabilities(kb, rank or "p0") if base == "location" else None
+
+    results = run_episodes(eps, policies, catalog, style, probs_for)
+    assert [len(results[p]) for p in policies] == [2, 2, 2]
+    for i, ep in enumerate(eps):
+        rows = [r for r in seen if r[1] == i]
+        assert [r[0] for r in rows] == policies
+        assert (
+            len({r[1:] for r in rows}) == 1
+        )  # same room, target, start pose, nothing known or seen
+        assert rows[0][2] == ep.room_seed
+        assert rows[0][5] == pytest.approx((ep.start.x, ep.start.y, ep.start.yaw), abs=1e-3)
+        assert {results[p][i].target for p in policies} == {ep.target}
+
+
+@pytest.mark.render
+def test_budget_ends_an_episode(catalog):
+    layout = room(DESK, SHELF)  # no cup anywhere
+    res, _ = _run("exhaustive", layout, catalog, budget=5.0)
+    assert not res.found and not res.success
+    assert res.time_to_find == 5.0
+    assert res.sim_time < 5.0 + 5.0  # stops at the first check after the budget
+
+
+def test_time_model_charges_match_result(catalog):
+    """SearchResult.time_to_find is the budget for failures and the time for successes."""
+    r = S.SearchResult("x", 0, "Cup", True, 3, 12.5, 4, 2.0, 60.0)
+    assert r.success and r.time_to_find == 12.5
+    r = S.SearchResult("x", 0, "Cup", True, 3, 70.0, 4, 2.0, 60.0)
+    assert not r.success and r.time_to_find == 60.0
+    assert TimeModel().image_cost > 0
