@@ -1,0 +1,375 @@
+"""Rerun recordings of what the robot does: the room, relation volumes, the robot and its camera.
+
+``Recorder(path)`` writes a ``.rrd`` file (open it with ``rerun FILE.rrd``); ``Recorder(None)``
+records nothing and every method returns at once, so callers log unconditionally.
+
+Entity tree (world frame: x east, y north, z up, metres)::
+
+    world/room/floor, world/room/walls          static boxes
+    world/objects/<Type>_<id>                   static: labelled bounding box (wireframe)
+    world/objects/<Type>_<id>/parts             static: the solid parts, filled, type colour
+    world/volumes/...                           relation volumes (wireframes), log_volumes
+    world/robot                                 base pose (Transform3D), with base/mast/head
+    world/robot_path                            the path driven so far (line strip)
+    world/camera                                camera pose (Transform3D, RDF)
+    world/camera/image                          Pinhole; rgb, segmentation, depth, detections
+    log                                         text messages
+    <any path>                                  scalars (log_scalar)
+
+Everything that changes is logged on the ``sim_time`` timeline (simulated seconds; set it with
+``set_time``) and, where given, a ``step`` sequence.
+
+Cameras: MuJoCo's look along their -z with +y up; rerun's pinhole is RDF (x right, y down, z
+forward), so the camera's world rotation is ``xmat @ diag(1, -1, -1)``. Segmentation images hold
+instance id + 1 (0: nothing), with an annotation context naming every instance by its type.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotPose, RobotSpec
+from knowledge.catalog import Catalog
+from knowledge.geometry import Box
+
+WALL_THICKNESS = 0.1  # m, drawn outside the room's boundary
+RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
+
+
+def rgb255(color: Sequence[float]) -> list[int]:
+    """An RGB colour in [0, 1] as 0-255 integers."""
+    return [int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in color[:3]]
+
+
+def intrinsics(width: int, height: int, fovy_deg: float) -> np.ndarray:
+    """The pinhole matrix K of a MuJoCo camera (square pixels, principal point at the centre)."""
+    f = (height / 2) / math.tan(math.radians(fovy_deg) / 2)
+    return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+
+
+def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
+    """The room's walls as boxes standing just outside its boundary, the door left open."""
+    w, d, h = layout.width, layout.depth, layout.height
+    t = thickness
+    # (wall, centre of the wall line, direction along the wall, length)
+    walls = {
+        "north": (np.array([0.0, d / 2 + t / 2]), 0, w + 2 * t),
+        "south": (np.array([0.0, -d / 2 - t / 2]), 0, w + 2 * t),
+        "east": (np.array([w / 2 + t / 2, 0.0]), 1, d),
+        "west": (np.array([-w / 2 - t / 2, 0.0]), 1, d),
+    }
+    out: list[Box] = []
+    for name, (c, axis, length) in walls.items():
+        spans = [(-length / 2, length / 2)]
+        if layout.door is not None and layout.door.wall == name:
+            a, b = (
+                layout.door.center - layout.door.width / 2,
+                layout.door.center + layout.door.width / 2,
+            )
+            spans = [(-length / 2, a), (b, length / 2)]
+        for lo, hi in spans:
+            if hi - lo <= 1e-6:
+                continue
+            center = c.copy()
+            center[axis] = (lo + hi) / 2
+            half = [t / 2, t / 2, h / 2]
+            half[axis] = (hi - lo) / 2
+            out.append(Box(np.array([center[0], center[1], h / 2]), 0.0, np.array(half)))
+    return out
+
+
+def _boxes3d(boxes: Sequence[Box], **kwargs: Any) -> Any:
+    import rerun as rr
+
+    return rr.Boxes3D(
+        centers=[b.center for b in boxes],
+        half_sizes=[b.half for b in boxes],
+        rotation_axis_angles=[
+            rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(b.yaw)) for b in boxes
+        ],
+        **kwargs,
+    )
+
+
+class Recorder:
+    """Logs the robot's world to a rerun ``.rrd`` file; a no-op when ``path`` is None."""
+
+    def __init__(self, path: str | Path | None, app_id: str = "ctxsearch") -> None:
+        self.path = Path(path) if path is not None else None
+        self._rec: Any = None
+        self._path_xy: list[list[float]] = []
+        self._robot_logged = False
+        if self.path is None:
+            return
+        import rerun as rr
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._rec = rr.RecordingStream(app_id)
+        self._rec.save(self.path)
+        self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    @property
+    def enabled(self) -> bool:
+        """True if this recorder writes a file."""
+        return self._rec is not None
+
+    # ----------------------------------------------------------------- time
+    def set_time(self, sim_time: float, step: int | None = None) -> None:
+        """Set the ``sim_time`` timeline (simulated seconds) and, if given, the ``step`` sequence."""
+        if self._rec is None:
+            return
+        self._rec.set_time("sim_time", duration=float(sim_time))
+        if step is not None:
+            self._rec.set_time("step", sequence=int(step))
+
+    # ----------------------------------------------------------------- the room
+    def log_room(self, layout: RoomLayout, catalog: Catalog) -> None:
+        """Static: floor, walls, and every object's parts (filled) and labelled bounding box."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        from envs.parts import world_parts
+
+        rec = self._rec
+        w, d = layout.width, layout.depth
+        rec.log(
+            "world/room/floor",
+            rr.Boxes3D(
+                centers=[[0, 0, -0.005]],
+                half_sizes=[[w / 2, d / 2, 0.005]],
+                colors=[[200, 200, 195]],
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+        rec.log(
+            "world/room/walls",
+            _boxes3d(
+                wall_boxes(layout),
+                colors=[[225, 225, 220, 90]],
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+        infos = []
+        for o in layout.objects:
+            typ = catalog.type(o.type)
+            color = rgb255(typ.color)
+            infos.append(rr.AnnotationInfo(id=o.id + 1, label=f"{o.type} #{o.id}", color=color))
+            entity = f"world/objects/{o.type}_{o.id}"
+            rec.log(
+                entity,
+                _boxes3d(
+                    [o.box()],
+                    labels=[o.type],
+                    colors=[color],
+                    show_labels=True,
+                    fill_mode=rr.components.FillMode.MajorWireframe,
+                ),
+                static=True,
+            )
+            parts = world_parts(o, catalog)
+            if parts:
+                rec.log(
+                    f"{entity}/parts",
+                    _boxes3d(
+                        parts, colors=[color] * len(parts), fill_mode=rr.components.FillMode.Solid
+                    ),
+                    static=True,
+                )
+        infos.append(rr.AnnotationInfo(id=0, label="background", color=[0, 0, 0]))
+        rec.log("world", rr.AnnotationContext(infos), static=True)
+
+    def log_volumes(
+        self,
+        entity: str,
+        boxes: Sequence[Box],
+        labels: Sequence[str] | None = None,
+        color: Sequence[float] | None = None,
+        static: bool = False,
+    ) -> None:
+        """Boxes (relation volumes, search regions) as labelled wireframes at ``entity``."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        kwargs: dict[str, Any] = {"fill_mode": rr.components.FillMode.MajorWireframe}
+        if labels is not None:
+            kwargs["labels"] = list(labels)
+            kwargs["show_labels"] = True
+        if color is not None:
+            kwargs["colors"] = [rgb255(color)] * len(boxes)
+        if not boxes:
+            self._rec.log(entity, rr.Clear(recursive=False), static=static)
+            return
+        self._rec.log(entity, _boxes3d(list(boxes), **kwargs), static=static)
+
+    # ----------------------------------------------------------------- the robot
+    def log_robot(
+        self, pose: RobotPose, spec: RobotSpec | None = None, path: np.ndarray | None = None
+    ) -> None:
+        """The robot's base pose and the path driven so far (``path`` (K, 2): the way it came
+        since the last call, if known; else a straight line from the last pose)."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        spec = spec or RobotSpec()
+        rec = self._rec
+        if not self._robot_logged:
+            r, hb, hc = spec.base_radius, spec.base_height, spec.camera_height
+            rec.log(
+                "world/robot/body",
+                rr.Cylinders3D(
+                    lengths=[hb, hc - hb],
+                    radii=[r, spec.mast_radius],
+                    centers=[[0, 0, hb / 2], [0, 0, (hb + hc) / 2]],
+                    colors=[[46, 46, 51], [217, 217, 224]],
+                    fill_mode=rr.components.FillMode.Solid,
+                ),
+                static=True,
+            )
+            rec.log(
+                "world/robot/nose",
+                rr.Arrows3D(
+                    origins=[[0, 0, hb + 0.01]], vectors=[[r * 1.2, 0, 0]], colors=[[230, 128, 25]]
+                ),
+                static=True,
+            )
+            self._robot_logged = True
+        rec.log(
+            "world/robot",
+            rr.Transform3D(
+                translation=[pose.x, pose.y, 0.0],
+                rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(pose.yaw)),
+            ),
+        )
+        for x, y in np.asarray(path if path is not None else [], float).reshape(-1, 2):
+            if (
+                not self._path_xy
+                or math.hypot(x - self._path_xy[-1][0], y - self._path_xy[-1][1]) > 1e-3
+            ):
+                self._path_xy.append([float(x), float(y)])
+        xy = [float(pose.x), float(pose.y)]
+        if (
+            not self._path_xy
+            or np.hypot(xy[0] - self._path_xy[-1][0], xy[1] - self._path_xy[-1][1]) > 1e-3
+        ):
+            self._path_xy.append(xy)
+        if len(self._path_xy) >= 2:
+            rec.log(
+                "world/robot_path",
+                rr.LineStrips3D(
+                    [[[x, y, 0.02] for x, y in self._path_xy]],
+                    colors=[[230, 128, 25]],
+                    radii=[0.015],
+                ),
+            )
+
+    def log_path(self, path: np.ndarray, entity: str = "world/plan") -> None:
+        """A planned path (K, 2) as a line strip on the floor."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        pts = [[float(x), float(y), 0.03] for x, y in np.asarray(path, float).reshape(-1, 2)]
+        self._rec.log(entity, rr.LineStrips3D([pts], colors=[[40, 120, 230]], radii=[0.01]))
+
+    # ----------------------------------------------------------------- the camera
+    def log_camera(self, frame: Any, detections: Sequence[Any] = ()) -> None:
+        """The camera's pose and pinhole, the frame's images and the detections as 2-D boxes."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        rec = self._rec
+        cam = frame.camera
+        width, height = int(cam.width), int(cam.height)
+        rot = np.asarray(cam.xmat, float).reshape(3, 3) @ RDF_FROM_MUJOCO
+        rec.log(
+            "world/camera", rr.Transform3D(translation=np.asarray(cam.position, float), mat3x3=rot)
+        )
+        rec.log(
+            "world/camera/image",
+            rr.Pinhole(
+                image_from_camera=intrinsics(width, height, float(cam.fovy_deg)),
+                resolution=[width, height],
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=0.4,
+            ),
+        )
+        if getattr(frame, "rgb", None) is not None:
+            rec.log("world/camera/image/rgb", rr.Image(frame.rgb))
+        if getattr(frame, "instance_ids", None) is not None:
+            seg = (
+                (np.asarray(frame.instance_ids).astype(np.int64) + 1)
+                .clip(0, 65535)
+                .astype(np.uint16)
+            )
+            rec.log("world/camera/image/segmentation", rr.SegmentationImage(seg, opacity=0.35))
+        if getattr(frame, "depth", None) is not None:
+            rec.log(
+                "world/camera/image/depth",
+                rr.DepthImage(np.asarray(frame.depth, np.float32), meter=1.0),
+            )
+        if detections:
+            mins = [[d.bbox[0], d.bbox[1]] for d in detections]
+            sizes = [[d.bbox[2] - d.bbox[0] + 1, d.bbox[3] - d.bbox[1] + 1] for d in detections]
+            labels = [
+                f"{d.type} #{d.instance_id} ({d.pixels} px, {d.distance:.1f} m)" for d in detections
+            ]
+            rec.log(
+                "world/camera/image/detections",
+                rr.Boxes2D(
+                    mins=mins,
+                    sizes=sizes,
+                    labels=labels,
+                    class_ids=[d.instance_id + 1 for d in detections],
+                ),
+            )
+        else:
+            rec.log("world/camera/image/detections", rr.Clear(recursive=False))
+
+    # ----------------------------------------------------------------- text and numbers
+    def log_text(self, msg: str, level: str = "INFO") -> None:
+        """A line in the recording's text log."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        self._rec.log("log", rr.TextLog(msg, level=level))
+
+    def log_scalar(self, path: str, value: float) -> None:
+        """One value of a time series at entity ``path``."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        self._rec.log(path, rr.Scalars(float(value)))
+
+    # ----------------------------------------------------------------- lifetime
+    def flush(self) -> None:
+        """Write everything logged so far to the file."""
+        if self._rec is not None:
+            self._rec.flush()
+
+    def close(self) -> None:
+        """Flush and close the file; later calls are no-ops."""
+        if self._rec is None:
+            return
+        self._rec.flush()
+        self._rec.disconnect()
+        self._rec = None
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,410 @@
+"""Gaze planning: where to put the base and how to point the head to see a region of space.
+
+Used by the acquisition loop (look into every relation volume of an object being examined) and by
+search (look at a candidate region). A *gaze* is a robot pose (base on a free, reachable grid
+cell; pan and tilt within their limits) plus the point the camera is aimed at.
+
+Camera model. As in envs/robot.py, the camera sits on both the pan and the tilt axis, at height
+``spec.camera_height`` above the base centre, so its position is (x, y, camera_height) whatever
+the head does, and it looks along heading yaw + pan, tilted by tilt (positive up).
+Conventions are MuJoCo's: ``xmat``'s columns are the camera's right (x), up (y) and backward (z)
+axes in the world, the camera looks along -z; pixel rows grow downwards.
+
+Planner (``plan_gazes``):
+1. sample points on a lattice filling the box (at most 0.25 m apart, corners included, coarser
+   for a big box so there are at most ``max_points``);
+2. candidate base positions: every reachable free cell on a ``candidate_step`` lattice whose
+   ground distance to the box's footprint is at most ``max_distance``, plus the current position;
+3. aim points: the box's centre and, for a box whose footprint is larger than ``split`` (NEAR-DESK
+   is about 3 x 3.4 m), the centres of its pieces after cutting the footprint into parts of at
+   most ``split`` metres;
+4. for every (position, aim point) the sample points inside the frustum and within
+   ``max_distance`` of the camera, weighted by a line-of-sight preference: when the volume has an
+   open side (``facing``, e.g. a desk's front for UNDER-DESK or IN-FRONT-OF-DESK, see
+   ``facing_for``), a viewpoint counts ((1 + cos a) / 2)^2 (at least 0.05: 1 in front, 1/4 from the side) where a is the angle
+   between that side and the direction from the box to the viewpoint;
+5. greedy weighted set cover: repeatedly take the gaze with the best (new weighted coverage) /
+   (simulated seconds to get there from the previous gaze: TimeModel drive over the grid distance,
+   the turn, the head slew and the image), until ``coverage_goal`` of the points are in some
+   frustum, no gaze adds ``min_gain``, or ``max_gazes`` are chosen.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agent.navigation import OccupancyGrid, nearest_free, plan_path
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from knowledge.catalog import RelationSpec
+from knowledge.geometry import Box, ObjectInstance
+
+NEAR_CLIP = 0.05  # m: points closer to the camera than this are not seen
+
+
+# --------------------------------------------------------------------------- camera geometry
+def camera_axes(heading: float, tilt: float) -> np.ndarray:
+    """The camera's ``xmat`` (3, 3) for a world heading (yaw + pan) and a tilt (positive up):
+    columns right, up, backward (MuJoCo convention; the camera looks along -column 2)."""
+    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
+    right = [sh, -ch, 0.0]
+    up = [-st * ch, -st * sh, ct]
+    back = [-ct * ch, -ct * sh, -st]
+    return np.array([right, up, back]).T
+
+
+@dataclass(frozen=True)
+class PinholeView:
+    """A pinhole camera in the world: position (3,), ``xmat`` (3, 3) (MuJoCo convention), vertical
+    field of view and image size. Same fields as envs.world.CameraInfo, without a renderer."""
+
+    position: np.ndarray
+    xmat: np.ndarray
+    fovy_deg: float
+    width: int
+    height: int
+
+    @property
+    def focal(self) -> float:
+        """Focal length in pixels (square pixels)."""
+        return (self.height / 2) / math.tan(math.radians(self.fovy_deg) / 2)
+
+    def intrinsics(self) -> np.ndarray:
+        """The 3x3 matrix K (pixel coordinates: x right, y down, origin at the top-left corner)."""
+        f = self.focal
+        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N, 2) (x right, y down) and depth along the optical axis (N,) of world points."""
+        return project(self, points)
+
+
+def camera_at(
+    pose: RobotPose, spec: RobotSpec | None = None, width: int = 320, height: int = 240
+) -> PinholeView:
+    """The (approximate, see the module docstring) head camera of the robot at ``pose``."""
+    spec = spec or RobotSpec()
+    return PinholeView(
+        np.array([pose.x, pose.y, spec.camera_height]),
+        camera_axes(pose.yaw + pose.pan, pose.tilt),
+        spec.fovy_deg,
+        width,
+        height,
+    )
+
+
+def project(camera: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (N, 2) and optical-axis depth (N,) of world ``points`` (N, 3) for any camera with
+    ``position``, ``xmat``, ``fovy_deg``, ``width`` and ``height`` (MuJoCo convention)."""
+    pts = np.atleast_2d(np.asarray(points, float))
+    local = (pts - np.asarray(camera.position, float)) @ np.asarray(camera.xmat, float)
+    depth = -local[:, 2]
+    f = (camera.height / 2) / math.tan(math.radians(camera.fovy_deg) / 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.width / 2 + f * local[:, 0] / depth
+        v = camera.height / 2 - f * local[:, 1] / depth
+    return np.column_stack([u, v]), depth
+
+
+def box_samples(box: Box, spacing: float = 0.25, max_points: int = 400) -> np.ndarray:
+    """World points (N, 3) on a lattice filling ``box``, corners included, at most ``spacing``
+    apart (coarser if that would exceed ``max_points``)."""
+    half = np.asarray(box.half, float)
+    while True:
+        n = np.maximum(2, np.ceil(2 * half / spacing).astype(int) + 1)
+        if np.prod(n) <= max_points:
+            break
+        spacing *= 1.25
+    axes = [np.linspace(-h, h, k) for h, k in zip(half, n, strict=True)]
+    lx, ly, lz = (a.ravel() for a in np.meshgrid(*axes, indexing="ij"))
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    return np.column_stack([c * lx - s * ly, s * lx + c * ly, lz]) + np.asarray(box.center, float)
+
+
+def points_in_view(
+    camera: Any, points: np.ndarray, max_distance: float | None = None
+) -> np.ndarray:
+    """Which world ``points`` (N, 3) fall inside the camera's image (and within ``max_distance``)."""
+    pix, depth = project(camera, points)
+    ok = (depth > NEAR_CLIP) & (pix[:, 0] >= 0) & (pix[:, 0] <= camera.width)
+    ok &= (pix[:, 1] >= 0) & (pix[:, 1] <= camera.height)
+    if max_distance is not None:
+        d = np.linalg.norm(np.atleast_2d(points) - np.asarray(camera.position, float), axis=1)
+        ok &= d <= max_distance
+    return ok
+
+
+def in_view(camera: Any, box: Box, max_distance: float | None = None) -> float:
+    """The fraction of ``box``'s sample points (lattice incl. corners) inside the camera's frustum."""
+    return float(points_in_view(camera, box_samples(box), max_distance).mean())
+
+
+def aim(
+    pose_xy: np.ndarray,
+    base_yaw: float,
+    camera_height: float,
+    target_xyz: np.ndarray,
+    spec: RobotSpec | None = None,
+) -> tuple[float, float]:
+    """Pan and tilt (within the joint limits) that point the camera of a base at ``pose_xy`` with
+    heading ``base_yaw`` at ``target_xyz``."""
+    spec = spec or RobotSpec()
+    d = np.asarray(target_xyz, float) - np.array([pose_xy[0], pose_xy[1], camera_height])
+    heading = math.atan2(d[1], d[0]) if math.hypot(d[0], d[1]) > 1e-9 else base_yaw
+    tilt = math.atan2(d[2], math.hypot(d[0], d[1]))
+    return spec.clip_head(wrap_angle(heading - base_yaw), tilt)
+
+
+def facing_for(rel: RelationSpec, ref: ObjectInstance) -> np.ndarray | None:
+    """The world direction (2,) from which volume v_rel(ref) is best seen, or None if any side will
+    do: the side the volume sticks out of (IN-FRONT-OF: the front, LEFT-OF: the left...), and the
+    reference's front for a volume tucked under it (UNDER-DESK: desks are open at the front)."""
+    lo, hi = rel.local_bounds(np.asarray(ref.size, float))
+    center = (lo + hi) / 2
+    half = np.asarray(ref.size, float) / 2
+    out = np.abs(center[:2]) - half[:2]
+    c, s = math.cos(ref.yaw), math.sin(ref.yaw)
+    if np.any(out > -1e-6) and np.hypot(*center[:2]) > 1e-6:
+        d = center[:2] * (out > -1e-6)  # the axes along which the volume leaves the footprint
+        local = d / np.linalg.norm(d)
+    elif hi[2] < half[2] - 1e-6:  # inside the footprint and below the top: under it
+        local = np.array([1.0, 0.0])
+    else:
+        return None
+    return np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+
+
+# --------------------------------------------------------------------------- planning
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
+@dataclass(frozen=True)
+class Gaze:
+    """A robot pose from which to take one image, the point it aims at, and the planner's
+    estimates of the coverage it adds and the seconds it costs from the previous gaze."""
+
+    pose: RobotPose
+    target: np.ndarray
+    coverage: float = 0.0
+    cost: float = 0.0
+    path: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+
+def _aim_points(box: Box, split: float) -> np.ndarray:
+    """The box's centre and, when its footprint is larger than ``split``, the centres of its pieces
+    after cutting it along x and y into parts of at most ``split`` metres (at the centre's height)."""
+    half = np.asarray(box.half, float)
+    n = np.maximum(1, np.ceil(2 * half[:2] / split - 1e-9).astype(int))
+    pts = [np.asarray(box.center, float)]
+    if np.prod(n) > 1:
+        axes = [(np.arange(k) + 0.5) / k * 2 * h - h for h, k in zip(half[:2], n, strict=True)]
+        lx, ly = (a.ravel() for a in np.meshgrid(*axes, indexing="ij"))
+        c, s = math.cos(box.yaw), math.sin(box.yaw)
+        pts.extend(
+            np.column_stack([c * lx - s * ly, s * lx + c * ly, np.zeros_like(lx)]) + box.center
+        )
+    return np.array(pts)
+
+
+def _footprint_distance(box: Box, xy: np.ndarray) -> np.ndarray:
+    """Ground distance from points ``xy`` (N, 2) to the box's footprint rectangle (0 inside)."""
+    d = xy - np.asarray(box.center[:2], float)
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
+    ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
+    return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
+
+
+def _visibility(
+    cams: np.ndarray,
+    aims: np.ndarray,
+    points: np.ndarray,
+    spec: RobotSpec,
+    width: int,
+    height: int,
+    max_distance: float,
+) -> np.ndarray:
+    """(C, T, N) bool: point n inside the frustum of the camera at cams[c] aimed at aims[t]."""
+    d = aims[None, :, :] - cams[:, None, :]  # (C, T, 3)
+    heading = np.arctan2(d[..., 1], d[..., 0])
+    tilt = np.clip(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])), *spec.tilt_range)
+    ch, sh, ct, st = np.cos(heading), np.sin(heading), np.cos(tilt), np.sin(tilt)
+    fwd = np.stack([ct * ch, ct * sh, st], -1)
+    right = np.stack([sh, -ch, np.zeros_like(ch)], -1)
+    up = np.stack([-st * ch, -st * sh, ct], -1)
+    rel = points[None, :, :] - cams[:, None, :]  # (C, N, 3)
+    z = np.einsum("ctk,cnk->ctn", fwd, rel)
+    x = np.einsum("ctk,cnk->ctn", right, rel)
+    y = np.einsum("ctk,cnk->ctn", up, rel)
+    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
+    tan_x = tan_y * width / height
+    dist = np.linalg.norm(rel, axis=-1)[:, None, :]
+    return (
+        (z > NEAR_CLIP)
+        & (np.abs(x) <= z * tan_x)
+        & (np.abs(y) <= z * tan_y)
+        & (dist <= max_distance)
+    )
+
+
+def plan_gazes(
+    grid: OccupancyGrid,
+    box: Box,
+    start_pose: RobotPose,
+    spec: RobotSpec | None = None,
+    time_model: TimeModel | None = None,
+    *,
+    max_distance: float = 2.5,
+    facing: np.ndarray | None = None,
+    width: int = 320,
+    height: int = 240,
+    coverage_goal: float = 0.95,
+    min_gain: float = 0.03,
+    max_gazes: int = 6,
+    split: float = 1.2,
+    candidate_step: float = 0.3,
+    max_points: int = 200,
+    cost_weight: float = 1.0,
+) -> list[Gaze]:
+    """A short sequence of gazes whose frusta together cover ``box`` (see the module docstring).
+
+    The first gaze starts from ``start_pose``, each later one from the previous gaze. Gazes are
+    ranked by gain / cost**``cost_weight`` (1: coverage per second; 0: coverage only, for the best
+    picture whatever the walk). Sample points outside the grid (beyond the walls) are dropped. If
+    ``facing`` leaves no gaze worth taking (the open side is against a wall), the plan is made
+    without it. Returns [] if no reachable viewpoint sees any of the box.
+    """
+    spec = spec or RobotSpec()
+    tm = time_model or TimeModel()
+    points = box_samples(box, max_points=max_points)
+    # Points beyond the walls can never be seen: plan for the part of the box inside the room.
+    h, w = grid.shape
+    lo = np.array([grid.x0, grid.y0])
+    inside = np.all(
+        (points[:, :2] >= lo) & (points[:, :2] <= lo + grid.resolution * np.array([w, h])), axis=1
+    )
+    points = points[inside]
+    if len(points) == 0:
+        return []
+    aims = _aim_points(box, split)
+    # Candidate base positions: reachable free cells on a coarse lattice near the box.
+    start_xy = nearest_free(grid, start_pose.xy)
+    if start_xy is None:
+        return []
+    reach = np.isfinite(grid.distances_from(start_xy))
+    k = max(1, int(round(candidate_step / grid.resolution)))
+    lattice = np.zeros_like(reach)
+    lattice[k // 2 :: k, k // 2 :: k] = True
+    rows, cols = np.nonzero(reach & lattice)
+    xs, ys = grid.cell_centers()
+    cand = np.column_stack([xs[cols], ys[rows]])
+    cand = cand[_footprint_distance(box, cand) <= max_distance]
+    cand = np.vstack([start_xy[None, :], cand])
+    cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
+    seen = _visibility(cams, aims, points, spec, width, height, max_distance)  # (C, T, N)
+    if not seen.any():
+        return []
+    weights = [np.ones(len(cand))]
+    if facing is not None:
+        f = np.asarray(facing, float)[:2]
+        f = f / max(np.linalg.norm(f), 1e-12)
+        off = cand - np.asarray(box.center[:2], float)
+        cos = (off @ f) / np.maximum(np.linalg.norm(off, axis=1), 1e-9)
+        weights.insert(0, np.maximum(0.05, (1.0 + cos) / 2) ** 2)
+    # Heading of the aim direction for every (candidate, aim), for the head/turn cost estimate.
+    d = aims[None, :, :] - cams[:, None, :]
+    aim_heading = np.arctan2(d[..., 1], d[..., 0])
+    aim_tilt = np.clip(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])), *spec.tilt_range)
+
+    gazes: list[Gaze] = []
+    for weight in weights:  # with the facing preference; if that finds nothing, without it
+        seen_w = seen * weight.astype(np.float32)[:, None, None]  # (C, T, N) float32
+        n = len(points)
+        cov = np.zeros(n, np.float32)  # weighted coverage so far
+        hit = np.zeros(n, bool)  # in some chosen frustum
+        cur_xy, cur_yaw = np.asarray(start_pose.xy, float), float(start_pose.yaw)
+        cur_pan, cur_tilt = float(start_pose.pan), float(start_pose.tilt)
+        while len(gazes) < max_gazes and hit.mean() < coverage_goal:
+            gain = np.maximum(seen_w - cov, 0.0).sum(-1) / n  # (C, T)
+            if gain.max() < min_gain:
+                break
+            dist = grid.distances_from(cur_xy)
+            r_c = np.floor((cand[:, 1] - grid.y0) / grid.resolution).astype(int)
+            c_c = np.floor((cand[:, 0] - grid.x0) / grid.resolution).astype(int)
+            drive = dist[r_c, c_c]  # metres along the grid
+            moved = np.hypot(*(cand - cur_xy).T) > 1e-3
+            arrive = np.where(
+                moved, np.arctan2(cand[:, 1] - cur_xy[1], cand[:, 0] - cur_xy[0]), cur_yaw
+            )
+            turn = np.where(moved, np.abs(_wrap(arrive - cur_yaw)) / tm.turn_rate, 0.0)
+            t_drive = drive / tm.drive_speed + turn  # (C,)
+            pan = _wrap(aim_heading - arrive[:, None])
+            pan0 = np.where(moved[:, None], 0.0, cur_pan)  # the head is kept while driving
+            t_head = np.maximum(
+                np.abs(pan - pan0) / tm.pan_rate, np.abs(aim_tilt - cur_tilt) / tm.tilt_rate
+            )
+            cost = t_drive[:, None] + t_head + tm.image_cost
+            score = np.where(gain >= min_gain, gain / cost**cost_weight, -np.inf)
+            ci, ti = np.unravel_index(int(np.argmax(score)), score.shape)
+            xy = cand[ci]
+            path = plan_path(grid, cur_xy, xy)
+            yaw = cur_yaw
+            if path is not None and len(path) >= 2:
+                seg = path[-1] - path[-2]
+                if np.hypot(*seg) > 1e-9:
+                    yaw = math.atan2(seg[1], seg[0])
+            pan_i, tilt_i = aim(xy, yaw, spec.camera_height, aims[ti], spec)
+            if (
+                abs(wrap_angle(yaw + pan_i - aim_heading[ci, ti])) > 1e-3
+            ):  # pan limit: turn the base
+                yaw, pan_i = float(aim_heading[ci, ti]), 0.0
+            gazes.append(
+                Gaze(
+                    RobotPose(float(xy[0]), float(xy[1]), float(yaw), float(pan_i), float(tilt_i)),
+                    aims[ti].copy(),
+                    coverage=float(gain[ci, ti]),
+                    cost=float(cost[ci, ti]),
+                    path=path,
+                )
+            )
+            cov = np.maximum(cov, seen_w[ci, ti])
+            hit |= seen[ci, ti]
+            cur_xy, cur_yaw, cur_pan, cur_tilt = xy, yaw, pan_i, tilt_i
+        if gazes:
+            break
+    return gazes
+
+
+def execute_gaze(
+    world: Any, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
+) -> Any:
+    """Drive to the gaze's base position (a planned path), turn, point the head at its target and
+    capture a frame; returns the world's ``Frame``. If the position cannot be reached from where
+    the robot stands, the robot looks at the target from where it is."""
+    spec = world.spec
+    pose = world.pose()
+    path = plan_path(grid, pose.xy, gaze.pose.xy)
+    yaw = pose.yaw
+    if path is not None and len(path) >= 2:
+        seg = path[-1] - path[-2]
+        if np.hypot(*seg) > 1e-9:
+            yaw = math.atan2(seg[1], seg[0])
+        xy = path[-1]
+    else:
+        xy = pose.xy
+    pan, tilt = aim(xy, yaw, spec.camera_height, gaze.target, spec)
+    d = np.asarray(gaze.target, float)[:2] - xy
+    heading = math.atan2(d[1], d[0])
+    if abs(wrap_angle(yaw + pan - heading)) > 1e-3:  # beyond the pan limit: turn the base instead
+        yaw = heading
+        pan, tilt = aim(xy, yaw, spec.camera_height, gaze.target, spec)
+    if path is not None and len(path) >= 2:
+        world.drive(path, yaw)
+    elif abs(wrap_angle(yaw - pose.yaw)) > 1e-6:
+        world.drive(np.asarray(pose.xy, float)[None, :], yaw)
+    world.move_head(pan, tilt)
+    return world.capture(rgb=rgb, depth=depth)

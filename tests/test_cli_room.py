@@ -1,0 +1,103 @@
+"""``ctxsearch room``: builds a room and writes the overview, views and recording (render-marked)."""
+
+from __future__ import annotations
+
+import argparse
+
+import cv2
+import numpy as np
+import pytest
+
+from scripts import cli, cmd_room
+
+
+def test_room_is_registered():
+    assert "scripts.cmd_room" in cli.COMMAND_MODULES
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="ctxsearch")
+    cmd_room.register(parser.add_subparsers(dest="command"))
+    return parser.parse_args(argv)
+
+
+def test_arguments_and_defaults(tmp_path):
+    args = _parse(["room", "--out", str(tmp_path)])
+    assert (args.style, args.seed, args.views, args.width, args.height, args.record) == (
+        "office",
+        0,
+        4,
+        320,
+        240,
+        None,
+    )
+
+
+@pytest.mark.render
+def test_room_writes_overview_views_and_recording(tmp_path, capsys):
+    import rerun as rr
+
+    out = tmp_path / "room"
+    rrd = tmp_path / "room.rrd"
+    args = _parse(
+        [
+            "room",
+            "--style",
+            "office",
+            "--seed",
+            "1",
+            "--out",
+            str(out),
+            "--views",
+            "2",
+            "--record",
+            str(rrd),
+        ]
+    )
+    assert args.func(args) == 0
+    printed = capsys.readouterr().out
+    overview = cv2.imread(str(out / "overview.png"))
+    assert overview is not None and overview.shape == (480, 640, 3)
+    assert overview.std() > 10  # not a blank image
+    views = sorted(out.glob("view_*.png"))
+    assert len(views) == 2
+    for v in views:
+        img = cv2.imread(str(v))
+        assert img is not None and img.shape[0] >= 240 and img.std() > 10
+        assert f"wrote {v}" in printed
+    # Every view shows furniture: the printed detections name at least one furniture type.
+    for line in (ln for ln in printed.splitlines() if ln.strip().startswith("view ")):
+        assert any(
+            t in line.split("detected:")[1] for t in ("Desk", "Shelf", "Cabinet", "Table", "Chair")
+        )
+    entities = {c.entity_path for c in rr.chunk.RrdReader(rrd).stream()}
+    assert {
+        "/world/room/walls",
+        "/world/camera/image/rgb",
+        "/world/camera/image/detections",
+    } <= entities
+    assert any(e.startswith("/world/objects/Desk_") for e in entities)
+    assert any(e.startswith("/world/volumes/Desk_") for e in entities)
+
+
+@pytest.mark.render
+def test_room_without_record_or_views(tmp_path):
+    args = _parse(["room", "--seed", "2", "--out", str(tmp_path), "--views", "0"])
+    assert args.func(args) == 0
+    assert (tmp_path / "overview.png").exists()
+    assert not list(tmp_path.glob("view_*.png"))
+    assert not list(tmp_path.glob("*.rrd"))
+
+
+def test_draw_detections_enlarges_and_labels(catalog):
+    from agent.perception import Detection
+    from knowledge.geometry import ObjectInstance
+
+    desk = ObjectInstance("Desk", 1, (0, 0, 0.37), 0.0, (0.7, 1.4, 0.74))
+    dets = [
+        Detection(1, "Desk", desk, 500, 2.0, (10, 20, 100, 120)),
+        Detection(1, "Desk", desk, 400, 2.5, (12, 22, 90, 110)),
+    ]
+    img = cmd_room.draw_detections(np.zeros((240, 320, 3), np.uint8), dets, catalog)
+    assert img.shape == (480, 640, 3)
+    assert img.any()
