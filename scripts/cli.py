@@ -18,6 +18,7 @@ import sys
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
     "scripts.cmd_kb",
+    "scripts.cmd_room",
     "scripts.cmd_truth",
 ]
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
