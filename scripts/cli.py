@@ -20,11 +20,13 @@ COMMAND_MODULES = [
     "scripts.cmd_kb",
     "scripts.cmd_room",
     "scripts.cmd_truth",
+    "scripts.cmd_learn",
 ]
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
 BENCH_MODULES = [
     "scripts.cmd_kb",
     "scripts.cmd_sim",
+    "scripts.cmd_learn",
 ]
 
 
