@@ -232,6 +232,19 @@ class OccupancyGrid:
         t = np.linspace(0.0, 1.0, max(n, 2))[:, None]
         return bool(self.free_mask(a + t * (b - a)).all())
 
+    def visible_from(self, a: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """For each of ``targets`` (J, 2): True if the segment from ``a`` to it lies in free cells
+        (each sampled at least every quarter cell, as ``line_of_sight``). (J,) bool."""
+        targets = np.asarray(targets, float).reshape(-1, 2)
+        if len(targets) == 0:
+            return np.zeros(0, bool)
+        a = np.asarray(a, float)
+        longest = float(np.max(np.hypot(*(targets - a).T)))
+        n = max(2, int(math.ceil(longest / (0.25 * self.resolution))) + 1)
+        t = np.linspace(0.0, 1.0, n)
+        samples = a + t[None, :, None] * (targets - a)[:, None, :]  # (J, n, 2)
+        return self.free_mask(samples.reshape(-1, 2)).reshape(len(targets), n).all(axis=1)
+
 
 def obstacle_boxes(layout: RoomLayout, spec: RobotSpec | None = None) -> list[Box]:
     """The bounding boxes that block the robot: every object whose bottom is below the head."""
@@ -269,9 +282,16 @@ def _shortcut(grid: OccupancyGrid, pts: np.ndarray) -> np.ndarray:
     out = [pts[0]]
     i = 0
     while i < len(pts) - 1:
-        j = len(pts) - 1
-        while j > i + 1 and not grid.line_of_sight(pts[i], pts[j]):
-            j -= 1
+        # The farthest corner visible from pts[i], checked in batches of 8 from the far end.
+        j = i + 1
+        hi = len(pts)
+        while hi > i + 2:
+            lo = max(i + 2, hi - 8)
+            later = np.flatnonzero(grid.visible_from(pts[i], pts[lo:hi]))
+            if len(later):
+                j = lo + int(later[-1])
+                break
+            hi = lo
         out.append(pts[j])
         i = j
     return np.array(out)
