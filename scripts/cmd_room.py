@@ -182,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
     from agent.perception import detect
     from agent.recording import Recorder
     from agent.viewplan import execute_gaze, plan_gazes
+    from envs.arena import MAX_IMAGE_SIZE
     from envs.robot_spec import RobotPose
     from envs.rooms import generate_room
     from envs.styles import load_style
@@ -191,7 +192,12 @@ def run(args: argparse.Namespace) -> int:
     from knowledge.geometry import relation_volume
 
     if args.views < 0:
-        raise CtxsearchError("--views must be at least 0")
+        raise CtxsearchError(f"--views must be at least 0, got {args.views}")
+    if not (1 <= args.width <= MAX_IMAGE_SIZE[0] and 1 <= args.height <= MAX_IMAGE_SIZE[1]):
+        raise CtxsearchError(
+            f"--width/--height must be within 1x1..{MAX_IMAGE_SIZE[0]}x{MAX_IMAGE_SIZE[1]}, "
+            f"got {args.width}x{args.height}"
+        )
     catalog = load_catalog(args.catalog)
     style = load_style(args.style, catalog)
     layout = generate_room(style, args.seed, catalog)

@@ -33,6 +33,15 @@ def test_arguments_and_defaults(tmp_path):
     )
 
 
+def test_bad_arguments_are_one_line_errors(tmp_path):
+    from knowledge.errors import CtxsearchError
+
+    for argv in (["--views", "-1"], ["--width", "100000"]):
+        args = _parse(["room", "--out", str(tmp_path), *argv])
+        with pytest.raises(CtxsearchError):
+            args.func(args)
+
+
 @pytest.mark.render
 def test_room_writes_overview_views_and_recording(tmp_path, capsys):
     import rerun as rr
