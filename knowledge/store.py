@@ -510,7 +510,7 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                         )
                         appended += len(batch)
                     rows = src.execute(
-                        "SELECT examination_id, relation, type, related_id FROM observations"
+                        "SELECT examination_id, relation, type, related_id FROM observations ORDER BY rowid"
                     )
                     while batch := rows.fetchmany(50_000):
                         cur.executemany(

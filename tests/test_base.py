@@ -257,7 +257,7 @@ def test_random_operations_match_a_dict_model():
         ]
         kb.record_examination(ref, pairs)
         model.record(ref, pairs)
-        if step % 97 == 0:
+        if step in (0, 299, 599):
             for t in cat.type_names:
                 assert kb.type_impact(t) == pytest.approx(brute_force_score(kb, t), abs=1e-12)
     for t in cat.type_names:

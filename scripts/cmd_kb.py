@@ -1,0 +1,373 @@
+"""``ctxsearch kb show|stats|merge`` (the evidence store) and ``ctxsearch bench kb``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sqlite3
+import sys
+import textwrap
+from pathlib import Path
+
+SHOW_EXAMPLES = """\
+examples:
+  ctxsearch kb show demo/kb.sqlite                  intervals with y > 0, best lower bound first
+  ctxsearch kb show demo/kb.sqlite --type Desk      only the relations of Desk (ON-TOP-OF-DESK, ...)
+  ctxsearch kb show demo/kb.sqlite --related Cup    where Cups were found, relative to what
+  ctxsearch kb show demo/kb.sqlite --all --alpha 0.05
+  ctxsearch kb show demo/kb.sqlite --json > intervals.json
+"""
+
+MERGE_EXAMPLES = """\
+examples:
+  ctxsearch kb merge all.sqlite robot1.sqlite robot2.sqlite
+  ctxsearch kb merge all.sqlite more.sqlite         appends to an existing all.sqlite
+"""
+
+BENCH_EXAMPLES = """\
+examples:
+  ctxsearch bench kb                                all sizes, writes results/bench_kb.*
+  ctxsearch bench kb --sizes 100,1000 --out /tmp/bench
+"""
+
+
+def _emit(text: str) -> None:
+    """Print ``text``; a closed pipe (``| head``) ends the output quietly."""
+    try:
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def _wrap(text: str) -> str:
+    """A description paragraph wrapped for RawDescriptionHelpFormatter (which keeps newlines)."""
+    return textwrap.fill(" ".join(text.split()), width=88)
+
+
+def _alpha(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {v}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    try:
+        sizes = tuple(int(s.replace("_", "")) for s in text.split(",") if s.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated type counts, e.g. 100,1000, got {text!r}"
+        ) from None
+    if not sizes or min(sizes) < 2:
+        raise argparse.ArgumentTypeError(f"expected type counts >= 2, got {text!r}")
+    return sizes
+
+
+def _add_catalog_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--catalog",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="object-type catalog the store was built with (default: assets/types.toml)",
+    )
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``kb show``, ``kb stats`` and ``kb merge``."""
+    kb = sub.add_parser(
+        "kb",
+        help="inspect or merge knowledge stores (the learned confidence intervals)",
+        description="A knowledge store is the SQLite evidence log written by `ctxsearch learn`: "
+        "one row per examination and per observed (relation, type) pair. Counts and intervals "
+        "are rebuilt from it, for any alpha.",
+    )
+    kb_sub = kb.add_subparsers(dest="kb_command", metavar="ACTION", required=True)
+
+    show = kb_sub.add_parser(
+        "show",
+        help="print the intervals INT(rel, B) of a store, sorted by lower bound",
+        description=_wrap(
+            "Print the confidence interval of P(rel(B)) for every relation rel and type "
+            "B: y (examinations of rel's reference type with at least one B in rel) out of n "
+            "(examinations of that type), and the Wilson interval [low, high] (paper eq. 1-2). Rows "
+            "are sorted by lower bound, best first. By default only rows with y > 0 are shown."
+        ),
+        epilog=SHOW_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    show.add_argument("path", type=Path, metavar="PATH", help="knowledge store (SQLite)")
+    show.add_argument(
+        "--type", dest="ref_type", metavar="T", help="only the relations of reference type T"
+    )
+    show.add_argument("--related", metavar="B", help="only rows about related type B")
+    show.add_argument("--all", action="store_true", help="also the rows with y = 0")
+    show.add_argument("--json", action="store_true", help="print a JSON list of rows instead")
+    show.add_argument(
+        "--alpha", type=_alpha, default=None, help="alpha of the intervals (default: the store's)"
+    )
+    _add_catalog_arg(show)
+    show.set_defaults(func=run_show)
+
+    stats = kb_sub.add_parser(
+        "stats",
+        help="summarise a store: examinations, runs, rooms, types examined, mean interval width",
+        description=_wrap(
+            "Summarise a knowledge store: examinations per run, rooms, how many types "
+            "were examined, how many (relation, type) pairs were ever observed, and the mean "
+            "interval width over every pair of the catalog (1.0 before any data)."
+        ),
+        epilog="example:\n  ctxsearch kb stats demo/kb.sqlite",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    stats.add_argument("path", type=Path, metavar="PATH", help="knowledge store (SQLite)")
+    stats.add_argument("--json", action="store_true", help="print JSON instead")
+    stats.add_argument(
+        "--alpha", type=_alpha, default=None, help="alpha of the intervals (default: the store's)"
+    )
+    _add_catalog_arg(stats)
+    stats.set_defaults(func=run_stats)
+
+    merge = kb_sub.add_parser(
+        "merge",
+        help="append the evidence of several stores to one (e.g. from several robots)",
+        description=_wrap(
+            "Append the examination logs of IN... to OUT (created if missing, appended "
+            "to otherwise) in one transaction. All stores must be built on the same catalog; every "
+            "input is checked before anything is written, and the inputs are not modified."
+        ),
+        epilog=MERGE_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    merge.add_argument("out", type=Path, metavar="OUT", help="output store")
+    merge.add_argument("inputs", type=Path, nargs="+", metavar="IN", help="input stores")
+    _add_catalog_arg(merge)
+    merge.set_defaults(func=run_merge)
+
+
+def register_bench(sub: argparse._SubParsersAction) -> None:
+    """Add ``bench kb``."""
+    p = sub.add_parser(
+        "kb",
+        help="knowledge-base speed and memory at up to 30 000 types (HIF choice, record)",
+        description=textwrap.dedent(
+            """\
+            Synthetic catalogs of T types with 6 relations each, 1% of the T*6*T counts y nonzero.
+            Times one Highest-Impact-First choice among 50 candidate types (cold: each candidate's
+            score recomputed after a record_examination), one record_examination, and the peak
+            traced memory; and, where it fits (T <= 1000), the same choice with a dense (T, 6, T)
+            implementation. Medians over --reps repetitions. Writes DIR/bench_kb.json (a list of
+            rows), DIR/bench_kb.md and DIR/bench_kb.png, and prints the table."""
+        ),
+        epilog=BENCH_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results"), metavar="DIR", help="default: results"
+    )
+    p.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=None,
+        help="comma-separated numbers of types (default: 100,1000,10000,30000)",
+    )
+    p.add_argument("--reps", type=_positive_int, default=21, help="repetitions (default: 21)")
+    p.add_argument(
+        "--candidates", type=_positive_int, default=50, help="candidate types (default: 50)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.set_defaults(func=run_bench)
+
+
+# ---- handlers ------------------------------------------------------------------------------
+def _open_kb(args: argparse.Namespace):
+    """(facts about the store, its KnowledgeBase) for args.path; StoreError if unusable."""
+    from knowledge.catalog import load_catalog
+    from knowledge.errors import StoreError
+    from knowledge.store import EvidenceStore
+
+    catalog = load_catalog(args.catalog)
+    try:
+        with EvidenceStore.open(args.path, catalog, create=False) as store:
+            kb = store.knowledge_base(args.alpha)
+            info = {
+                "path": str(args.path),
+                "examinations": store.examinations_count(),
+                "runs": {r: store.examinations_count(r) for r in store.runs()},
+                "rooms": store.rooms(),
+                "alpha": kb.alpha,
+                "stored_alpha": float(store.meta["alpha"]),
+                "catalog_fingerprint": store.fingerprint,
+                "catalog": str(catalog.path),
+                "created": store.meta.get("created", ""),
+            }
+    except sqlite3.DatabaseError as exc:  # damage found past the checks of open()
+        raise StoreError(
+            f"{args.path}: corrupt knowledge store ({' '.join(str(exc).split())})"
+        ) from None
+    return info, kb
+
+
+def _row_dict(r) -> dict:
+    return {
+        "ref": r.ref,
+        "relation": r.relation,
+        "type": r.type,
+        "y": r.y,
+        "n": r.n,
+        "p0": r.p0,
+        "low": r.low,
+        "high": r.high,
+    }
+
+
+def format_rows(rows) -> str:
+    """The interval rows as an aligned text table."""
+    head = ("relation", "type", "y/n", "low", "high")
+    body = [(r.relation, r.type, f"{r.y}/{r.n}", f"{r.low:.3f}", f"{r.high:.3f}") for r in rows]
+    widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
+    right = (False, False, True, True, True)
+
+    def line(cells) -> str:
+        return "  ".join(
+            c.rjust(w) if rj else c.ljust(w) for c, w, rj in zip(cells, widths, right, strict=True)
+        ).rstrip()
+
+    return "\n".join([line(head), *(line(b) for b in body)])
+
+
+def run_show(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch kb show``."""
+    info, kb = _open_kb(args)
+    if args.related is not None:
+        kb.catalog.type(args.related)  # one-line error for an unknown type
+    rows = kb.rows(args.ref_type, include_zero=args.all)
+    if args.related is not None:
+        rows = [r for r in rows if r.type == args.related]
+    if args.json:
+        _emit(json.dumps([_row_dict(r) for r in rows], indent=1))
+        return 0
+    cat = kb.catalog
+    refs = [args.ref_type] if args.ref_type else cat.type_names
+    total = sum(len(cat.type(a).relations) for a in refs) * (1 if args.related else len(cat))
+    shown_nonzero = sum(1 for r in rows if r.y > 0)
+    out = [
+        f"{info['path']}: {info['examinations']} examinations, alpha {kb.alpha:g}, "
+        f"catalog {info['catalog_fingerprint']}"
+    ]
+    if rows:
+        out.append(format_rows(rows))
+    elif info["examinations"] == 0:
+        out.append("no examinations yet (run `ctxsearch learn --kb PATH ...`)")
+    else:
+        out.append("no observed pairs" + (f" for type {args.ref_type}" if args.ref_type else ""))
+    hidden = total - shown_nonzero if not args.all else 0
+    if hidden:
+        out.append(f"({hidden} rows with y = 0 hidden; --all shows them)")
+    _emit("\n".join(out))
+    return 0
+
+
+def run_stats(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch kb stats``."""
+    info, kb = _open_kb(args)
+    cat = kb.catalog
+    n_by_type = {t: kb.n(t) for t in cat.type_names if kb.n(t) > 0}
+    pairs_total = sum(len(t.relations) for t in cat.types) * len(cat)
+    done = sum(1 for r in info["rooms"] if r[3] == "done")
+    stats = {
+        "path": info["path"],
+        "examinations": info["examinations"],
+        "runs": info["runs"],
+        "rooms_done": done,
+        "rooms_started": len(info["rooms"]) - done,
+        "types": len(cat),
+        "types_examined": len(n_by_type),
+        "n_by_type": n_by_type,
+        "pairs": pairs_total,
+        "pairs_observed": kb.nnz(),
+        "mean_width": kb.mean_width(),
+        "alpha": kb.alpha,
+        "catalog_fingerprint": info["catalog_fingerprint"],
+        "created": info["created"],
+    }
+    if args.json:
+        _emit(json.dumps(stats, indent=1))
+        return 0
+    runs = ", ".join(f"{r} ({c})" for r, c in info["runs"].items()) or "none"
+    top = sorted(n_by_type.items(), key=lambda kv: (-kv[1], kv[0]))
+    examined = ", ".join(f"{t} {c}" for t, c in top[:12]) + (" ..." if len(top) > 12 else "")
+    lines = [
+        ("store", f"{info['path']} (created {info['created']})"),
+        ("catalog", f"{info['catalog_fingerprint']} ({info['catalog']})"),
+        ("examinations", f"{info['examinations']} (runs: {runs})"),
+        ("rooms", f"{done} done, {len(info['rooms']) - done} started"),
+        ("types examined", f"{len(n_by_type)} of {len(cat)}" + (f": {examined}" if top else "")),
+        ("pairs with y > 0", f"{kb.nnz()} of {pairs_total}"),
+        ("mean width", f"{kb.mean_width():.4f} (alpha {kb.alpha:g}; 1.0 = nothing known)"),
+    ]
+    w = max(len(k) for k, _ in lines)
+    _emit("\n".join(f"{k.ljust(w)}  {v}" for k, v in lines))
+    return 0
+
+
+def run_merge(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch kb merge``."""
+    from knowledge.catalog import load_catalog
+    from knowledge.store import EvidenceStore, merge_stores
+
+    catalog = load_catalog(args.catalog)
+    added = merge_stores(args.out, args.inputs, catalog)
+    with EvidenceStore.open(args.out, catalog, create=False) as store:
+        total = store.examinations_count()
+    print(
+        f"merged {added} examinations from {len(args.inputs)} store(s) into {args.out} "
+        f"(now {total} examinations)"
+    )
+    return 0
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench kb``."""
+    from knowledge import bench
+
+    sizes = args.sizes or bench.DEFAULT_SIZES
+
+    def progress(row: dict) -> None:
+        print(
+            f"  T={row['types']:>6}: choose {row['choose_ms']:.3f} ms, record {row['record_ms']:.3f} ms, "
+            f"peak {row['peak_mb']:.1f} MB",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    rows = bench.run(
+        tuple(sizes),
+        reps=args.reps,
+        candidates=args.candidates,
+        seed=args.seed,
+        progress=progress,
+    )
+    command = (
+        f"ctxsearch bench kb --out {args.out} --sizes {','.join(str(t) for t in sizes)} "
+        f"--reps {args.reps} --candidates {args.candidates} --seed {args.seed}"
+    )
+    paths = bench.write_results(rows, args.out, command=command)
+    print(bench.markdown_table(rows))
+    print(f"wrote {paths['json']}, {paths['md']} and {paths['png']}")
+    return 0
