@@ -188,11 +188,19 @@ class OraclePerception:
         self._occ = geometry.BoxArray.from_instances([objs[i] for i in self._occ_idx])
         self._tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
         self._tan_x = self._tan_y * width / height
+        self._radius = np.linalg.norm(self._half, axis=1)
+        self._vis_cache: dict[tuple[float, float], np.ndarray] = {}
+        if len(objs):
+            self._sight = self._sight_points()
+            flat = self._sight.reshape(-1, 3)
+            self._sight_inside = _points_in_boxes(flat, self._occ).reshape(
+                self._sight.shape[0], len(objs), len(self._occ)
+            )
 
     def see(self, frame: Any) -> list[ObjectInstance]:
         """The objects a look from the current pose recognizes: within the type's max_range,
-        inside the frustum, and with a clear line of sight (to the centre or the top) past the
-        furniture boxes that do not contain it."""
+        inside the frustum, and with a clear line of sight (to the centre, the top or a top
+        corner) past the furniture boxes that do not contain it."""
         if not self._objs:
             return []
         p = self.body.pose()
@@ -204,37 +212,48 @@ class OraclePerception:
         up = np.array([-st * ch, -st * sh, ct])
         rel = self._centers - cam
         z, x, y = rel @ fwd, rel @ right, rel @ up
-        rad = np.linalg.norm(self._half, axis=1)  # bounding-sphere radius: any part in view
-        ok = np.linalg.norm(rel, axis=1) <= self._range
+        rad = self._radius  # bounding-sphere radius: any part in view
+        ok = self._visible_from(p.x, p.y).copy()
         ok &= z > -rad
         ok &= np.abs(x) <= z * self._tan_x + rad * math.sqrt(1 + self._tan_x**2)
         ok &= np.abs(y) <= z * self._tan_y + rad * math.sqrt(1 + self._tan_y**2)
-        idx = np.flatnonzero(ok)
-        if len(idx) and len(self._occ):
-            clear = np.zeros(len(idx), bool)
-            starts = np.repeat(cam[None], len(idx), 0)
-            for ends in self._sight_points(idx):
-                todo = ~clear
-                if not todo.any():
-                    break
-                hits = _segment_hits_boxes(starts[todo], ends[todo], self._occ)
-                # A box holding the end point (the object itself, the desk a chair is under) does
-                # not hide it.
-                inside = _points_in_boxes(ends[todo], self._occ)
-                clear[todo] = ~(hits & ~inside).any(1)
-            idx = idx[clear]
-        return [self._objs[i] for i in idx]
+        return [self._objs[i] for i in np.flatnonzero(ok)]
 
-    def _sight_points(self, idx: np.ndarray) -> Iterator[np.ndarray]:
-        """Points of the objects a line of sight may reach: centre, top centre, top corners."""
-        c, h = self._centers[idx], self._half[idx]
-        yaw = np.array([self._objs[i].yaw for i in idx])
+    def _visible_from(self, x: float, y: float) -> np.ndarray:
+        """(N,) bool: in range and in clear line of sight from the camera above (x, y); it does
+        not depend on where the head points, so it is computed once per position."""
+        key = (round(x, 6), round(y, 6))
+        vis = self._vis_cache.get(key)
+        if vis is not None:
+            return vis
+        cam = np.array([x, y, self.spec.camera_height])
+        vis = np.linalg.norm(self._centers - cam, axis=1) <= self._range
+        idx = np.flatnonzero(vis)
+        if len(idx) and len(self._occ):
+            pts = self._sight[:, idx, :]  # (S, M, 3)
+            S, M = pts.shape[:2]
+            ends = pts.reshape(-1, 3)
+            hits = _segment_hits_boxes(np.repeat(cam[None], len(ends), 0), ends, self._occ)
+            # A box holding the end point (the object itself, the desk a chair is under) does
+            # not hide it.
+            blocked = (hits & ~self._sight_inside[:, idx, :].reshape(-1, len(self._occ))).any(1)
+            vis[idx] = (~blocked.reshape(S, M)).any(0)
+        if len(self._vis_cache) > 256:
+            self._vis_cache.clear()
+        self._vis_cache[key] = vis
+        return vis
+
+    def _sight_points(self) -> np.ndarray:
+        """(6, N, 3): points of every object a line of sight may reach: its centre, the centre of
+        its top face and (just inside) the four corners of its top face."""
+        c, h = self._centers, self._half
+        yaw = np.array([o.yaw for o in self._objs])
         cy, sy = np.cos(yaw), np.sin(yaw)
-        yield c
-        yield c + np.column_stack([0 * cy, 0 * cy, h[:, 2]])
+        pts = [c, c + np.column_stack([0 * cy, 0 * cy, h[:, 2]])]
         for sx, sy_ in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
             lx, ly = sx * h[:, 0] * 0.9, sy_ * h[:, 1] * 0.9
-            yield c + np.column_stack([cy * lx - sy * ly, sy * lx + cy * ly, h[:, 2]])
+            pts.append(c + np.column_stack([cy * lx - sy * ly, sy * lx + cy * ly, h[:, 2]]))
+        return np.stack(pts)
 
     def related(
         self, obj: ObjectInstance, seen: Sequence[ObjectInstance]
@@ -351,19 +370,32 @@ class GridCosts:
         return self
 
     def _approach_cells(self, obj: ObjectInstance) -> np.ndarray:
+        """Flat indices of the free cells within ``standoff`` of the object's footprint (within
+        2.5 m if there are none); cached per object."""
         cells = self._approach.get(obj.id)
         if cells is None:
             box = obj.box()
-            d = self._cells - box.center[:2]
-            c, s = math.cos(box.yaw), math.sin(box.yaw)
-            lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
-            ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
-            dist = np.hypot(np.maximum(lx, 0), np.maximum(ly, 0))
-            cells = np.flatnonzero(self._free_flat & (dist <= self.standoff))
+            cells = self._cells_near(box, self.standoff)
             if not len(cells):
-                cells = np.flatnonzero(self._free_flat & (dist <= 2.5))
+                cells = self._cells_near(box, 2.5)
             self._approach[obj.id] = cells
         return cells
+
+    def _cells_near(self, box: Box, reach: float) -> np.ndarray:
+        g = self.grid
+        h, w = g.shape
+        r = float(np.hypot(box.half[0], box.half[1])) + reach
+        r0, c0 = g.to_cell(box.center[:2] - r)  # (row, col) of the window's corners
+        r1, c1 = g.to_cell(box.center[:2] + r)
+        r0, c0, r1, c1 = max(0, r0), max(0, c0), min(h - 1, r1), min(w - 1, c1)
+        rows, cols = np.mgrid[r0 : r1 + 1, c0 : c1 + 1]
+        flat = (rows * w + cols).ravel()
+        d = self._cells[flat] - box.center[:2]
+        c, s = math.cos(box.yaw), math.sin(box.yaw)
+        lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
+        ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
+        dist = np.hypot(np.maximum(lx, 0), np.maximum(ly, 0))
+        return flat[self._free_flat[flat] & (dist <= reach)]
 
     def travel_s(self, obj: ObjectInstance) -> float:
         """Seconds to drive to where ``obj`` is examined from."""

@@ -1,0 +1,152 @@
+"""``ctxsearch learn`` and ``ctxsearch bench learning`` as a user runs them."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from scripts.cli import main
+
+
+def test_learn_then_resume_then_kb_show(tmp_path, capsys):
+    kb = tmp_path / "office.sqlite"
+    args = [
+        "learn",
+        "--style",
+        "office",
+        "--rooms",
+        "1",
+        "--kb",
+        str(kb),
+        "--perception",
+        "oracle",
+        "--no-progress",
+    ]
+    assert main([*args, "--max-examinations", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "examinations: 5 now, 5 in the store" in out
+    assert "0 rooms done" in out
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "1 rooms done (1 in this call)" in out
+    assert "examinations per wall second" in out and "mean interval width" in out
+    n_total = int(out.split(" in the store")[0].split()[-1])
+    assert n_total > 5
+    # A finished run again: nothing to do.
+    assert main(args) == 0
+    assert "examinations: 0 now" in capsys.readouterr().out
+    # The store lists in `kb show`.
+    assert main(["kb", "show", str(kb), "--json"]) == 0
+    shown = capsys.readouterr().out
+    assert shown.strip()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--rooms", "0"], "expected a positive integer"),
+        (["--rooms", "x"], "expected a positive integer"),
+        (["--strategy", "best"], "invalid choice: 'best'"),
+        (["--perception", "lidar"], "invalid choice: 'lidar'"),
+        (["--alpha", "1.5"], "expected a number in (0, 1)"),
+        (["--max-examinations", "-3"], "expected a positive integer"),
+    ],
+)
+def test_learn_bad_flags_are_argparse_errors(tmp_path, capsys, argv, message):
+    base = {"--style": "office", "--rooms": "1", "--kb": str(tmp_path / "k.sqlite")}
+    for k, v in zip(argv[::2], argv[1::2], strict=True):
+        base[k] = v
+    flat = [x for kv in base.items() for x in kv]
+    with pytest.raises(SystemExit) as exc:
+        main(["learn", *flat, *[a for a in argv if a not in flat]])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_learn_unknown_style_and_bad_store_are_one_line_errors(tmp_path, capsys):
+    assert (
+        main(
+            [
+                "learn",
+                "--style",
+                "nowhere",
+                "--rooms",
+                "1",
+                "--kb",
+                str(tmp_path / "k.sqlite"),
+                "--perception",
+                "oracle",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ctxsearch: error:") and "nowhere" in err[0]
+    bad = tmp_path / "not_a_store.sqlite"
+    bad.write_text("hello")
+    assert (
+        main(
+            [
+                "learn",
+                "--style",
+                "office",
+                "--rooms",
+                "1",
+                "--kb",
+                str(bad),
+                "--perception",
+                "oracle",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a ctxsearch knowledge store" in err[0]
+    assert bad.read_text() == "hello"
+
+
+def test_bench_learning_writes_its_three_files(tmp_path, capsys):
+    out = tmp_path / "bench"
+    assert (
+        main(
+            [
+                "bench",
+                "learning",
+                "--style",
+                "office",
+                "--rooms",
+                "1",
+                "--seeds",
+                "2",
+                "--strategies",
+                "hif,random",
+                "--out",
+                str(out),
+                "--truth-samples",
+                "8",
+            ]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    assert "| hif |" in printed and "| random |" in printed
+    data = json.loads((out / "learning.json").read_text())
+    assert data["style"] == "office" and data["seeds"] == [0, 1]
+    for name in ("hif", "random"):
+        s = data["strategies"][name]
+        k = len(s["examinations"])
+        assert k > 10
+        for key in ("sim_s", "mean_width", "max_width", "mean_abs_error", "coverage"):
+            assert len(s[key]) == k
+        assert s["mean_width"][0] > s["mean_width"][-1]
+        assert all(0.0 <= c <= 1.0 for c in s["coverage"])
+    assert "Mean interval width" in (out / "learning.md").read_text()
+    assert (out / "learning.png").stat().st_size > 10_000
+
+
+def test_bench_learning_bad_strategy_list(tmp_path, capsys):
+    assert main(["bench", "learning", "--strategies", "hif,nope", "--out", str(tmp_path)]) == 2
+    assert "unknown strategy 'nope'" in capsys.readouterr().err
