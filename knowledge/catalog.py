@@ -61,7 +61,7 @@ _NAME_RE = re.compile(r"^[A-Z][A-Za-z0-9]*$")
 _REL_RE = re.compile(r"^[A-Z][A-Z0-9]*(-[A-Z0-9]+)*$")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RelationSpec:
     """One relation of a reference type: its name, the reference type, and its volume spec."""
 
@@ -79,7 +79,7 @@ class RelationSpec:
                 np.asarray(self.hi) * size + np.asarray(self.margin_hi))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ObjectType:
     """An object type: name, kind, builder shape, size range, colour, detectability, relations."""
 
