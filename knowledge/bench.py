@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import gc
 import json
+import os
 import platform
 import resource
 import statistics
@@ -269,10 +270,21 @@ def markdown_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
 def _environment() -> str:
     return (
-        f"Python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
-        f"{platform.system()} {platform.release()}, processor: {platform.processor() or 'unknown'}"
+        f"Python {platform.python_version()}, numpy {np.__version__}, {platform.system()} "
+        f"{platform.machine()}, {_cpu_model()} ({os.cpu_count()} logical CPUs)"
     )
 
 
