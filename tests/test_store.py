@@ -4,7 +4,6 @@ touching them, crash safety, merging."""
 from __future__ import annotations
 
 import hashlib
-import os
 import sqlite3
 import subprocess
 import sys
@@ -493,9 +492,3 @@ def test_rebuild_is_fast_for_100k_examinations(tmp_path, catalog):
     assert kb.total_examinations == 100_000
     print(f"knowledge_base() over 100k examinations: {elapsed:.3f} s")
     assert elapsed < 3.0, elapsed
-
-
-def test_store_files_are_gitignored():
-    ignored = subprocess.run(["git", "check-ignore", "-q", "x/kb.sqlite"], cwd=ROOT).returncode
-    assert ignored == 0 or not (ROOT / ".git").exists()
-    assert os.path.exists(ROOT / ".gitignore")
