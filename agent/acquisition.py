@@ -694,10 +694,20 @@ class RoomLearner:
                     f"{stored.object_id} was examined next, the replay chose {choice.obj.id} "
                     "(store written by other code or settings?)"
                 )
+            if self.run.on_choice is not None:
+                self.run.on_choice(self.kb, choice)
             self.log.choice(self, choice)
             del self.unexamined[choice.obj.id]  # line 14
             self.examined.add(choice.obj.id)
             related, n_gazes = self.examine(choice, stored)  # lines 15-16
+            if n_gazes == 0 and stored is None:
+                # No reachable viewpoint sees its relation volumes: not a trial, no evidence.
+                self.log.text(
+                    self,
+                    f"{choice.obj.type} #{choice.obj.id} cannot be examined: "
+                    "no reachable viewpoint sees its relation volumes",
+                )
+                continue
             pairs = geometry.related_pairs(related)
             if stored is None:  # lines 17-20: one transaction, then the same counts in memory
                 self.run.store.record(
@@ -837,6 +847,7 @@ class Run:
     clock_offset: float = 0.0  # the run clock when the current room started
     examinations: int = 0  # made in this run so far (replayed ones included)
     sim_new: float = 0.0  # simulated seconds of new (not replayed) work in this call
+    on_choice: Callable[[KnowledgeBase, Choice], None] | None = None  # before each examination
 
 
 # =========================================================================== recording
@@ -987,6 +998,13 @@ class RunLog:
         self.rec.log_text(f"{res.choice.obj.type} #{res.choice.obj.id}: {found}")
         self.knowledge(L)
 
+    def text(self, L: RoomLearner, msg: str) -> None:
+        """A line in the text log."""
+        if self.rec is None:
+            return
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_text(msg, level="WARN")
+
     def knowledge(self, L: RoomLearner) -> None:
         """Time series: mean interval width and n per type."""
         if self.rec is None:
@@ -1079,14 +1097,15 @@ def learn(
     catalog: Catalog | None = None,
     layouts: LayoutFn | None = None,
     on_examination: ExamCallback | None = None,
+    on_choice: Callable[[KnowledgeBase, Choice], None] | None = None,
 ) -> Summary:
     """Run learn-spatial-contexts (Figure 2) over ``rooms`` rooms of ``style``.
 
     ``kb_path`` is the evidence store, created or resumed (see the module docstring); ``alpha``
     defaults to the store's. ``max_examinations`` stops the call after that many new
     examinations (run it again to go on). ``layouts`` replaces the room generator (tests);
-    ``on_examination(result, kb)`` is called after every examination, replayed ones included
-    (benchmarks). Ctrl-C ends the call at once (the examination in flight is lost) with
+    ``on_examination(result, kb)`` is called after every examination, replayed ones included,
+    and ``on_choice(kb, choice)`` after every choice, before the examination (benchmarks). Ctrl-C ends the call at once (the examination in flight is lost) with
     ``Summary.interrupted`` set.
 
     The run clock (``sim_time`` in the store) runs on from room to room. A replayed room takes
@@ -1134,7 +1153,9 @@ def learn(
             kb.record_examination(ex.ref_type, {(r, t) for r, t, _ in ex.related})
             if ex.run == rid:
                 strategy_obj.observe(ex.ref_type)
-        run = Run(catalog, kb, store, strategy_obj, perception, style, seed, rid, log)
+        run = Run(
+            catalog, kb, store, strategy_obj, perception, style, seed, rid, log, on_choice=on_choice
+        )
         bar = None
         if progress:
             from tqdm import tqdm

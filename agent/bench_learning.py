@@ -13,8 +13,12 @@ geometry) are compared with it:
 
 Per strategy, each list in ``learning.json`` is the median over seeds at every examination count
 (as far as every seed got). ``learning.md`` tabulates the medians with their inter-quartile range
-at 50, 100, 200 and 400 examinations and at equal simulated time; ``learning.png`` draws the
-curves with inter-quartile bands.
+at 10, 25, 50, 100, 200 and 400 examinations and at equal simulated time, the paired (same rooms,
+same seed) difference of every strategy's mean width from HIF's, the averages over the whole run,
+and how the strategies' decisions relate: how often a pick agrees with what hif, expected-hif and
+fewest would pick from the same knowledge, and how often HIF's pick can only come from the quirk
+of eq. 3 (impact(0, n) is not monotonic in n). ``learning.png`` draws the curves with
+inter-quartile bands.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
 
 METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage")
-EXAM_MARKS = (50, 100, 200, 400)
+EXAM_MARKS = (10, 25, 50, 100, 200, 400)
 TIME_FRACTIONS = (0.25, 0.5, 1.0)  # of the shortest run's simulated time
 
 
@@ -90,6 +94,12 @@ class Trace:
     sim_s: list[float] = field(default_factory=list)
     metrics: dict[str, list[float]] = field(default_factory=lambda: {m: [] for m in METRICS})
     wall_s: float = 0.0
+    # One row per choice among at least two candidate types: does the pick agree with what
+    # hif, expected-hif and fewest would pick from the same knowledge; was a less-examined type
+    # on offer; and was it a quirk pick: the pick's n is larger than the least-examined
+    # candidate's, yet impact(0, n) - the term that dominates the average, most y being 0 -
+    # is larger for it (eq. 3 is not monotonic in n).
+    decisions: list[tuple[bool, bool, bool, bool, bool]] = field(default_factory=list)
 
     def at_exam(self, k: int, metric: str) -> float:
         """The metric after examination k (1-based), or NaN past the end."""
@@ -132,6 +142,24 @@ def run_trace(
     tracker = TruthTracker(truth, catalog, alpha)
     tr = Trace()
 
+    order = {t: i for i, t in enumerate(catalog.type_names)}
+
+    def on_choice(kb, choice):
+        types = sorted(choice.scores, key=order.__getitem__)
+        if len(types) < 2:
+            return
+        hif = kb.choose(types)
+        exp = kb.choose(types, fn=intervals.expected_width_change)
+        few = min(types, key=lambda t: (kb.n(t), order[t]))
+        c = choice.type
+        n_min = min(kb.n(t) for t in types)
+        n_c = kb.n(c)
+        better_known = n_c > n_min
+        quirk = better_known and float(intervals.impact(0, n_c, kb.alpha)) > float(
+            intervals.impact(0, n_min, kb.alpha)
+        )
+        tr.decisions.append((c == hif, c == exp, c == few, better_known, quirk))
+
     def on_exam(res, kb):
         tracker.record(res.choice.obj.type, res.pairs)
         tr.sim_s.append(res.sim_time)
@@ -150,6 +178,7 @@ def run_trace(
         progress=False,
         catalog=catalog,
         on_examination=on_exam,
+        on_choice=on_choice,
     )
     tr.wall_s = time.perf_counter() - t0
     return tr
@@ -164,13 +193,30 @@ def _median_curve(traces: list[Trace], metric: str) -> list[float]:
     return [float(v) for v in np.median(arr, axis=0)] if k else []
 
 
-def _fmt(vals: list[float], digits: int = 3) -> str:
+def _fmt(vals, digits: int = 3, sign: bool = False) -> str:
     v = np.asarray(vals, float)
     v = v[np.isfinite(v)]
     if not len(v):
         return "-"
     q1, med, q3 = np.percentile(v, [25, 50, 75])
-    return f"{med:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
+    f = f"{{:{'+' if sign else ''}.{digits}f}}"
+    return f"{f.format(med)} [{f.format(q1)}, {f.format(q3)}]"
+
+
+def _run_mean(t: Trace, metric: str, k: int) -> float:
+    """The metric averaged over examinations 1..k (the area under its curve, per examination)."""
+    return float(np.mean(t.metrics[metric][:k])) if k else float("nan")
+
+
+def _decision_stats(ts: list[Trace]) -> dict[str, float]:
+    rows = [d for t in ts for d in t.decisions]
+    n = len(rows)
+    a = np.array(rows, bool).reshape(-1, 5)
+    keys = ("same_hif", "same_expected", "same_fewest", "better_known", "quirk")
+    return {
+        "choices": n,
+        **{k: float(a[:, i].mean()) if n else float("nan") for i, k in enumerate(keys)},
+    }
 
 
 def markdown(
@@ -182,16 +228,19 @@ def markdown(
     truth_samples: int,
     alpha: float,
 ) -> str:
-    """The tables of learning.md (medians over seeds, [IQR])."""
+    """The tables of learning.md (medians over seeds, [inter-quartile range])."""
     names = list(traces)
+    ref = "hif" if "hif" in traces else names[0]
     t_end = min(t.sim_s[-1] for ts in traces.values() for t in ts if t.sim_s)
     times = [f * t_end for f in TIME_FRACTIONS]
+    k_all = min(len(t.sim_s) for ts in traces.values() for t in ts)
     lines = [
         f"# Learning benchmark: {style}, {rooms} rooms x {seeds} seeds, {perception} perception",
         "",
         f"Ground truth from {truth_samples} generated rooms; alpha = {alpha}. Every cell: the median "
         "over seeds [inter-quartile range]. Widths, errors and coverage are over every (A, rel, B) "
-        "with ground truth.",
+        "with ground truth. Every strategy sees the same rooms for a given seed, so differences "
+        f"are paired per seed (a strategy minus {ref}: positive means {ref} is ahead).",
         "",
     ]
     titles = {
@@ -200,23 +249,94 @@ def markdown(
         "mean_abs_error": "Mean |p0 - p_true|",
         "coverage": "Coverage (share of intervals holding p_true)",
     }
+    head = (
+        "| strategy | "
+        + " | ".join(f"{k} exams" for k in EXAM_MARKS)
+        + " | "
+        + " | ".join(f"t = {t:.0f} s" for t in times)
+        + " |"
+    )
+    rule = "|---" * (1 + len(EXAM_MARKS) + len(times)) + "|"
     for metric in METRICS:
-        lines += [
-            f"## {titles[metric]}",
-            "",
-            "| strategy | "
-            + " | ".join(f"{k} exams" for k in EXAM_MARKS)
-            + " | "
-            + " | ".join(f"t = {t:.0f} s" for t in times)
-            + " |",
-            "|---" * (1 + len(EXAM_MARKS) + len(times)) + "|",
-        ]
+        lines += [f"## {titles[metric]}", "", head, rule]
         for n in names:
             cells = [_fmt([t.at_exam(k, metric) for t in traces[n]]) for k in EXAM_MARKS]
             cells += [_fmt([t.at_time(tt, metric) for t in traces[n]]) for tt in times]
             lines.append(f"| {n} | " + " | ".join(cells) + " |")
         lines.append("")
+    lines += [f"## Mean interval width minus {ref}'s (paired per seed)", "", head, rule]
+    for n in names:
+        if n == ref:
+            continue
+        pairs = list(zip(traces[n], traces[ref], strict=True))
+        cells = [
+            _fmt(
+                [a.at_exam(k, "mean_width") - b.at_exam(k, "mean_width") for a, b in pairs], 4, True
+            )
+            for k in EXAM_MARKS
+        ]
+        cells += [
+            _fmt(
+                [a.at_time(tt, "mean_width") - b.at_time(tt, "mean_width") for a, b in pairs],
+                4,
+                True,
+            )
+            for tt in times
+        ]
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
     lines += [
+        "",
+        f"## Averaged over examinations 1..{k_all} (area under the curve per examination)",
+        "",
+        f"| strategy | mean width | minus {ref} | mean abs error | minus {ref} | coverage |",
+        "|---|---|---|---|---|---|",
+    ]
+    for n in names:
+        pairs = list(zip(traces[n], traces[ref], strict=True))
+        lines.append(
+            f"| {n} | {_fmt([_run_mean(t, 'mean_width', k_all) for t in traces[n]], 4)} | "
+            + _fmt(
+                [
+                    _run_mean(a, "mean_width", k_all) - _run_mean(b, "mean_width", k_all)
+                    for a, b in pairs
+                ],
+                4,
+                True,
+            )
+            + f" | {_fmt([_run_mean(t, 'mean_abs_error', k_all) for t in traces[n]], 4)} | "
+            + _fmt(
+                [
+                    _run_mean(a, "mean_abs_error", k_all) - _run_mean(b, "mean_abs_error", k_all)
+                    for a, b in pairs
+                ],
+                4,
+                True,
+            )
+            + f" | {_fmt([_run_mean(t, 'coverage', k_all) for t in traces[n]], 3)} |"
+        )
+    lines += [
+        "",
+        "## Decisions",
+        "",
+        "Choices among at least two candidate types (all seeds). 'Same as X': the share of "
+        "them where the strategy picked what X would have picked from the same knowledge. "
+        "'Better-known picks': a less-examined type was on offer. 'Quirk picks': better-known "
+        "picks where impact(0, n) (the term that dominates the average, most y being 0) is "
+        "larger for the pick's n than for the least-examined candidate's: eq. 3 is not "
+        "monotonic in n (impact(0, 2) = 0.101 < impact(0, 4) = 0.115).",
+        "",
+        "| strategy | choices | same as hif | same as expected-hif | same as fewest "
+        "| better-known picks | quirk picks |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for n in names:
+        d = _decision_stats(traces[n])
+        lines.append(
+            f"| {n} | {d['choices']} | {d['same_hif']:.1%} | {d['same_expected']:.1%} | "
+            f"{d['same_fewest']:.1%} | {d['better_known']:.1%} | {d['quirk']:.1%} |"
+        )
+    lines += [
+        "",
         "## Examinations and time",
         "",
         "| strategy | sim s at "
@@ -240,48 +360,76 @@ def markdown(
     return "\n".join(lines) + "\n"
 
 
+def _band(ax, x, arr, name, ref, lw=1.4):
+    with warnings.catch_warnings():  # NaN before the first examination
+        warnings.simplefilter("ignore", RuntimeWarning)
+        q1, med, q3 = np.nanpercentile(arr, [25, 50, 75], axis=0)
+    (line,) = ax.plot(x, med, label=name, lw=2.4 if name == ref else lw)
+    ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.15, lw=0)
+
+
 def plot(path: Path, traces: dict[str, list[Trace]], title: str) -> None:
-    """Curves (median over seeds) with inter-quartile bands: three metrics against examinations
-    and the mean width against simulated time."""
+    """Curves (median over seeds) with inter-quartile bands: mean width, error and coverage
+    against examinations, mean width against simulated time, and every strategy's mean width
+    minus HIF's (paired per seed) against examinations and time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(12, 8.5))
-    panels = [
-        ("mean_width", "examinations", axes[0, 0]),
-        ("mean_abs_error", "examinations", axes[0, 1]),
-        ("coverage", "examinations", axes[1, 0]),
-        ("mean_width", "time", axes[1, 1]),
-    ]
-    for metric, xaxis, ax in panels:
-        for name, ts in traces.items():
-            k = min(len(t.sim_s) for t in ts)
-            if not k:
-                continue
-            arr = np.array([t.metrics[metric][:k] for t in ts])
-            if xaxis == "examinations":
-                x = np.arange(1, k + 1)
-                q1, med, q3 = np.percentile(arr, [25, 50, 75], axis=0)
-            else:
-                t_end = min(t.sim_s[-1] for t in ts)
-                x = np.linspace(0, t_end, 300)
-                arr = np.array([[t.at_time(v, metric) for v in x] for t in ts])
-                with warnings.catch_warnings():  # before the first examination: all NaN
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    q1, med, q3 = np.nanpercentile(arr, [25, 50, 75], axis=0)
-            (line,) = ax.plot(x, med, label=name, lw=1.4 if name != "hif" else 2.2)
-            ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.15, lw=0)
-        ax.set_xlabel("examinations" if xaxis == "examinations" else "simulated seconds")
-        ax.set_ylabel(metric.replace("_", " "))
+    names = list(traces)
+    ref = "hif" if "hif" in traces else names[0]
+    k = min(len(t.sim_s) for ts in traces.values() for t in ts)
+    t_end = min(t.sim_s[-1] for ts in traces.values() for t in ts)
+    xk = np.arange(1, k + 1)
+    xt = np.linspace(0, t_end, 400)
+    fig, axes = plt.subplots(2, 3, figsize=(17, 9))
+    for n, ts in traces.items():
+        for ax, metric in (
+            (axes[0, 0], "mean_width"),
+            (axes[1, 0], "mean_abs_error"),
+            (axes[1, 1], "coverage"),
+        ):
+            _band(ax, xk, np.array([t.metrics[metric][:k] for t in ts]), n, ref)
+        _band(
+            axes[1, 2], xt, np.array([[t.at_time(v, "mean_width") for v in xt] for t in ts]), n, ref
+        )
+        pairs = list(zip(ts, traces[ref], strict=True))
+        d_k = np.array(
+            [
+                np.array(a.metrics["mean_width"][:k]) - np.array(b.metrics["mean_width"][:k])
+                for a, b in pairs
+            ]
+        )
+        d_t = np.array(
+            [
+                [a.at_time(v, "mean_width") - b.at_time(v, "mean_width") for v in xt]
+                for a, b in pairs
+            ]
+        )
+        _band(axes[0, 1], xk, d_k, n, ref)
+        _band(axes[0, 2], xt, d_t, n, ref)
+    labels = {
+        (0, 0): ("examinations", "mean interval width"),
+        (0, 1): ("examinations", f"mean width minus {ref}'s (paired)"),
+        (0, 2): ("simulated seconds", f"mean width minus {ref}'s (paired)"),
+        (1, 0): ("examinations", "mean |p0 - p_true|"),
+        (1, 1): ("examinations", "coverage"),
+        (1, 2): ("simulated seconds", "mean interval width"),
+    }
+    for (r, c), (xl, yl) in labels.items():
+        ax = axes[r, c]
+        ax.set_xlabel(xl)
+        ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
-        if xaxis == "examinations":
+        if xl == "examinations":
             ax.set_xscale("log")
+    for ax in (axes[0, 1], axes[0, 2]):
+        ax.axhline(0.0, color="k", lw=0.8)
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
@@ -342,6 +490,7 @@ def bench_learning(
                 "sim_s": _median_curve(ts, "sim_s"),
                 **{m: _median_curve(ts, m) for m in METRICS},
                 "wall_s": [t.wall_s for t in ts],
+                "decisions": {k: float(v) for k, v in _decision_stats(ts).items()},
             }
             for s, ts in traces.items()
         },
