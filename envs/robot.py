@@ -192,10 +192,6 @@ class Robot(composer.Entity):
         physics.bind(self._joints).qvel = 0.0
         physics.bind(self._actuators).ctrl = q
 
-    def get_pose(self, physics: mjcf.Physics) -> RobotPose:
-        """The robot's current pose read from qpos (yaw wrapped to (-pi, pi])."""
-        return qpos_to_pose(physics.bind(self._joints).qpos)
-
 
 def pose_to_qpos(pose: RobotPose, spec: RobotSpec) -> np.ndarray:
     """Joint positions (x, y, yaw, pan, tilt) of ``pose``, head clipped to its limits."""

@@ -37,7 +37,7 @@ from dm_control import mjcf
 
 from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
 from envs.layout import RoomLayout
-from envs.robot import ROBOT_GEOM_GROUP, pose_to_qpos, qpos_to_pose
+from envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from envs.task import RoomTask
 from knowledge.catalog import Catalog, load_catalog
@@ -315,10 +315,7 @@ class World:
 
     def reset_pose(self, pose: RobotPose) -> None:
         """Teleport the robot to ``pose`` (episode start); no time charged."""
-        q = pose_to_qpos(pose, self.spec)
-        self._d.qpos[self._qadr] = q
-        self._d.qvel[self._vadr] = 0.0
-        self._d.ctrl[self._act] = q
+        self.task.robot.set_pose(self.physics, pose)
         mujoco.mj_forward(self._m, self._d)
 
     def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
