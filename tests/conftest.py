@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
-import pytest
+import os
 
-from knowledge.catalog import Catalog, load_catalog
+# Off-screen rendering through EGL must be chosen before the first mujoco import, whichever test
+# module pytest happens to import first.
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+import pytest  # noqa: E402
+
+from knowledge.catalog import Catalog, load_catalog  # noqa: E402
 
 
 @pytest.fixture(scope="session")
