@@ -15,7 +15,8 @@ room, faithfully to Figure 2:
   relation of its type) are grouped into few boxes, the view planner plans gazes that cover them,
   the robot executes them (drive, head, image), the detector reports what it sees, and
   RELATED-OBJECTS / RELATED-TYPES follow from knowledge.geometry.related on the detected poses
-  (the examined object's own pose is the reference);
+  (the examined object's own pose is the reference); an object no reachable viewpoint can see
+  into is marked examined without counting as a trial;
 - lines 17-20: one transaction in the evidence store and the same counts in the knowledge base
   (intervals are derived from counts on demand, see DESIGN.md);
 - line 21: UNEXAMINED := (UNEXAMINED + RELATED-OBJECTS) - EXAMINED.
@@ -1105,7 +1106,8 @@ def learn(
     defaults to the store's. ``max_examinations`` stops the call after that many new
     examinations (run it again to go on). ``layouts`` replaces the room generator (tests);
     ``on_examination(result, kb)`` is called after every examination, replayed ones included,
-    and ``on_choice(kb, choice)`` after every choice, before the examination (benchmarks). Ctrl-C ends the call at once (the examination in flight is lost) with
+    and ``on_choice(kb, choice)`` after every choice, before the examination (benchmarks).
+    Ctrl-C ends the call at once (the examination in flight is lost) with
     ``Summary.interrupted`` set.
 
     The run clock (``sim_time`` in the store) runs on from room to room. A replayed room takes
