@@ -945,8 +945,9 @@ class RunLog:
             from agent.viewplan import camera_at
 
             self.rec.log_camera(_Shot(camera_at(L.body.pose(), L.spec)))
-        else:
-            self.rec.log_camera(frame, getattr(L.perception, "last_detections", ()))
+        else:  # RGB and segmentation; depth is left out (it would double the file's size)
+            shot = _Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)
+            self.rec.log_camera(shot, getattr(L.perception, "last_detections", ()))
         if purpose == "look" and objs:
             self.rec.log_text(
                 "look-around recognizes " + ", ".join(f"{o.type} #{o.id}" for o in objs),
