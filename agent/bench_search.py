@@ -305,12 +305,13 @@ def plot_cdf(
     for name, rs in results.items():
         t = np.sort([r.sim_time for r in rs if r.success])
         n = len(rs)
-        xs = np.concatenate([[0.0], t, [budget_s]])
+        xs = np.concatenate([[0.2], t, [budget_s]])
         ys = np.concatenate([[0.0], np.arange(1, len(t) + 1) / n, [len(t) / n]])
         ax.step(xs, ys, where="post", label=name, lw=1.8)
-    ax.set_xlabel("simulated seconds")
+    ax.set_xscale("log")
+    ax.set_xlabel("simulated seconds (log scale)")
     ax.set_ylabel("share of episodes with the target found")
-    ax.set_xlim(0, budget_s)
+    ax.set_xlim(0.2, budget_s)
     ax.set_ylim(0, 1.02)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
@@ -357,7 +358,7 @@ def bench_search(
     def probs_for(base: str, r: str | None) -> ss.ProbabilitySource | None:
         needs = S.POLICIES[base].needs
         if needs == "kb":
-            return ss.KBProbabilities(kb, r or rank)
+            return ss.KBProbabilities(kb, r or rank, rooms=len(learned) or None)
         if needs == "truth":
             return truth
         return None
@@ -475,7 +476,7 @@ def search_once(
             if needs == "kb" and kb is None:
                 raise CtxsearchError(f"policy '{base}' needs a knowledge store (--kb)")
             probs = (
-                ss.KBProbabilities(kb, r or rank)
+                ss.KBProbabilities(kb, r or rank, rooms=len(learned) or None)
                 if needs == "kb"
                 else truth_probs
                 if needs == "truth"

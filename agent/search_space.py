@@ -42,9 +42,13 @@ three tilts, each kept only if its frustum still holds enough unseen points.
 
 Detectability-driven search (``indirect_plan``). With nothing known, looking for T directly
 costs about half a coverage tour at T's range, C_T = cover(r_T) / 2. Looking first for an
-intermediate type I costs cover(r_I) / 2 to find one, then the time to look into its best
-relation volumes; with probability q_I = max_{rel in RELATIONS(I)} P(rel(T)) T is there, else
-the direct search remains: C_I = cover(r_I)/2 + look_I + (1 - q_I) C_T. The cheapest plan wins.
+intermediate type I costs cover(r_I) / 2 to find one (furniture: one ring of images at its
+height), then the time to look into its most likely relation volume. I is in the room with
+probability 1 - exp(-k_I) (k_I: instances per room, n_I over the rooms learned in), and T is then
+related to one of them with q = 1 - (1 - q_I)^max(1, k_I), q_I = max_{rel in RELATIONS(I)}
+P(rel(T)); otherwise the direct search remains:
+C_I = present (cover(r_I)/2 + look_I + (1 - q) C_T) + (1 - present)(cover(r_I) + C_T).
+The cheapest plan wins.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance, relation_volume
 
 RANK_MODES = ("low", "p0", "high")
-DEFAULT_RANK = "p0"  # chosen by measurement, see README "Object search"
+DEFAULT_RANK = "low"  # chosen by measurement: see agent/search.py's docstring
 RANGE_SAFETY = 0.8
 LATTICE_XY = 0.2  # m
 LATTICE_Z = (0.05, 1.85, 0.15)  # first, last, step (m)
@@ -114,16 +118,26 @@ class ProbabilitySource:
         """The probability used to rank rel's volume when looking for ``type_name``."""
         raise NotImplementedError
 
+    def instances(self, type_name: str) -> float | None:
+        """Expected instances of ``type_name`` per room, or None if unknown."""
+        return None
+
 
 class KBProbabilities(ProbabilitySource):
     """The learned intervals: lower bound, p0 (the Wilson centre) or upper bound, by ``rank``."""
 
-    def __init__(self, kb: KnowledgeBase, rank: str = DEFAULT_RANK):
+    def __init__(self, kb: KnowledgeBase, rank: str = DEFAULT_RANK, rooms: int | None = None):
         if rank not in RANK_MODES:
             raise CtxsearchError(f"unknown rank '{rank}' (known: {', '.join(RANK_MODES)})")
-        self.kb, self.rank = kb, rank
+        self.kb, self.rank, self.rooms = kb, rank, rooms
         self.name = f"kb-{rank}"
         self._cache: dict[tuple[str, str], float] = {}
+
+    def instances(self, type_name: str) -> float | None:
+        """n_T / rooms learned in: examined instances per room (None without a room count)."""
+        if not self.rooms:
+            return None
+        return self.kb.n(type_name) / self.rooms
 
     def p(self, relation: str, type_name: str) -> float:
         key = (relation, type_name)
@@ -146,20 +160,41 @@ class KBProbabilities(ProbabilitySource):
 class TableProbabilities(ProbabilitySource):
     """Fixed probabilities from a table {(relation, type): p} (ground truth, or a test's)."""
 
-    def __init__(self, table: Mapping[tuple[str, str], float], name: str = "table"):
+    def __init__(
+        self,
+        table: Mapping[tuple[str, str], float],
+        name: str = "table",
+        per_room: Mapping[str, float] | None = None,
+    ):
         self.table = {k: float(v) for k, v in table.items()}
         self.name = name
+        self.per_room = dict(per_room) if per_room is not None else None
 
     @classmethod
     def from_truth(cls, doc: Mapping) -> TableProbabilities:
-        """From ``ctxsearch truth``'s JSON document ({"entries": [{"relation", "type", "p"}, ...]})."""
+        """From ``ctxsearch truth``'s JSON document ({"samples", "entries": [{"ref", "relation",
+        "type", "p", "n"}, ...]}); instances per room are n_ref / samples."""
+        entries = doc.get("entries", [])
+        per_room = None
+        if doc.get("samples"):
+            per_room = {
+                e["ref"]: float(e["n"]) / float(doc["samples"])
+                for e in entries
+                if "n" in e and "ref" in e
+            }
         return cls(
-            {(e["relation"], e["type"]): float(e["p"]) for e in doc.get("entries", [])},
+            {(e["relation"], e["type"]): float(e["p"]) for e in entries},
             name="truth",
+            per_room=per_room,
         )
 
     def p(self, relation: str, type_name: str) -> float:
         return self.table.get((relation, type_name), 0.0)
+
+    def instances(self, type_name: str) -> float | None:
+        if self.per_room is None:
+            return None
+        return self.per_room.get(type_name, 0.0)
 
 
 # =========================================================================== the seen map
@@ -664,8 +699,13 @@ def indirect_plan(
     """Every plan (direct, and via each candidate type) with its expected cost, cheapest first.
 
     ``cover_s[t]``: seconds of a coverage tour at type t's effective range; ``look_s[t]``:
-    seconds to look into the relation volumes of one found t. Expected costs as in the module
-    docstring: direct C_T = cover_s[T] / 2; via I: cover_s[I] / 2 + look_s[I] + (1 - q_I) C_T.
+    seconds to look into the most likely relation volume of one found t. Expected costs:
+    direct C_T = cover_s[T] / 2. Via I, with k = ``probs.instances(I)`` expected instances per
+    room (1 if unknown), I is present with probability 1 - exp(-k) and then T is related to one
+    of them with q = 1 - (1 - q_I)^max(1, k):
+
+        C_I = present (cover_s[I]/2 + look_s[I] + (1 - q) C_T) + (1 - present)(cover_s[I] + C_T)
+
     Ties go to the direct plan, then to catalog order.
     """
     direct = cover_s[target] / 2
@@ -674,12 +714,16 @@ def indirect_plan(
     for name in names:
         if name == target or name not in cover_s:
             continue
-        q = relation_probability(catalog, probs, name, target)
-        if q <= 0:
+        q1 = relation_probability(catalog, probs, name, target)
+        if q1 <= 0:
             continue
+        k = probs.instances(name)
+        present = 1.0 if k is None else 1.0 - math.exp(-k)
+        q = 1.0 - (1.0 - q1) ** max(1.0, k if k is not None else 1.0)
         find = cover_s[name] / 2
         look = look_s.get(name, 0.0)
-        out.append(IndirectOption(name, find + look + (1 - q) * direct, q, find, look))
+        cost = present * (find + look + (1 - q) * direct) + (1 - present) * (cover_s[name] + direct)
+        out.append(IndirectOption(name, cost, q, find, look))
     order = {n: i for i, n in enumerate(catalog.type_names)}
     out.sort(key=lambda o: (o.cost, o.via is not None, order.get(o.via, -1) if o.via else -1))
     return out

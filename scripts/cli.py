@@ -21,12 +21,15 @@ COMMAND_MODULES = [
     "scripts.cmd_room",
     "scripts.cmd_truth",
     "scripts.cmd_learn",
+    "scripts.cmd_search",
+    "scripts.cmd_demo",
 ]
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
 BENCH_MODULES = [
     "scripts.cmd_kb",
     "scripts.cmd_sim",
     "scripts.cmd_learn",
+    "scripts.cmd_search",
 ]
 
 

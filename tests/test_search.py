@@ -143,6 +143,34 @@ def test_indirect_plan_prefers_easy_related_type_when_it_pays(catalog):
     assert [o.via for o in ss.indirect_plan("Pen", catalog, none, cover, look, ["Desk"])] == [None]
 
 
+def test_indirect_plan_counts_instances_per_room(catalog):
+    doc = {
+        "samples": 10,
+        "entries": [
+            {"ref": "Desk", "relation": "ON-TOP-OF-DESK", "type": "Pen", "p": 0.4, "n": 30},
+            {"ref": "Chair", "relation": "NEAR-CHAIR", "type": "Pen", "p": 0.4, "n": 2},
+        ],
+    }
+    probs = ss.TableProbabilities.from_truth(doc)
+    assert probs.instances("Desk") == pytest.approx(3.0) and probs.instances(
+        "Chair"
+    ) == pytest.approx(0.2)
+    cover = {"Pen": 100.0, "Desk": 10.0, "Chair": 10.0}
+    plans = {
+        o.via: o
+        for o in ss.indirect_plan(
+            "Pen", catalog, probs, cover, {"Desk": 2.0, "Chair": 2.0}, ["Desk", "Chair"]
+        )
+    }
+    # Three desks per room: the pen is near one of them with 1 - 0.6^3; chairs are rare.
+    assert plans["Desk"].q == pytest.approx(1 - 0.6**3)
+    present = 1 - math.exp(-3.0)
+    assert plans["Desk"].cost == pytest.approx(
+        present * (5 + 2 + 0.6**3 * 50) + (1 - present) * (10 + 50)
+    )
+    assert plans["Chair"].cost > plans["Desk"].cost
+
+
 def test_coverage_viewpoints_cover_the_room_within_range(catalog):
     lay = room(DESK, SHELF)
     grid = OccupancyGrid.from_layout(lay)
@@ -358,3 +386,34 @@ def test_time_model_charges_match_result(catalog):
     r = S.SearchResult("x", 0, "Cup", True, 3, 70.0, 4, 2.0, 60.0)
     assert not r.success and r.time_to_find == 60.0
     assert TimeModel().image_cost > 0
+
+
+@pytest.mark.render
+def test_search_recording_shows_candidates_path_and_camera_views(catalog, tmp_path):
+    import rerun as rr
+
+    from agent.recording import Recorder
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP)
+    probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Cup"): 0.8, ("ON-SHELF", "Cup"): 0.2})
+    path = tmp_path / "search.rrd"
+    ep = S.Episode(0, "test", 0, "Cup", RobotPose(-1.5, -1.2, 0.0), 120.0)
+    with World(layout, catalog) as world, Recorder(path) as rec:
+        rec.log_room(layout, catalog)
+        ctx = S.SearchContext(
+            ep, layout, catalog, world, probs=probs, recorder=rec, policy="location"
+        )
+        res = S.make_policy("location").run(ctx)
+    assert res.success
+    entities = {c.entity_path for c in rr.chunk.RrdReader(path).stream()}
+    expected = {
+        "/world/search/candidates",
+        "/world/search/best",
+        "/world/search/found",
+        "/world/robot",
+        "/world/camera/image/rgb",
+        "/world/camera/image/segmentation",
+        "/log",
+    }
+    assert expected <= entities, expected - entities

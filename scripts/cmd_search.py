@@ -1,0 +1,185 @@
+"""``ctxsearch search`` (one object search in a held-out room) and ``ctxsearch bench search``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {v}")
+    return v
+
+
+def _policy_names() -> list[str]:
+    from agent.search import POLICIES
+
+    return list(POLICIES)
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    from agent.search import DEFAULT_BUDGET_S
+    from agent.search_space import DEFAULT_RANK, RANK_MODES
+
+    p.add_argument(
+        "--budget-seconds",
+        type=_seconds,
+        default=DEFAULT_BUDGET_S,
+        metavar="B",
+        help=f"simulated seconds before an episode counts as failed (default: {DEFAULT_BUDGET_S:.0f})",
+    )
+    p.add_argument(
+        "--rank",
+        choices=RANK_MODES,
+        default=DEFAULT_RANK,
+        help=f"which part of the interval ranks candidate regions (default: {DEFAULT_RANK}, "
+        "chosen by measurement, see README)",
+    )
+    p.add_argument(
+        "--truth",
+        type=Path,
+        default=None,
+        metavar="FILE.json",
+        help="ground truth from `ctxsearch truth` for the oracle-prior policies "
+        "(default: estimated over --truth-samples rooms)",
+    )
+    p.add_argument(
+        "--truth-samples",
+        type=_positive_int,
+        default=200,
+        help="rooms sampled for the ground truth when --truth is not given (default: 200)",
+    )
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``search`` sub-command."""
+    p = sub.add_parser(
+        "search",
+        help="search for an object type in a held-out room, with or without learned context",
+        description="Put the robot in a room it never learned in (the first held-out room of --style "
+        "for --seed that holds a --target) and let a policy search until the detector reports a "
+        "--target or --budget-seconds of simulated time are spent. Prints whether it was found, the "
+        "simulated time, the gazes and the distance driven; --record writes a rerun recording with "
+        "the ranked candidate regions, the path and every camera view.",
+    )
+    p.add_argument(
+        "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
+    )
+    p.add_argument(
+        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+    )
+    p.add_argument("--target", required=True, help="the object type to find (e.g. Cup)")
+    p.add_argument(
+        "--policy",
+        default="location",
+        choices=_policy_names(),
+        help="search policy (default: location)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="which held-out room and start pose (default: 0)"
+    )
+    p.add_argument(
+        "--record", type=Path, default=None, metavar="FILE.rrd", help="write a rerun recording"
+    )
+    _add_common(p)
+    p.set_defaults(func=run_search)
+
+
+def run_search(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch search``."""
+    from agent.bench_search import search_once
+
+    one = search_once(
+        args.style,
+        args.target,
+        [args.policy],
+        kb_path=args.kb,
+        seed=args.seed,
+        budget_s=args.budget_seconds,
+        rank=args.rank,
+        records=[args.record],
+        truth=args.truth,
+        truth_samples=args.truth_samples,
+    )
+    ep, res = one.episode, one.results[0]
+    s = ep.start
+    print(
+        f"room: {ep.style} seed {ep.room_seed} (held out); start ({s.x:.2f}, {s.y:.2f}) heading "
+        f"{s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
+    )
+    print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
+    if args.record is not None:
+        print(f"recording: {args.record} (open with: rerun {args.record})")
+    return 0
+
+
+def register_bench(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench search``."""
+    p = bench_sub.add_parser(
+        "search",
+        help="search policies on the same held-out episodes: time to find, success, ratios",
+        description="Draw --episodes paired episodes once (held-out room, start pose, a small target "
+        "type present in the room) and run every policy on each. Reports per policy the success rate "
+        "within the budget, median and mean simulated seconds to find (failures counted at the "
+        "budget) with bootstrap 95%% intervals, gazes, path length and the ratios of the median to "
+        "exhaustive and to oracle. Writes DIR/search.json, DIR/search.md and DIR/search.png. A policy "
+        "name may carry a rank: location@low,location@p0,location@high.",
+    )
+    p.add_argument(
+        "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
+    )
+    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--episodes", type=_positive_int, default=40, help="paired episodes (default: 40)"
+    )
+    p.add_argument(
+        "--policies",
+        default="exhaustive,location,indirect,oracle-prior,oracle",
+        help="comma-separated policies (default: exhaustive,location,indirect,oracle-prior,oracle)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    p.add_argument("--quiet", action="store_true", help="no line per episode")
+    _add_common(p)
+    p.set_defaults(func=run_bench)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench search``."""
+    from agent.bench_search import bench_search
+    from agent.search import parse_policies
+
+    names = parse_policies(args.policies)
+    res = bench_search(
+        args.kb,
+        args.style,
+        args.episodes,
+        names,
+        args.out,
+        budget_s=args.budget_seconds,
+        seed=args.seed,
+        rank=args.rank,
+        truth=args.truth,
+        truth_samples=args.truth_samples,
+        progress=None if args.quiet else print,
+    )
+    print(res.table)
+    for f in res.files:
+        print(f"wrote {f}")
+    print(f"({res.wall_s:.0f} s wall)")
+    return 0
