@@ -27,10 +27,21 @@ what a look-around recognizes geometrically (type's max_range, inside the frustu
 sight past furniture boxes), without rendering. Both charge the same ``TimeModel`` seconds for the
 same planned drives, head moves and images, so simulated time is comparable.
 
-Runs, rooms and resume. A run is identified by (strategy, perception, seed); room i's seed is
-derived from (seed, i). Rooms marked done in the store are skipped. A room in progress is
-*replayed* from its start: the knowledge base as it was before the room, the same rng, the same
-motions; the examinations already in the store are not perceived again but read back (and checked
+Limited time (``room_budget_s``). The paper's robot "will not have an infinite amount of time to
+learn": with a budget of B simulated seconds per room, the robot leaves a room as soon as B
+seconds have passed since it entered, whatever is left unexamined. What is in flight is
+completed: an examination, or one exploration step (a drive to the next viewpoint, a six-image
+look-around), so a room takes at most B plus one of those; nothing new starts once B is
+spent. Without a budget (None, the default) every room is run to completion as in Figure 2, and
+every strategy examines the same objects per room in another order. The budget is part of the run's identity: runs with another
+budget are separate runs in the same store.
+
+Runs, rooms and resume. A run is identified by (strategy, perception, seed, room budget); room
+i's seed is derived from (seed, i). Rooms marked done in the store are skipped; the run clock
+goes on from the end time the store recorded for them (stores written before end times were
+recorded: from their last examination). A room in progress is *replayed* from its start: the
+knowledge base as it was before the room, the same rng, the same motions, the same budget
+checks; the examinations already in the store are not perceived again but read back (and checked
 against the choices), so a resumed run makes exactly the choices of an uninterrupted one. Every
 examination is one store transaction: Ctrl-C or a kill loses at most the one in flight.
 """
@@ -59,6 +70,11 @@ from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance
 
 PERCEPTION_MODES = ("camera", "oracle")
+# Examination gazes prefer the open side of a relation volume (agent.viewplan.facing_for) when
+# True. Off: measured on 2 x 3 office rooms in camera mode (results/learning_budget/facing.md),
+# it found no more related pairs (recall 0.994 -> 0.994 and 0.992 -> 0.986 of the oracle's) and
+# took about as long or longer per examination.
+EXAMINE_FACING = False
 ROOM_DONE = "done"
 ROOM_STARTED = "started"
 
@@ -74,9 +90,11 @@ def room_rng(seed: int, index: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(index), 0x51])
 
 
-def run_id(strategy: str, perception: str, seed: int) -> str:
-    """The store's run key: runs with another strategy, perception or seed are separate runs."""
-    return f"{strategy}/{perception}/seed={int(seed)}"
+def run_id(strategy: str, perception: str, seed: int, room_budget_s: float | None = None) -> str:
+    """The store's run key: runs with another strategy, perception, seed or room budget are
+    separate runs (no budget: the key has no budget part)."""
+    key = f"{strategy}/{perception}/seed={int(seed)}"
+    return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
 
 
 # =========================================================================== the oracle's body
@@ -418,6 +436,11 @@ def group_volumes(boxes: Sequence[Box], slack: float = 2.0) -> list[Box]:
     """Merge relation volumes that share a frame (all volumes of one object share its yaw) into
     few boxes: two groups merge when their joint bounding box is at most ``slack`` times the sum
     of their volumes (a volume inside another always merges). Greedy, deterministic."""
+    return [box for box, _ in group_volume_members(boxes, slack)]
+
+
+def group_volume_members(boxes: Sequence[Box], slack: float = 2.0) -> list[tuple[Box, list[int]]]:
+    """``group_volumes`` with, for every group, the indices of the input boxes merged into it."""
     if not boxes:
         return []
     yaw = float(boxes[0].yaw)
@@ -432,7 +455,8 @@ def group_volumes(boxes: Sequence[Box], slack: float = 2.0) -> list[Box]:
             raise ValueError("group_volumes needs boxes sharing one yaw")
         return lc - b.half, lc + b.half
 
-    groups = [(*to_local(b), float(np.prod(2 * b.half))) for b in boxes]  # (lo, hi, summed volume)
+    # (lo, hi, summed volume, members)
+    groups = [(*to_local(b), float(np.prod(2 * b.half)), [i]) for i, b in enumerate(boxes)]
     merged = True
     while merged and len(groups) > 1:
         merged = False
@@ -454,14 +478,34 @@ def group_volumes(boxes: Sequence[Box], slack: float = 2.0) -> list[Box]:
         if best is not None:
             _, i, j, lo, hi = best
             vol = groups[i][2] + groups[j][2]
-            groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [(lo, hi, vol)]
+            members = sorted(groups[i][3] + groups[j][3])
+            groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [(lo, hi, vol, members)]
             merged = True
     out = []
-    for lo, hi, _ in groups:
+    for lo, hi, _, members in groups:
         lc = (lo + hi) / 2
         center = np.array([*(origin[:2] + rot @ lc[:2]), origin[2] + lc[2]])
-        out.append(Box(center, yaw, (hi - lo) / 2))
+        out.append((Box(center, yaw, (hi - lo) / 2), members))
     return out
+
+
+def group_facing(directions: Sequence[np.ndarray | None], max_angle_deg: float = 60.0):
+    """The open side of a group of relation volumes (agent.viewplan.facing_for of each member):
+    None when no member has one (any side will do) or when the members' sides disagree (more than
+    ``max_angle_deg`` from their mean); otherwise the unit mean of the members that have one
+    (members open on every side do not constrain it)."""
+    dirs = [np.asarray(d, float)[:2] for d in directions if d is not None]
+    if not dirs:
+        return None
+    mean = np.sum(dirs, axis=0)
+    norm = float(np.linalg.norm(mean))
+    if norm < 1e-9:
+        return None
+    mean = mean / norm
+    cos_max = math.cos(math.radians(max_angle_deg))
+    if any(float(d @ mean) / max(float(np.linalg.norm(d)), 1e-12) < cos_max for d in dirs):
+        return None
+    return mean
 
 
 def relation_boxes(catalog: Catalog, obj: ObjectInstance) -> list[Box]:
@@ -512,6 +556,9 @@ class Explorer:
             cands = [o for oid, o in sorted(self.seen.items()) if oid not in examined]
             if cands:
                 return strat.nearest_object(cands, L.costs.at(L.body.pose()))
+            if L.budget_spent():  # no new exploration step once the room's time is spent
+                L.left_early = True
+                return None
             here = L.body.pose().xy
             if not any(np.hypot(*(here - q)) <= self.spacing / 2 for q in self.looks):
                 self.look_around()
@@ -526,6 +573,9 @@ class Explorer:
                 return None
             goal = self.todo.pop(k)
             L.drive_to(goal)
+            if L.budget_spent():
+                L.left_early = True
+                return None
             self.look_around()
 
     def look_around(self) -> None:
@@ -602,12 +652,23 @@ class RoomLearner:
         self.unexamined: dict[int, ObjectInstance] = {}
         self.last_exam_clock = self.clock  # the run clock after the room's last examination
         self.new_since = self.clock  # the run clock when the replay (if any) was over
+        self.budget_s = run.room_budget_s
+        self.left_early = False  # the budget ended the room (objects may be left unexamined)
 
     # ---- time and motion ------------------------------------------------------------------
     @property
     def clock(self) -> float:
         """The run clock: seconds before this room plus the room's own."""
         return self.run.clock_offset + (self.body.sim_time - self._t0)
+
+    @property
+    def room_elapsed(self) -> float:
+        """Simulated seconds since the robot entered this room."""
+        return self.body.sim_time - self._t0
+
+    def budget_spent(self) -> bool:
+        """True once the room's time budget (if any) is used up."""
+        return self.budget_s is not None and self.room_elapsed >= self.budget_s
 
     def drive_to(self, xy: np.ndarray) -> None:
         """Drive along a planned path to ``xy``, facing along the last segment."""
@@ -622,12 +683,18 @@ class RoomLearner:
     # ---- examination -------------------------------------------------------------------------
     def plan_examination(self, obj: ObjectInstance, start: RobotPose):
         """The gazes (agent.viewplan) that cover the object's relation volumes, group by group."""
-        from agent.viewplan import plan_gazes
+        from agent.viewplan import facing_for, plan_gazes
 
+        rels = self.catalog.type(obj.type).relations
         gazes = []
         pose = start
-        for box in group_volumes(relation_boxes(self.catalog, obj)):
-            gs = plan_gazes(self.grid, box, pose, self.spec, self.tm)
+        for box, members in group_volume_members(relation_boxes(self.catalog, obj)):
+            facing = (
+                group_facing([facing_for(rels[i], obj) for i in members])
+                if EXAMINE_FACING
+                else None
+            )
+            gs = plan_gazes(self.grid, box, pose, self.spec, self.tm, facing=facing)
             gazes.extend(gs)
             if gs:
                 pose = gs[-1].pose
@@ -644,14 +711,13 @@ class RoomLearner:
         return t
 
     def examine(
-        self, choice: Choice, stored: StoredExam | None
-    ) -> tuple[list[tuple[str, ObjectInstance]], int]:
-        """Lines 15-16: execute the gazes, detect, decide the relations. With ``stored`` (a
-        replay) the motions are made, images are not taken, and the stored result is used."""
+        self, choice: Choice, stored: StoredExam | None, gazes: Sequence[Any]
+    ) -> list[tuple[str, ObjectInstance]]:
+        """Lines 15-16: execute the planned gazes, detect, decide the relations. With ``stored``
+        (a replay) the motions are made, images are not taken, and the stored result is used."""
         from agent.viewplan import execute_gaze
 
         obj = choice.obj
-        gazes = self.plan_examination(obj, self.body.pose())
         self.log.examine_start(self, obj, gazes)
         seen: dict[int, ObjectInstance] = {}
         replay = stored is not None
@@ -671,17 +737,21 @@ class RoomLearner:
             related = [(rel, by_id[i]) for rel, _t, i in stored.related]
         else:
             related = self.perception.related(obj, list(seen.values()))
-        return related, len(gazes)
+        return related
 
     # ---- Figure 2 ----------------------------------------------------------------------------
     def run_room(self) -> Iterator[ExamResult]:
-        """Lines 3-21 until the room is done; yields every examination."""
+        """Lines 3-21 until the room is done or its time budget is spent; yields every
+        examination."""
         n_room = 0
         while True:
+            if self.budget_spent():  # limited time: leave the room
+                self.left_early = True
+                break
             if not self.unexamined:  # lines 4-7
                 obj = self.explorer.find(self.examined)
                 if obj is None:
-                    return
+                    break
                 self.unexamined[obj.id] = obj
             pose = self.body.pose()
             cands = [self.unexamined[i] for i in sorted(self.unexamined)]
@@ -689,26 +759,28 @@ class RoomLearner:
                 self.run.strategy, self.kb, cands, pose, self.costs.at(pose), self.rng
             )
             stored = self.prior[n_room] if n_room < len(self.prior) else None
-            if stored is not None and stored.object_id != choice.obj.id:
-                raise CtxsearchError(
-                    f"cannot resume room seed {self.layout.seed}: the store says object "
-                    f"{stored.object_id} was examined next, the replay chose {choice.obj.id} "
-                    "(store written by other code or settings?)"
-                )
             if self.run.on_choice is not None:
                 self.run.on_choice(self.kb, choice)
             self.log.choice(self, choice)
             del self.unexamined[choice.obj.id]  # line 14
             self.examined.add(choice.obj.id)
-            related, n_gazes = self.examine(choice, stored)  # lines 15-16
-            if n_gazes == 0 and stored is None:
-                # No reachable viewpoint sees its relation volumes: not a trial, no evidence.
+            gazes = self.plan_examination(choice.obj, self.body.pose())
+            if not gazes:
+                # No reachable viewpoint sees its relation volumes: not a trial, no evidence (so
+                # nothing in the store either, and a replay skips it the same way).
                 self.log.text(
                     self,
                     f"{choice.obj.type} #{choice.obj.id} cannot be examined: "
                     "no reachable viewpoint sees its relation volumes",
                 )
                 continue
+            if stored is not None and stored.object_id != choice.obj.id:
+                raise self._resume_error(
+                    f"the store says object {stored.object_id} was examined next, the replay "
+                    f"chose {choice.obj.id}"
+                )
+            related = self.examine(choice, stored, gazes)  # lines 15-16
+            n_gazes = len(gazes)
             pairs = geometry.related_pairs(related)
             if stored is None:  # lines 17-20: one transaction, then the same counts in memory
                 self.run.store.record(
@@ -745,6 +817,17 @@ class RoomLearner:
                 self.clock,
                 replayed=stored is not None,
             )
+        if n_room < len(self.prior):
+            raise self._resume_error(
+                f"the store holds {len(self.prior)} examinations of it, the replay left it after "
+                f"{n_room}"
+            )
+
+    def _resume_error(self, what: str) -> CtxsearchError:
+        return CtxsearchError(
+            f"cannot resume room seed {self.layout.seed}: {what} "
+            "(store written by other code or settings?)"
+        )
 
     def close(self) -> None:
         """Release the renderer (camera mode)."""
@@ -813,6 +896,8 @@ class Summary:
     sim_s: float  # simulated seconds of this call (replayed motions not counted)
     interrupted: bool = False
     files: list[Path] = field(default_factory=list)  # recordings written
+    room_budget_s: float | None = None  # simulated seconds per room (None: no limit)
+    rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -827,7 +912,14 @@ class Summary:
             f"types seen: {self.types_seen}; mean interval width: {self.mean_width:.4f}",
             f"time: {self.wall_s:.1f} s wall, {self.sim_s:.1f} s simulated; "
             f"{self.exams_per_wall_s:.1f} examinations per wall second",
-        ]
+        ] + (
+            [
+                f"room budget: {self.room_budget_s:g} s simulated per room; the budget ended "
+                f"{self.rooms_left_early} of the {self.rooms_done_now} rooms done in this call"
+            ]
+            if self.room_budget_s is not None
+            else []
+        )
 
 
 @dataclass
@@ -848,6 +940,7 @@ class Run:
     clock_offset: float = 0.0  # the run clock when the current room started
     examinations: int = 0  # made in this run so far (replayed ones included)
     sim_new: float = 0.0  # simulated seconds of new (not replayed) work in this call
+    room_budget_s: float | None = None  # simulated seconds per room (None: each to completion)
     on_choice: Callable[[KnowledgeBase, Choice], None] | None = None  # before each examination
 
 
@@ -918,6 +1011,7 @@ class RunLog:
         self.rec.log_text(
             f"room {L.room_index} done: {n_exams} examinations, "
             f"{L.clock - L.run.clock_offset:.1f} s simulated"
+            + (" (time budget spent: leaving)" if L.left_early else "")
         )
         self.rec.close()
         self.rec = None
@@ -1037,45 +1131,7 @@ ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
 LayoutFn = Callable[[int, int], RoomLayout]  # (room index, room seed) -> layout
 
 
-@dataclass(frozen=True)
-class LoggedExam:
-    """One examination of the store's log, with its observation rows."""
-
-    id: int
-    run: str
-    style: str
-    room_seed: int
-    object_id: int
-    ref_type: str
-    sim_time: float
-    related: tuple[tuple[str, str, int], ...]
-
-
-def read_log(store: Any) -> list[LoggedExam]:
-    """Every examination of the store in log order (knowledge.store's documented tables)."""
-    rel: dict[int, list[tuple[str, str, int]]] = {}
-    for eid, r, t, oid in store.conn.execute(
-        "SELECT examination_id, relation, type, related_id FROM observations ORDER BY rowid"
-    ):
-        rel.setdefault(int(eid), []).append((str(r), str(t), int(oid)))
-    return [
-        LoggedExam(
-            int(i),
-            str(run),
-            str(st),
-            int(seed),
-            int(oid),
-            str(t),
-            float(sim),
-            tuple(rel.get(int(i), ())),
-        )
-        for i, run, st, seed, oid, t, sim in store.conn.execute(
-            "SELECT id, run, style, room_seed, object_id, type, sim_time FROM examinations ORDER BY id"
-        )
-    ]
-
-
-def _style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
+def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
     """The style's name and its room generator."""
     from envs.rooms import generate_room
     from envs.styles import load_style
@@ -1095,6 +1151,7 @@ def learn(
     record: str | Path | None = None,
     max_examinations: int | None = None,
     progress: bool = True,
+    room_budget_s: float | None = None,
     *,
     catalog: Catalog | None = None,
     layouts: LayoutFn | None = None,
@@ -1108,14 +1165,16 @@ def learn(
     examinations (run it again to go on). ``layouts`` replaces the room generator (tests);
     ``on_examination(result, kb)`` is called after every examination, replayed ones included,
     and ``on_choice(kb, choice)`` after every choice, before the examination (benchmarks).
+    ``room_budget_s`` limits the simulated seconds spent in each room (see the module
+    docstring; None: every room to completion, Figure 2 as published).
     Ctrl-C ends the call at once (the examination in flight is lost) with
     ``Summary.interrupted`` set.
 
-    The run clock (``sim_time`` in the store) runs on from room to room. A replayed room takes
-    its clock from its stored examinations, so a resumed run's clock equals an uninterrupted
-    one's, except after a room finished in an earlier call when the next room had not started:
-    the store keeps no room end time, so that room's final exploration (after its last
-    examination) is missing from the clock.
+    The run clock (``sim_time`` in the store) runs on from room to room. A room done in an
+    earlier call resumes the clock from the end time the store recorded for it, a replayed room
+    takes its clock from its stored examinations, so a resumed run's clock equals an
+    uninterrupted one's. (Rooms done by a store of schema version 1, which has no end times,
+    resume it from their last examination: their final exploration is missing from the clock.)
     """
     from knowledge.catalog import load_catalog
     from knowledge.store import EvidenceStore
@@ -1124,6 +1183,17 @@ def learn(
         raise CtxsearchError(f"rooms must be >= 0, got {rooms}")
     if max_examinations is not None and max_examinations < 0:
         raise CtxsearchError(f"max_examinations must be >= 0, got {max_examinations}")
+    if room_budget_s is not None:
+        try:
+            room_budget_s = float(room_budget_s)
+        except (TypeError, ValueError):
+            raise CtxsearchError(
+                f"room budget must be a number of seconds, got {room_budget_s!r}"
+            ) from None
+        if not (math.isfinite(room_budget_s) and room_budget_s > 0):
+            raise CtxsearchError(
+                f"room budget must be a positive number of seconds, got {room_budget_s}"
+            )
     if perception not in PERCEPTION_MODES:
         raise CtxsearchError(
             f"unknown perception mode '{perception}' (known: {', '.join(PERCEPTION_MODES)})"
@@ -1131,17 +1201,17 @@ def learn(
     strategy_obj = strat.make_strategy(strategy)
     catalog = catalog or load_catalog()
     if layouts is None:
-        style, layouts = _style_layouts(style, catalog)
-    rid = run_id(strategy, perception, seed)
+        style, layouts = style_layouts(style, catalog)
+    rid = run_id(strategy, perception, seed, room_budget_s)
     seeds = [room_seed(seed, i) for i in range(rooms)]
     t_wall = time.perf_counter()
     log = RunLog(record)
-    summary = Summary(rid, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0)
+    summary = Summary(rid, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, room_budget_s=room_budget_s)
     with ExitStack() as stack:
         store = stack.enter_context(EvidenceStore.open(kb_path, catalog, alpha=alpha, create=True))
         stack.callback(log.close)
         done = {s for s in seeds if store.room_status(rid, style, s) == ROOM_DONE}
-        history = read_log(store)
+        history = list(store.examinations())
         mine = {
             s: [e for e in history if e.run == rid and e.style == style and e.room_seed == s]
             for s in seeds
@@ -1153,11 +1223,21 @@ def learn(
         for ex in history:
             if ex.run == rid and ex.style == style and ex.room_seed in replay_seeds:
                 continue
-            kb.record_examination(ex.ref_type, {(r, t) for r, t, _ in ex.related})
+            kb.record_examination(ex.type, {(r, t) for r, t, _ in ex.related})
             if ex.run == rid:
-                strategy_obj.observe(ex.ref_type)
+                strategy_obj.observe(ex.type)
         run = Run(
-            catalog, kb, store, strategy_obj, perception, style, seed, rid, log, on_choice=on_choice
+            catalog,
+            kb,
+            store,
+            strategy_obj,
+            perception,
+            style,
+            seed,
+            rid,
+            log,
+            on_choice=on_choice,
+            room_budget_s=room_budget_s,
         )
         bar = None
         if progress:
@@ -1176,7 +1256,12 @@ def learn(
         try:
             for i, s in enumerate(seeds):
                 if s in done:
-                    run.clock_offset = max([run.clock_offset] + [e.sim_time for e in mine[s]])
+                    end = store.room_end_time(rid, style, s)
+                    run.clock_offset = (
+                        end
+                        if end is not None
+                        else max([run.clock_offset] + [e.sim_time for e in mine[s]])
+                    )
                     continue
                 if max_examinations is not None and summary.examinations >= max_examinations:
                     break
@@ -1184,7 +1269,7 @@ def learn(
                     run,
                     layouts(i, s),
                     i,
-                    [StoredExam(e.object_id, e.ref_type, e.related, e.sim_time) for e in mine[s]],
+                    [StoredExam(e.object_id, e.type, e.related, e.sim_time) for e in mine[s]],
                 )
                 stack.callback(L.close)
                 if store.room_status(rid, style, s) is None:
@@ -1213,9 +1298,10 @@ def learn(
                 summary.sim_s = run.sim_new
                 if stopped:
                     break
-                store.mark_room(rid, style, s, ROOM_DONE)
+                store.mark_room(rid, style, s, ROOM_DONE, end_time=L.clock)
                 run.clock_offset = L.clock
                 summary.rooms_done_now += 1
+                summary.rooms_left_early += int(L.left_early)
                 if bar is not None:
                     bar.update(1)
                     bar.set_postfix_str(

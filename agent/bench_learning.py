@@ -19,11 +19,20 @@ and how the strategies' decisions relate: how often a pick agrees with what hif,
 fewest would pick from the same knowledge, and how often HIF's pick can only come from the quirk
 of eq. 3 (impact(0, n) is not monotonic in n). ``learning.png`` draws the curves with
 inter-quartile bands.
+
+``room_budget_s`` gives every room a simulated-time budget (agent.acquisition): the robot leaves a
+room when it is spent, so the strategies examine different objects, not only the same objects in
+another order. Then ``learning.md`` opens with a generated "Reading": the share of each room's
+objects examined, and every strategy's mean width minus HIF's (paired per seed) at marks in
+examinations and simulated time and averaged over the run, with the number of seeds where HIF is
+ahead. The time-averaged width is the mean over a uniform grid of simulated seconds from 0 to the
+shortest run's end (before the first examination: the width of the empty knowledge).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 import time
@@ -40,6 +49,8 @@ from knowledge.errors import CtxsearchError
 METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage")
 EXAM_MARKS = (10, 25, 50, 100, 200, 400)
 TIME_FRACTIONS = (0.25, 0.5, 1.0)  # of the shortest run's simulated time
+WIDTH_GOALS = (0.6, 0.5, 0.4, 0.3)  # mean widths whose first simulated second is tabulated
+TIME_GRID = 400  # points of the simulated-time grid for time averages
 
 
 class TruthTracker:
@@ -94,6 +105,10 @@ class Trace:
     sim_s: list[float] = field(default_factory=list)
     metrics: dict[str, list[float]] = field(default_factory=lambda: {m: [] for m in METRICS})
     wall_s: float = 0.0
+    initial: dict[str, float] = field(default_factory=dict)  # before any examination
+    room_objects: list[int] = field(default_factory=list)  # objects in room i
+    room_exams: list[int] = field(default_factory=list)  # examinations made in room i
+    rooms_left_early: int = 0  # rooms the time budget ended
     # One row per choice among at least two candidate types: does the pick agree with what
     # hif, expected-hif and fewest would pick from the same knowledge; was a less-examined type
     # on offer; and was it a quirk pick: the pick's n is larger than the least-examined
@@ -107,9 +122,24 @@ class Trace:
         return vals[k - 1] if 0 < k <= len(vals) else float("nan")
 
     def at_time(self, t: float, metric: str) -> float:
-        """The metric after the last examination finished by simulated second t."""
+        """The metric after the last examination finished by simulated second t (before the
+        first one: its value for the empty knowledge, NaN if that was not recorded)."""
         k = int(np.searchsorted(np.asarray(self.sim_s), t, side="right"))
-        return self.at_exam(k, metric) if k > 0 else float("nan")
+        return self.at_exam(k, metric) if k > 0 else self.initial.get(metric, float("nan"))
+
+    def time_mean(self, t_end: float, metric: str) -> float:
+        """The metric averaged over simulated time 0..t_end (a uniform grid)."""
+        return float(np.mean([self.at_time(t, metric) for t in np.linspace(0, t_end, TIME_GRID)]))
+
+    def time_to(self, goal: float, metric: str = "mean_width") -> float:
+        """The simulated second the metric first reaches ``goal`` or below (NaN: never)."""
+        vals = np.asarray(self.metrics[metric])
+        hit = np.flatnonzero(vals <= goal)
+        return float(self.sim_s[hit[0]]) if len(hit) else float("nan")
+
+    def examined_shares(self) -> list[float]:
+        """Per room: examinations over the objects in the room."""
+        return [e / o for e, o in zip(self.room_exams, self.room_objects, strict=False) if o]
 
     def exams_by(self, t: float) -> int:
         """Examinations finished by simulated second t."""
@@ -135,12 +165,22 @@ def run_trace(
     perception: str,
     alpha: float,
     workdir: Path,
+    room_budget_s: float | None = None,
 ) -> Trace:
     """One learn run in a fresh store, measured after every examination."""
-    from agent.acquisition import learn
+    from agent.acquisition import learn, style_layouts
 
     tracker = TruthTracker(truth, catalog, alpha)
-    tr = Trace()
+    tr = Trace(initial=tracker.metrics())
+    style, generate = style_layouts(style, catalog)
+
+    def layouts(index, seed):
+        layout = generate(index, seed)
+        while len(tr.room_objects) <= index:
+            tr.room_objects.append(0)
+            tr.room_exams.append(0)
+        tr.room_objects[index] = len(layout.objects)
+        return layout
 
     order = {t: i for i, t in enumerate(catalog.type_names)}
 
@@ -161,13 +201,14 @@ def run_trace(
         tr.decisions.append((c == hif, c == exp, c == few, better_known, quirk))
 
     def on_exam(res, kb):
+        tr.room_exams[res.room_index] += 1
         tracker.record(res.choice.obj.type, res.pairs)
         tr.sim_s.append(res.sim_time)
         for k, v in tracker.metrics().items():
             tr.metrics[k].append(v)
 
     t0 = time.perf_counter()
-    learn(
+    summary = learn(
         style,
         rooms,
         workdir / f"{strategy}-{seed}.sqlite",
@@ -177,10 +218,13 @@ def run_trace(
         seed=seed,
         progress=False,
         catalog=catalog,
+        layouts=layouts,
         on_examination=on_exam,
         on_choice=on_choice,
+        room_budget_s=room_budget_s,
     )
     tr.wall_s = time.perf_counter() - t0
+    tr.rooms_left_early = summary.rooms_left_early
     return tr
 
 
@@ -219,6 +263,105 @@ def _decision_stats(ts: list[Trace]) -> dict[str, float]:
     }
 
 
+def _ahead(diffs) -> str:
+    """'k/n': the seeds where the paired difference is positive (the reference is ahead)."""
+    v = np.asarray(diffs, float)
+    v = v[np.isfinite(v)]
+    return f"{int((v > 1e-12).sum())}/{len(v)}"
+
+
+def _shares(ts: list[Trace]) -> list[float]:
+    return [x for t in ts for x in t.examined_shares()]
+
+
+def reading(
+    traces: dict[str, list[Trace]], room_budget_s: float | None, ref: str = "hif"
+) -> list[str]:
+    """The generated "Reading" section of learning.md: every number comes from ``traces``."""
+    names = list(traces)
+    if ref not in traces:
+        ref = names[0]
+    t_end = min(t.sim_s[-1] for ts in traces.values() for t in ts if t.sim_s)
+    k_all = min(len(t.sim_s) for ts in traces.values() for t in ts)
+    k_mid = max(1, min(100, k_all // 2))
+    n_rooms = sum(len(t.room_objects) for t in traces[ref])
+    budget = (
+        f"a budget of {room_budget_s:g} simulated seconds per room (the robot leaves a room when it "
+        "is spent; the examination in flight completes)"
+        if room_budget_s is not None
+        else "no time budget (every room to completion, Figure 2 as published)"
+    )
+    share_cells = ", ".join(f"{n} {_fmt(_shares(traces[n]), 2)}" for n in names)
+    lines = [
+        "## Reading",
+        "",
+        f"Generated from this run. With {budget}, the share of a room's objects examined (median "
+        f"over rooms and seeds [IQR]): {share_cells}. The budget ended "
+        f"{sum(t.rooms_left_early for t in traces[ref])} of {n_rooms} rooms for {ref}.",
+        "",
+        f"Mean interval width minus {ref}'s, paired per seed: median [IQR] and the seeds where "
+        f"{ref} is ahead (positive: {ref} has the narrower intervals). 'Per exam' averages over "
+        f"examinations 1..{k_all}; 'per second' over simulated seconds 0..{t_end:.0f} (the "
+        "shortest run), which charges every strategy for its travel.",
+        "",
+        f"| strategy | at {k_mid} exams | at t = {t_end / 2:.0f} s | at t = {t_end:.0f} s "
+        "| averaged per exam | averaged per second |",
+        "|---|---|---|---|---|---|",
+    ]
+    verdicts = []
+    for n in names:
+        if n == ref:
+            continue
+        pairs = list(zip(traces[n], traces[ref], strict=True))
+        cols = [
+            [a.at_exam(k_mid, "mean_width") - b.at_exam(k_mid, "mean_width") for a, b in pairs],
+            [
+                a.at_time(t_end / 2, "mean_width") - b.at_time(t_end / 2, "mean_width")
+                for a, b in pairs
+            ],
+            [a.at_time(t_end, "mean_width") - b.at_time(t_end, "mean_width") for a, b in pairs],
+            [
+                _run_mean(a, "mean_width", k_all) - _run_mean(b, "mean_width", k_all)
+                for a, b in pairs
+            ],
+            [a.time_mean(t_end, "mean_width") - b.time_mean(t_end, "mean_width") for a, b in pairs],
+        ]
+        lines.append(
+            f"| {n} | " + " | ".join(f"{_fmt(c, 4, True)} ({_ahead(c)})" for c in cols) + " |"
+        )
+        per_exam, per_s = np.asarray(cols[3]), np.asarray(cols[4])
+        verdicts.append(
+            f"- {ref} vs {n}: per examination {ref} is ahead in {_ahead(per_exam)} seeds "
+            f"(median {np.median(per_exam):+.4f}), per simulated second in {_ahead(per_s)} "
+            f"(median {np.median(per_s):+.4f})."
+        )
+    lines += ["", *verdicts]
+    if "expected-hif" in traces and ref == "hif":
+        d_h, d_e = _decision_stats(traces["hif"]), _decision_stats(traces["expected-hif"])
+        lines += [
+            f"- The impact quirk (eq. 3 is not monotonic in n): {d_h['quirk']:.1%} of hif's "
+            f"choices among two or more types are quirk picks ({d_e['quirk']:.1%} for "
+            f"expected-hif); hif and expected-hif agree on {d_h['same_expected']:.1%} of hif's "
+            "choices."
+        ]
+
+    def goal_cell(ts: list[Trace], g: float) -> str:
+        v = np.array([t.time_to(g) for t in ts])
+        med = float(np.median(np.where(np.isfinite(v), v, np.inf)))  # never reached: infinite
+        return f"{med:.0f}" if math.isfinite(med) else "-"
+
+    goals = ", ".join(
+        f"{n} " + " / ".join(goal_cell(traces[n], g) for g in WIDTH_GOALS) for n in names
+    )
+    lines += [
+        "- Simulated seconds to reach a mean width of "
+        + " / ".join(f"{g:g}" for g in WIDTH_GOALS)
+        + f" (median over seeds; '-': the median seed never does): {goals}.",
+        "",
+    ]
+    return lines
+
+
 def markdown(
     style: str,
     seeds: int,
@@ -227,6 +370,7 @@ def markdown(
     traces: dict[str, list[Trace]],
     truth_samples: int,
     alpha: float,
+    room_budget_s: float | None = None,
 ) -> str:
     """The tables of learning.md (medians over seeds, [inter-quartile range])."""
     names = list(traces)
@@ -234,14 +378,17 @@ def markdown(
     t_end = min(t.sim_s[-1] for ts in traces.values() for t in ts if t.sim_s)
     times = [f * t_end for f in TIME_FRACTIONS]
     k_all = min(len(t.sim_s) for ts in traces.values() for t in ts)
+    budget = "" if room_budget_s is None else f", room budget {room_budget_s:g} s"
     lines = [
-        f"# Learning benchmark: {style}, {rooms} rooms x {seeds} seeds, {perception} perception",
+        f"# Learning benchmark: {style}, {rooms} rooms x {seeds} seeds, {perception} perception"
+        + budget,
         "",
         f"Ground truth from {truth_samples} generated rooms; alpha = {alpha}. Every cell: the median "
         "over seeds [inter-quartile range]. Widths, errors and coverage are over every (A, rel, B) "
         "with ground truth. Every strategy sees the same rooms for a given seed, so differences "
         f"are paired per seed (a strategy minus {ref}: positive means {ref} is ahead).",
         "",
+        *reading(traces, room_budget_s, ref),
     ]
     titles = {
         "mean_width": "Mean interval width",
@@ -288,8 +435,9 @@ def markdown(
         "",
         f"## Averaged over examinations 1..{k_all} (area under the curve per examination)",
         "",
-        f"| strategy | mean width | minus {ref} | mean abs error | minus {ref} | coverage |",
-        "|---|---|---|---|---|---|",
+        f"| strategy | mean width | minus {ref} | mean abs error | minus {ref} | coverage "
+        f"| mean width over 0..{t_end:.0f} s | minus {ref} |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for n in names:
         pairs = list(zip(traces[n], traces[ref], strict=True))
@@ -312,7 +460,18 @@ def markdown(
                 4,
                 True,
             )
-            + f" | {_fmt([_run_mean(t, 'coverage', k_all) for t in traces[n]], 3)} |"
+            + f" | {_fmt([_run_mean(t, 'coverage', k_all) for t in traces[n]], 3)} | "
+            + _fmt([t.time_mean(t_end, "mean_width") for t in traces[n]], 4)
+            + " | "
+            + _fmt(
+                [
+                    a.time_mean(t_end, "mean_width") - b.time_mean(t_end, "mean_width")
+                    for a, b in pairs
+                ],
+                4,
+                True,
+            )
+            + " |"
         )
     lines += [
         "",
@@ -343,8 +502,8 @@ def markdown(
         + " | sim s at ".join(str(k) for k in EXAM_MARKS)
         + " | "
         + " | ".join(f"exams by {t:.0f} s" for t in times)
-        + " | exams in all | wall s |",
-        "|---" * (2 + len(EXAM_MARKS) + len(times) + 1) + "|",
+        + " | exams in all | share of room objects examined | rooms ended by the budget | wall s |",
+        "|---" * (2 + len(EXAM_MARKS) + len(times) + 3) + "|",
     ]
     for n in names:
         cells = [
@@ -354,6 +513,8 @@ def markdown(
         cells += [_fmt([t.exams_by(tt) for t in traces[n]], 0) for tt in times]
         cells += [
             _fmt([len(t.sim_s) for t in traces[n]], 0),
+            _fmt(_shares(traces[n]), 2),
+            _fmt([t.rooms_left_early for t in traces[n]], 0),
             _fmt([t.wall_s for t in traces[n]], 1),
         ]
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
@@ -445,8 +606,11 @@ def bench_learning(
     catalog: Catalog | None = None,
     truth: dict | None = None,
     progress: bool = True,
+    room_budget_s: float | None = None,
 ) -> BenchResult:
-    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png."""
+    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png.
+
+    ``room_budget_s``: simulated seconds per room (None: every room to completion)."""
     from knowledge.catalog import load_catalog
 
     catalog = catalog or load_catalog()
@@ -468,7 +632,9 @@ def bench_learning(
     tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
     with tempfile.TemporaryDirectory(prefix="ctxsearch-bench-", dir=tmp_root) as tmp:
         for s, k in jobs:
-            tr = run_trace(style, rooms, k, s, truth, catalog, perception, alpha, Path(tmp))
+            tr = run_trace(
+                style, rooms, k, s, truth, catalog, perception, alpha, Path(tmp), room_budget_s
+            )
             traces[s].append(tr)
             if bar is not None:
                 bar.set_postfix_str(
@@ -483,6 +649,7 @@ def bench_learning(
         "rooms": rooms,
         "perception": perception,
         "alpha": alpha,
+        "room_budget_s": room_budget_s,
         "truth_samples": truth.get("samples", truth_samples),
         "strategies": {
             s: {
@@ -490,14 +657,19 @@ def bench_learning(
                 "sim_s": _median_curve(ts, "sim_s"),
                 **{m: _median_curve(ts, m) for m in METRICS},
                 "wall_s": [t.wall_s for t in ts],
+                "examined_share": [t.examined_shares() for t in ts],  # per seed, per room
+                "rooms_left_early": [t.rooms_left_early for t in ts],
                 "decisions": {k: float(v) for k, v in _decision_stats(ts).items()},
             }
             for s, ts in traces.items()
         },
     }
-    table = markdown(style, seeds, rooms, perception, traces, data["truth_samples"], alpha)
+    table = markdown(
+        style, seeds, rooms, perception, traces, data["truth_samples"], alpha, room_budget_s
+    )
     files = [out / "learning.json", out / "learning.md", out / "learning.png"]
     files[0].write_text(json.dumps(data, indent=1) + "\n")
     files[1].write_text(table)
-    plot(files[2], traces, f"{style}: {rooms} rooms x {seeds} seeds ({perception})")
+    budget = "" if room_budget_s is None else f", room budget {room_budget_s:g} s"
+    plot(files[2], traces, f"{style}: {rooms} rooms x {seeds} seeds ({perception}{budget})")
     return BenchResult(data, table, files)

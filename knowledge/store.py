@@ -5,16 +5,23 @@ strategy) and one row per observed (relation, related type, related object id); 
 knowledge base, hence its intervals, are rebuilt from this log, so runs resume, stores from several
 robots merge (``merge_stores``), and the same evidence can be re-read with another alpha.
 
-Tables (schema version 1)::
+Tables (schema version 2)::
 
     meta          (key TEXT PRIMARY KEY, value TEXT)   app='ctxsearch', schema_version,
                                                        catalog_fingerprint, catalog_path, alpha,
                                                        created
-    rooms         (run, style, seed, status)           status 'started' | 'done';
+    rooms         (run, style, seed, status, end_time) status 'started' | 'done';
+                                                       end_time: the run's simulated clock when
+                                                       the room was done (NULL if not recorded);
                                                        PRIMARY KEY (run, style, seed)
     examinations  (id INTEGER PRIMARY KEY, run, style, room_seed, object_id, type, sim_time,
                    strategy, created)
     observations  (examination_id REFERENCES examinations, relation, type, related_id)
+
+Version 1 (no rooms.end_time) is still read: its rooms have no end time. The first write of an
+end time (``mark_room(..., end_time=...)``, or a merge into it) upgrades a version-1 store in place
+(one transaction: ADD COLUMN, schema_version 2); older ctxsearch then refuses it with its one-line
+"newer schema" error. ``examinations()`` reads the log back, examination by examination.
 
 Every examination is written in one transaction (its row and its observation rows). The store
 uses SQLite's write-ahead log (journal_mode=WAL, synchronous=NORMAL): a process killed at any
@@ -35,7 +42,8 @@ import sqlite3
 import time
 import urllib.parse
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from knowledge import intervals
@@ -43,7 +51,7 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError, StoreError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -54,6 +62,7 @@ CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE rooms (
     run TEXT NOT NULL, style TEXT NOT NULL, seed INTEGER NOT NULL,
     status TEXT NOT NULL CHECK (status IN ('started', 'done')),
+    end_time REAL,
     PRIMARY KEY (run, style, seed)
 );
 CREATE TABLE examinations (
@@ -185,6 +194,35 @@ def _read_meta(conn: sqlite3.Connection, path: Path) -> dict[str, str]:
         conn.close()
 
 
+@dataclass(frozen=True)
+class Examination:
+    """One examination of the log with its observation rows (``EvidenceStore.examinations``)."""
+
+    id: int
+    run: str
+    style: str
+    room_seed: int
+    object_id: int
+    type: str  # the examined object's (reference) type
+    sim_time: float
+    strategy: str
+    related: tuple[tuple[str, str, int], ...]  # (relation, related type, related object id)
+
+
+def _has_end_time(conn: sqlite3.Connection) -> bool:
+    """True when the rooms table has the end_time column (schema version 2)."""
+    return any(r[1] == "end_time" for r in conn.execute("PRAGMA table_info(rooms)"))
+
+
+def _upgrade(cur: sqlite3.Cursor) -> None:
+    """Bring a version-1 store to version 2 inside the caller's transaction."""
+    if not _has_end_time(cur.connection):
+        cur.execute("ALTER TABLE rooms ADD COLUMN end_time REAL")
+        cur.execute(
+            "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
+        )
+
+
 class _Corrupt(Exception):
     """quick_check found damage (maybe only seen through an immutable read of a live store)."""
 
@@ -200,6 +238,9 @@ class EvidenceStore:
         self.catalog = catalog
         self.alpha = alpha
         self.meta = dict(meta)
+        self._end_time = _has_end_time(conn)  # schema 2; a version-1 store is upgraded on demand
+        if self._end_time:  # an immutable read of the main file may predate an upgrade in the WAL
+            self.meta["schema_version"] = str(SCHEMA_VERSION)
 
     # ---- opening ------------------------------------------------------------------------------
     @classmethod
@@ -312,16 +353,35 @@ class EvidenceStore:
             [(eid, rel, t, rid) for rel, t, rid in rows],
         )
 
-    def mark_room(self, run: str, style: str, seed: int, status: str) -> None:
-        """Set a room's status: 'started' when the robot enters it, 'done' when it is finished."""
+    def mark_room(
+        self, run: str, style: str, seed: int, status: str, end_time: float | None = None
+    ) -> None:
+        """Set a room's status: 'started' when the robot enters it, 'done' when it is finished;
+        ``end_time`` (the run's simulated clock when it was done) replaces the stored one. A
+        version-1 store is upgraded in the same transaction when an end time is given."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
+        key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), status)
+        end = None if end_time is None else _float(end_time, "end_time")
         with self._transaction() as cur:
-            cur.execute(
-                "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
-                "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status",
-                (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), status),
-            )
+            if end is not None:
+                _upgrade(cur)
+            if end is not None or self._end_time:
+                cur.execute(
+                    "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
+                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status, "
+                    "end_time = excluded.end_time",
+                    (*key, end),
+                )
+            else:
+                cur.execute(
+                    "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
+                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status",
+                    key,
+                )
+        if end is not None and not self._end_time:
+            self._end_time = True
+            self.meta["schema_version"] = str(SCHEMA_VERSION)
 
     # ---- reading ------------------------------------------------------------------------------
     def room_status(self, run: str, style: str, seed: int) -> str | None:
@@ -331,6 +391,47 @@ class EvidenceStore:
             (run, style, int(seed)),
         ).fetchone()
         return None if row is None else str(row[0])
+
+    def room_end_time(self, run: str, style: str, seed: int) -> float | None:
+        """The run's simulated clock when the room was done, or None (not done, not recorded,
+        or a version-1 store)."""
+        if not self._end_time:
+            return None
+        row = self.conn.execute(
+            "SELECT end_time FROM rooms WHERE run = ? AND style = ? AND seed = ?",
+            (run, style, int(seed)),
+        ).fetchone()
+        return None if row is None or row[0] is None else float(row[0])
+
+    def examinations(self, run: str | None = None) -> Iterator[Examination]:
+        """Every examination of the log (of one run, or all) in log order, each with its
+        observation rows in the order they were written. The observations of the selected
+        examinations are read first, the examinations then streamed; do not write to the store
+        while iterating."""
+        exams = "SELECT id, run, style, room_seed, object_id, type, sim_time, strategy FROM examinations"
+        obs = "SELECT examination_id, relation, type, related_id FROM observations"
+        args: tuple = ()
+        if run is not None:
+            exams += " WHERE run = ?"
+            obs += " WHERE examination_id IN (SELECT id FROM examinations WHERE run = ?)"
+            args = (run,)
+        related: dict[int, list[tuple[str, str, int]]] = defaultdict(list)
+        for eid, rel, t, rid in self.conn.execute(obs + " ORDER BY rowid", args):
+            related[int(eid)].append((str(rel), str(t), int(rid)))
+        for i, r, st, seed, oid, t, sim, strategy in self.conn.execute(
+            exams + " ORDER BY id", args
+        ):
+            yield Examination(
+                int(i),
+                str(r),
+                str(st),
+                int(seed),
+                int(oid),
+                str(t),
+                float(sim),
+                str(strategy),
+                tuple(related.pop(int(i), ())),
+            )
 
     def examined(self, run: str, style: str, room_seed: int) -> set[int]:
         """Ids of the objects already examined in that room (to resume without re-examining)."""
@@ -472,7 +573,8 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
 
     Every input must be a store built on ``catalog`` (StoreError naming the file otherwise); all
     inputs are checked before anything is written, and the whole merge is one transaction.
-    Examination ids are renumbered; a room marked 'done' in any input is 'done' in the output.
+    Examination ids are renumbered; a room marked 'done' in any input is 'done' in the output,
+    with the first end time any of them recorded. A version-1 output is upgraded to version 2.
     A new output gets the first input's alpha. Returns the number of examinations appended.
     """
     out_path = Path(out_path)
@@ -495,6 +597,7 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
     appended = 0
     try:
         with store, store._transaction() as cur:
+            _upgrade(cur)
             for p in ins:
                 src = _connect(p)
                 try:
@@ -517,11 +620,15 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                             "INSERT INTO observations (examination_id, relation, type, related_id) VALUES (?, ?, ?, ?)",
                             [(r[0] + offset, *r[1:]) for r in batch],
                         )
+                    end = "end_time" if _has_end_time(src) else "NULL"
                     cur.executemany(
-                        "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
+                        "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
                         "ON CONFLICT (run, style, seed) DO UPDATE SET status = "
-                        "CASE WHEN rooms.status = 'done' OR excluded.status = 'done' THEN 'done' ELSE 'started' END",
-                        src.execute("SELECT run, style, seed, status FROM rooms").fetchall(),
+                        "CASE WHEN rooms.status = 'done' OR excluded.status = 'done' THEN 'done' ELSE 'started' END, "
+                        "end_time = COALESCE(rooms.end_time, excluded.end_time)",
+                        src.execute(
+                            f"SELECT run, style, seed, status, {end} FROM rooms"
+                        ).fetchall(),
                     )
                 except sqlite3.DatabaseError as exc:
                     raise StoreError(f"{p}: cannot read ({_one_line(exc)})") from None

@@ -16,6 +16,25 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive number of seconds, got {text!r}"
+        ) from None
+    if not (v > 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text}")
+    return v
+
+
+ROOM_BUDGET_HELP = (
+    "simulated seconds the robot may spend in each room: when they are spent it leaves the room "
+    "(the examination in flight completes), whatever is left unexamined (default: no limit, "
+    "every room to completion as in the paper's Figure 2)"
+)
+
+
 def _alpha(text: str) -> float:
     try:
         v = float(text)
@@ -85,6 +104,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="K",
         help="stop after K examinations (resume later with the same command)",
     )
+    p.add_argument(
+        "--room-budget", type=_seconds, default=None, metavar="SECONDS", help=ROOM_BUDGET_HELP
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_learn)
 
@@ -104,6 +126,7 @@ def run_learn(args: argparse.Namespace) -> int:
         record=args.record,
         max_examinations=args.max_examinations,
         progress=not args.no_progress,
+        room_budget_s=args.room_budget,
     )
     for line in s.lines():
         print(line)
@@ -145,6 +168,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         help="rooms sampled for the ground truth (default: 300)",
     )
     p.add_argument("--alpha", type=_alpha, default=0.10, help="interval confidence (default: 0.10)")
+    p.add_argument(
+        "--room-budget", type=_seconds, default=None, metavar="SECONDS", help=ROOM_BUDGET_HELP
+    )
     p.set_defaults(func=run_bench)
 
 
@@ -170,6 +196,7 @@ def run_bench(args: argparse.Namespace) -> int:
         perception=args.perception,
         truth_samples=args.truth_samples,
         alpha=args.alpha,
+        room_budget_s=args.room_budget,
     )
     print(result.table)
     for f in result.files:

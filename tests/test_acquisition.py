@@ -37,8 +37,9 @@ def _rel(name, lo, hi, mlo=(0, 0, 0), mhi=(0, 0, 0)):
 FULL_LO, FULL_HI = (-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)
 
 
-def tiny_catalog():
-    """Four types with a few relations each; volumes chosen so the counts below are easy to verify."""
+def tiny_catalog(lamp: bool = False):
+    """Four types with a few relations each; volumes chosen so the counts below are easy to verify.
+    With ``lamp``, a fifth type whose only relation volume lies 20 m away (beyond any wall)."""
 
     def typ(name, kind, shape, size, color, rels, min_pixels=20, max_range=8.0):
         return {
@@ -107,6 +108,20 @@ def tiny_catalog():
                     max_range=5.0,
                 ),
             ]
+            + (
+                [
+                    typ(
+                        "Lamp",
+                        "object",
+                        "box",
+                        (0.2, 0.2, 0.4),
+                        (0.9, 0.8, 0.3),
+                        [_rel("FAR-LAMP", (0, 0, 0), (0, 0, 0), (20, 20, 0), (21, 21, 0.5))],
+                    )
+                ]
+                if lamp
+                else []
+            )
         }
     )
 
@@ -382,3 +397,148 @@ def test_group_volumes_keeps_far_apart_volumes_apart():
     inner = Box(np.array([0.05, 0.0, 0.5]), 0.3, np.array([0.1, 0.1, 0.1]))
     groups = group_volumes([a, b, inner])
     assert len(groups) == 2
+
+
+# ------------------------------------------------------------------ limited time per room
+def _office_layouts():
+    from envs.rooms import generate_room
+    from envs.styles import load_style
+    from knowledge.catalog import load_catalog
+
+    cat = load_catalog()
+    style = load_style("office", cat)
+    rooms = {}
+
+    def layouts(i, s):
+        if s not in rooms:
+            rooms[s] = generate_room(style, s, cat)
+        return rooms[s]
+
+    return cat, layouts, rooms
+
+
+def _office_learn(path, cat, layouts, rooms=1, **kw):
+    seq = []
+    kw.setdefault("seed", 3)
+    s = learn(
+        "office",
+        rooms,
+        path,
+        perception="oracle",
+        catalog=cat,
+        layouts=layouts,
+        progress=False,
+        on_examination=lambda res, kb: seq.append(
+            (res.room_index, res.choice.obj.id, round(res.sim_time, 6))
+        ),
+        **kw,
+    )
+    return s, seq
+
+
+def _end_times(path, cat, run):
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(path, cat, create=False) as st:
+        return [st.room_end_time(r, sty, seed) for r, sty, seed, _ in st.rooms(run)]
+
+
+def test_a_budgeted_room_stops_within_budget_plus_one_examination(tmp_path):
+    cat, layouts, rooms = _office_layouts()
+    full, seq_full = _office_learn(tmp_path / "full.sqlite", cat, layouts)
+    budget = 60.0
+    s, seq = _office_learn(tmp_path / "b.sqlite", cat, layouts, room_budget_s=budget)
+    assert s.run.endswith("/budget=60.0s") and s.room_budget_s == budget
+    assert s.rooms == 1 and s.rooms_done_now == 1 and s.rooms_left_early == 1
+    assert 2 <= len(seq) < len(seq_full)
+    times = [t for _, _, t in seq]
+    # The same choices as the unlimited run until the budget ends the room ...
+    assert seq == seq_full[: len(seq)]
+    # ... every examination but the last ended within the budget (so the last started within
+    # it), and the room ended with the last examination, after the budget was spent.
+    assert times[-2] < budget <= times[-1]
+    longest = max(b - a for a, b in zip([0.0, *times], times, strict=False))
+    assert times[-1] <= budget + longest
+    (end,) = _end_times(tmp_path / "b.sqlite", cat, s.run)
+    assert end == pytest.approx(times[-1])
+    assert "the budget ended 1 of the 1 rooms" in "\n".join(s.lines())
+
+
+def test_resume_with_a_budget_equals_an_uninterrupted_run_with_it(tmp_path):
+    cat, layouts, rooms = _office_layouts()
+    kw = {"room_budget_s": 40.0, "strategy": "cost-hif"}
+    full, seq_full = _office_learn(tmp_path / "full.sqlite", cat, layouts, rooms=3, **kw)
+    n0 = sum(1 for r, _, _ in seq_full if r == 0)
+    assert full.rooms_left_early == 3 and n0 < len(rooms[room_seed(3, 0)].objects)
+    part = tmp_path / "part.sqlite"
+    # Interrupted inside room 0, then a call that ends room 0 exactly (rooms=1), then inside
+    # room 1 (replaying room 1 from the store's end time of room 0), then to the end.
+    _, seq1 = _office_learn(part, cat, layouts, max_examinations=n0 - 2, **kw)
+    s2, seq2 = _office_learn(part, cat, layouts, rooms=1, **kw)
+    assert s2.rooms == 1
+    _, seq3 = _office_learn(part, cat, layouts, rooms=3, max_examinations=3, **kw)
+    s4, seq4 = _office_learn(part, cat, layouts, rooms=3, **kw)
+    assert seq1 == seq_full[: n0 - 2]
+    assert seq2 == seq_full[:n0]  # replayed, then finished
+    assert seq3 == seq_full[n0 : n0 + 3]  # the run clock goes on from room 0's end time
+    assert seq4 == seq_full[n0:]
+    assert s4.rooms == 3 and s4.total_examinations == full.total_examinations
+    assert _end_times(part, cat, full.run) == pytest.approx(
+        _end_times(tmp_path / "full.sqlite", cat, full.run)
+    )
+    kb_full, kb_part = _kb(tmp_path / "full.sqlite", cat), _kb(part, cat)
+    for t in cat.type_names:
+        assert kb_full.n(t) == kb_part.n(t) and kb_full.nonzero(t) == kb_part.nonzero(t)
+    # The same store without the budget is another run.
+    s5, _ = _office_learn(part, cat, layouts, max_examinations=1, strategy="cost-hif")
+    assert s5.examinations == 1 and s5.run != full.run
+
+
+def test_bad_room_budget_is_a_one_line_error(tmp_path):
+    for bad in (0, -5.0, float("nan"), "soon"):
+        with pytest.raises(CtxsearchError, match="room budget must be"):
+            _learn(tmp_path, room_budget_s=bad)
+
+
+def test_resume_replays_an_object_that_could_not_be_examined(tmp_path):
+    # The lamp by the door is recognized first and chosen first, but no viewpoint sees its
+    # volume: it is skipped (no trial, nothing stored). A resumed run must skip it the same way.
+    cat = tiny_catalog(lamp=True)
+    lamp = ObjectInstance("Lamp", 4, (0.8, -1.5, 0.2), 0.0, (0.2, 0.2, 0.4))
+    base = tiny_room(room_seed(0, 0))
+    room = RoomLayout(
+        style=base.style,
+        seed=base.seed,
+        width=base.width,
+        depth=base.depth,
+        height=base.height,
+        door=base.door,
+        objects=(*base.objects, lamp),
+        support={**base.support, 4: None},
+    )
+
+    def go(path, **kw):
+        order = []
+        s = learn(
+            "tiny",
+            1,
+            path,
+            perception="oracle",
+            catalog=cat,
+            layouts=lambda i, sd: room,
+            progress=False,
+            on_choice=lambda kb, c: order.append(c.obj.type),
+            **kw,
+        )
+        return s, order
+
+    full, order_full = go(tmp_path / "full.sqlite")
+    assert order_full[0] == "Lamp" and full.examinations == 4
+    part, _ = go(tmp_path / "part.sqlite", max_examinations=2)
+    assert part.examinations == 2
+    rest, order_rest = go(tmp_path / "part.sqlite")
+    assert rest.examinations == 2 and rest.rooms == 1 and order_rest == order_full
+    kb_full, kb_part = _kb(tmp_path / "full.sqlite", cat), _kb(tmp_path / "part.sqlite", cat)
+    assert kb_part.n("Lamp") == kb_full.n("Lamp") == 0
+    for t in cat.type_names:
+        assert kb_full.n(t) == kb_part.n(t) and kb_full.nonzero(t) == kb_part.nonzero(t)

@@ -51,6 +51,8 @@ def test_learn_then_resume_then_kb_show(tmp_path, capsys):
         (["--perception", "lidar"], "invalid choice: 'lidar'"),
         (["--alpha", "1.5"], "expected a number in (0, 1)"),
         (["--max-examinations", "-3"], "expected a positive integer"),
+        (["--room-budget", "0"], "expected a positive number of seconds"),
+        (["--room-budget", "soon"], "expected a positive number of seconds"),
     ],
 )
 def test_learn_bad_flags_are_argparse_errors(tmp_path, capsys, argv, message):
@@ -108,37 +110,57 @@ def test_learn_unknown_style_and_bad_store_are_one_line_errors(tmp_path, capsys)
     assert bad.read_text() == "hello"
 
 
-def test_bench_learning_writes_its_three_files(tmp_path, capsys):
+def test_learn_with_a_room_budget(tmp_path, capsys):
+    kb = tmp_path / "office.sqlite"
+    base = ["learn", "--style", "office", "--rooms", "2", "--kb", str(kb), "--perception", "oracle"]
+    assert main([*base, "--room-budget", "45", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "2 rooms done (2 in this call)" in out
+    assert "room budget: 45 s simulated per room; the budget ended 2 of the 2 rooms" in out
+    n_budget = int(out.split(" in the store")[0].split()[-1])
+    # Without the budget it is another run in the same store: every room to completion.
+    assert main([*base, "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "room budget" not in out
+    n_now = int(out.split("examinations: ")[1].split()[0])
+    assert n_now > 2 * n_budget
+
+
+@pytest.mark.parametrize("budget", [None, "60"])
+def test_bench_learning_writes_its_three_files(tmp_path, capsys, budget):
     out = tmp_path / "bench"
-    assert (
-        main(
-            [
-                "bench",
-                "learning",
-                "--style",
-                "office",
-                "--rooms",
-                "1",
-                "--seeds",
-                "2",
-                "--strategies",
-                "hif,random",
-                "--out",
-                str(out),
-                "--truth-samples",
-                "8",
-            ]
-        )
-        == 0
-    )
+    argv = [
+        "bench",
+        "learning",
+        "--style",
+        "office",
+        "--rooms",
+        "1",
+        "--seeds",
+        "2",
+        "--strategies",
+        "hif,random",
+        "--out",
+        str(out),
+        "--truth-samples",
+        "8",
+    ]
+    assert main(argv + (["--room-budget", budget] if budget else [])) == 0
     printed = capsys.readouterr().out
     assert "| hif |" in printed and "| random |" in printed
+    assert "## Reading" in printed and "hif vs random: per examination hif is ahead in" in printed
     data = json.loads((out / "learning.json").read_text())
     assert data["style"] == "office" and data["seeds"] == [0, 1]
+    assert data["room_budget_s"] == (float(budget) if budget else None)
     for name in ("hif", "random"):
         s = data["strategies"][name]
         k = len(s["examinations"])
-        assert k > 10
+        assert k > (4 if budget else 10)
+        shares = [x for seed in s["examined_share"] for x in seed]
+        assert len(shares) == 2 and all(0 < x <= 1 for x in shares)
+        assert s["rooms_left_early"] == ([1, 1] if budget else [0, 0])
+        if budget:
+            assert max(shares) < 0.9
         for key in ("sim_s", "mean_width", "max_width", "mean_abs_error", "coverage"):
             assert len(s[key]) == k
         assert s["mean_width"][0] > s["mean_width"][-1]

@@ -211,7 +211,7 @@ def make_bad(kind: str, path: Path, catalog, other_catalog) -> str:
         return f"{other_catalog.fingerprint}.*{catalog.fingerprint}"
     if kind == "newer-schema":
         _newer_schema(path, catalog)
-        return "schema version 2 is newer"
+        return f"schema version {SCHEMA_VERSION + 1} is newer"
     if kind == "truncated-header":
         _big_store(path, catalog)
         path.write_bytes(path.read_bytes()[:60])
@@ -492,3 +492,84 @@ def test_rebuild_is_fast_for_100k_examinations(tmp_path, catalog):
     assert kb.total_examinations == 100_000
     print(f"knowledge_base() over 100k examinations: {elapsed:.3f} s")
     assert elapsed < 3.0, elapsed
+
+
+def test_examinations_iterates_rows_with_their_observations(store, catalog):
+    on = _desk_rel(catalog, "ON-TOP-OF")
+    exam(store, 1, "Desk", [(on, "Cup", 10), (on, "Book", 11)])
+    exam(store, 2, "Cup")
+    exam(store, 3, "Desk", [(on, "Cup", 12)], run="r2", seed=4)
+    rows = list(store.examinations())
+    assert [(e.id, e.run, e.object_id, e.type) for e in rows] == [
+        (1, "r1", 1, "Desk"),
+        (2, "r1", 2, "Cup"),
+        (3, "r2", 3, "Desk"),
+    ]
+    assert rows[0].related == ((on, "Cup", 10), (on, "Book", 11))
+    assert rows[1].related == () and rows[1].sim_time == 2.0 and rows[1].strategy == "hif"
+    assert rows[2].room_seed == 4 and rows[2].style == "office"
+    assert [e.id for e in store.examinations(run="r2")] == [3]
+    assert list(store.examinations(run="nobody")) == []
+
+
+def test_room_end_time(store):
+    assert store.room_end_time("r1", "office", 3) is None
+    store.mark_room("r1", "office", 3, "started")
+    assert store.room_end_time("r1", "office", 3) is None
+    store.mark_room("r1", "office", 3, "done", end_time=123.5)
+    assert store.room_end_time("r1", "office", 3) == 123.5
+    assert store.rooms() == [("r1", "office", 3, "done")]
+    with pytest.raises(CtxsearchError, match="end_time must be a number"):
+        store.mark_room("r1", "office", 3, "done", end_time="late")
+
+
+def _version1(path: Path, catalog) -> None:
+    """A store as schema version 1 wrote it: no rooms.end_time."""
+    with EvidenceStore.open(path, catalog) as s:
+        exam(s, 1, "Desk")
+        s.mark_room("r1", "office", 1, "done")
+    conn = sqlite3.connect(path)
+    conn.execute("ALTER TABLE rooms DROP COLUMN end_time")
+    conn.execute("UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    conn.commit()
+    conn.close()
+
+
+def test_version_1_store_is_read_and_upgraded_on_the_first_end_time(tmp_path, catalog):
+    path = tmp_path / "v1.sqlite"
+    _version1(path, catalog)
+    before = digest(path)
+    with EvidenceStore.open(path, catalog, create=False) as s:  # reading leaves it as it is
+        assert s.meta["schema_version"] == "1"
+        assert s.room_status("r1", "office", 1) == "done"
+        assert s.room_end_time("r1", "office", 1) is None
+        assert [e.object_id for e in s.examinations()] == [1]
+    assert digest(path) == before
+    with EvidenceStore.open(path, catalog, create=False) as s:
+        s.mark_room("r1", "office", 2, "started")  # a write without an end time: still v1
+    assert inspect_store(path)["schema_version"] == "1"
+    with EvidenceStore.open(path, catalog, create=False) as s:
+        s.mark_room("r1", "office", 2, "done", end_time=7.0)
+        assert s.meta["schema_version"] == str(SCHEMA_VERSION)
+        assert s.room_end_time("r1", "office", 2) == 7.0
+        assert s.room_end_time("r1", "office", 1) is None
+    with EvidenceStore.open(path, catalog, create=False) as s:
+        assert s.meta["schema_version"] == str(SCHEMA_VERSION)
+        assert s.rooms() == [("r1", "office", 1, "done"), ("r1", "office", 2, "done")]
+
+
+def test_merge_keeps_end_times_and_upgrades_a_version_1_output(tmp_path, catalog):
+    old, new = tmp_path / "old.sqlite", tmp_path / "new.sqlite"
+    _version1(old, catalog)
+    with EvidenceStore.open(new, catalog) as s:
+        exam(s, 5, "Cup", run="r2")
+        s.mark_room("r2", "office", 1, "done", end_time=42.0)
+    assert merge_stores(old, [new], catalog) == 1
+    with EvidenceStore.open(old, catalog, create=False) as s:
+        assert s.meta["schema_version"] == str(SCHEMA_VERSION)
+        assert s.room_end_time("r2", "office", 1) == 42.0
+        assert s.room_end_time("r1", "office", 1) is None
+    out = tmp_path / "out.sqlite"
+    assert merge_stores(out, [new, tmp_path / "old.sqlite"], catalog) == 3
+    with EvidenceStore.open(out, catalog, create=False) as s:
+        assert s.room_end_time("r2", "office", 1) == 42.0
