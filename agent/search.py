@@ -32,16 +32,20 @@ class with a ``name`` and ``run(ctx) -> SearchResult``:
   bound on time to find.
 
 Which value of the interval ranks candidates is ``rank`` (``low``, ``p0`` or ``high``; default
-``low``, the lower bound, chosen by measurement). ``ctxsearch bench search --policies
-exhaustive,location@low,location@p0,location@high,indirect@low,indirect@p0,indirect@high
---episodes 80`` on three office stores (hif, 30 rooms oracle perception: 1105 examinations; 5
-rooms oracle: 194; 6 rooms camera: 227) gave ``location`` median / mean seconds to find of
-1.6/5.3, 1.6/5.8, 1.7/6.1 (30 rooms), 1.6/5.8, 1.8/6.4, 3.1/7.8 (5 rooms) and 1.4/4.6, 1.7/6.4,
-2.9/7.8 (6 camera rooms) for low / p0 / high: the lower bound is best or tied everywhere, and its
-margin grows as the evidence thins, because an upper bound ranks barely-examined relations
-(wide intervals) too high. For ``indirect`` the picture is mixed (the upper bound's optimism
-makes it take the detour more often, which paid off in median but not always in mean); it uses
-the same default.
+``low``, the lower bound, chosen by measurement). ``ctxsearch bench search --episodes 80
+--policies exhaustive,location@low,location@p0,location@high,indirect@low,indirect@p0,indirect@high``
+on three office stores learned by hif (30 rooms, oracle perception: 1105 examinations; 5 rooms
+oracle: 194; 6 rooms camera: 227), median / mean simulated seconds to find, low / p0 / high:
+
+- ``location``: 1.6/5.3, 1.6/5.8, 1.7/6.1 (30 rooms); 1.6/5.7, 1.8/6.4, 3.1/7.8 (5 rooms);
+  1.4/4.6, 1.7/6.4, 2.9/7.8 (6 camera rooms).
+- ``indirect``: 3.0/6.2, 2.9/5.8, 2.9/6.8; 3.0/5.7, 3.1/6.3, 3.1/6.4; 3.0/5.8, 2.5/6.5, 2.2/7.2.
+- (``exhaustive``: 5.9/8.1 on the same episodes.)
+
+The lower bound is best or tied for ``location`` everywhere and its margin grows as evidence
+thins: an upper bound ranks barely-examined relations (wide intervals) too high. For
+``indirect`` the differences are within noise (low has the best or near-best mean); it uses the
+same default.
 """
 
 from __future__ import annotations
@@ -374,14 +378,17 @@ class SearchContext:
         *,
         tilts: Sequence[float] = ss.SWEEP_TILTS,
         until: Callable[[], bool] | None = None,
-        rounds: int = 3,
+        rounds: int = 6,
         purpose: str = "sweep",
     ) -> None:
         """Exhaustive coverage for ``type_name`` (default: the target): tour the coverage
         viewpoints and sweep at each (see the module docstring). Returns when ``until()`` turns
-        true after an image, or when nothing coverable is left."""
+        true after an image, or when nothing coverable is left: a round whose sweeps found no
+        image worth ``SWEEP_MIN_SHARE`` of what is unseen is followed by one that takes every
+        image showing at least a few unseen points."""
         name = type_name or self.target
         rng = self.range_of(name)
+        share = ss.SWEEP_MIN_SHARE
         for _ in range(rounds):
             unseen = self.seen.unseen(rng)
             sites = ss.coverage_viewpoints(
@@ -401,11 +408,13 @@ class SearchContext:
                     continue
                 if not self.drive_to(xy):
                     continue
-                took += self.sweep(rng, tilts=tilts, purpose=purpose, until=until)
+                took += self.sweep(rng, tilts=tilts, purpose=purpose, until=until, share=share)
                 if until is not None and until():
                     return
             if took == 0:
-                return
+                if share == 0.0:
+                    return
+                share = 0.0
 
     def sweep(
         self,
@@ -414,27 +423,32 @@ class SearchContext:
         tilts: Sequence[float] = ss.SWEEP_TILTS,
         purpose: str = "sweep",
         until: Callable[[], bool] | None = None,
+        share: float = ss.SWEEP_MIN_SHARE,
     ) -> int:
         """A pan/tilt sweep here, skipping images predicted to add little (and stopping early when
         ``until()`` turns true after an image); images taken."""
         pose = self.body.pose()
+        cam = np.array([pose.x, pose.y, self.spec.camera_height])
+        unseen = self.seen.unseen(rng)
         plan = ss.sweep_gazes(
             pose.xy,
             pose.yaw + pose.pan,
             self.seen.points,
-            self.seen.unseen(rng),
+            unseen,
             self.spec,
             rng,
             tilts=tilts,
+            min_share=share,
         )
+        near = np.linalg.norm(self.seen.points - cam, axis=1) <= rng
+        need = max(8, int(math.ceil(share * np.count_nonzero(unseen & near))))
         n = 0
         for g in plan:
             # Re-check against what the images so far really showed.
-            cam = np.array([pose.x, pose.y, self.spec.camera_height])
             m = ss.frustum_mask(
                 cam, g.heading, g.tilt, self.seen.points, self.spec, rng
             ) & self.seen.unseen(rng)
-            if m.sum() < 8:
+            if m.sum() < need:
                 continue
             self.look_heading(g.heading, g.tilt, purpose)
             n += 1

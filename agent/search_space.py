@@ -38,7 +38,12 @@ Coverage (exhaustive search and the fallback). ``coverage_viewpoints``: base pos
 0.5 m lattice of reachable free cells, chosen by greedy set cover of the unseen points within
 the type's effective range, then ordered by a nearest-neighbour tour (grid distances) improved
 by 2-opt. At each viewpoint the head sweeps (``sweep_gazes``): headings 60 degrees apart and
-three tilts, each kept only if its frustum still holds enough unseen points.
+three tilts, each kept only if its frustum still holds at least ``SWEEP_MIN_SHARE`` (10%) of the
+points unseen within range there (and 8 points). That threshold was measured: 0 (any image that
+shows 8 new points) gave exhaustive a median of 10.8 s over 40 office episodes, 0.05 6.5 s, 0.1
+5.9 s, 0.15 7.2 s; the best value makes the baseline as strong as we could make it. A round of
+the tour whose sweeps take no image is followed by one without the share threshold, so the
+coverage still completes.
 
 Detectability-driven search (``indirect_plan``). With nothing known, looking for T directly
 costs about half a coverage tour at T's range, C_T = cover(r_T) / 2. Looking first for an
@@ -77,6 +82,7 @@ MIN_REGION_HALF = 0.1  # m: thin volumes (TOUCHING-BOTTOM-OF-CUP) are thickened 
 MERGE_JACCARD = 0.6
 SWEEP_HEADING_STEP = math.radians(60.0)
 SWEEP_TILTS = (-0.95, -0.35, 0.25)
+SWEEP_MIN_SHARE = 0.1  # an image of a sweep must show this share of what is unseen around
 
 
 # =========================================================================== detectability
@@ -644,16 +650,20 @@ def sweep_gazes(
     min_gain: int = 8,
     tilts: Sequence[float] = SWEEP_TILTS,
     heading_step: float = SWEEP_HEADING_STEP,
+    min_share: float | None = None,
 ) -> list[SweepGaze]:
-    """The images of a pan/tilt sweep at ``xy`` worth taking (each predicted to show at least
-    ``min_gain`` unseen points within ``max_range``, counting the earlier images of the sweep),
-    ordered as one turn starting from ``current_heading``."""
+    """The images of a pan/tilt sweep at ``xy`` worth taking, ordered as one turn starting from
+    ``current_heading``: each is predicted to show at least ``min_gain`` unseen points within
+    ``max_range`` and ``min_share`` (default ``SWEEP_MIN_SHARE``) of those unseen here, counting
+    the earlier images of the sweep."""
     cam = np.array([xy[0], xy[1], spec.camera_height])
     todo = unseen.copy()
     near = np.linalg.norm(points - cam, axis=1) <= max_range
     todo &= near
     if todo.sum() < min_gain:
         return []
+    share = SWEEP_MIN_SHARE if min_share is None else min_share
+    min_gain = max(min_gain, int(math.ceil(share * todo.sum())))
     n_h = max(1, int(round(2 * math.pi / heading_step)))
     headings = [current_heading + i * 2 * math.pi / n_h for i in range(n_h)]
     out: list[SweepGaze] = []

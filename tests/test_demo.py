@@ -21,7 +21,9 @@ def test_demo_writes_its_files_and_reruns(tmp_path):
     assert any(line.strip().startswith("rerun ") and "learn.rrd" in line for line in lines)
     # A second run reuses the complete store and redoes the searches.
     lines2: list[str] = []
-    res2 = run_demo(out, rooms=1, quick=True, perception="oracle", progress=False, echo=lines2.append)
+    res2 = run_demo(
+        out, rooms=1, quick=True, perception="oracle", progress=False, echo=lines2.append
+    )
     assert not res2.learned_now
     assert any("reusing" in line for line in lines2)
     assert (out / "learn.rrd").is_file() and (out / "search.rrd").is_file()
