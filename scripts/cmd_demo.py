@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+from scripts import argtypes
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", type=Path, default=Path("demo"), help="output directory (default: demo)"
     )
-    p.add_argument("--rooms", type=_positive_int, default=6, help="rooms to learn in (default: 6)")
+    p.add_argument(
+        "--rooms", type=argtypes.positive_int, default=6, help="rooms to learn in (default: 6)"
+    )
     p.add_argument(
         "--quick", action="store_true", help="at most 2 learning rooms and a shorter search budget"
     )

@@ -10,6 +10,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+from scripts import argtypes
+
 SHOW_EXAMPLES = """\
 examples:
   ctxsearch kb show demo/kb.sqlite                  intervals with y > 0, best lower bound first
@@ -44,26 +46,6 @@ def _emit(text: str) -> None:
 def _wrap(text: str) -> str:
     """A description paragraph wrapped for RawDescriptionHelpFormatter (which keeps newlines)."""
     return textwrap.fill(" ".join(text.split()), width=88)
-
-
-def _alpha(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {v}")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
 
 
 def _sizes(text: str) -> tuple[int, ...]:
@@ -119,7 +101,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     show.add_argument("--all", action="store_true", help="also the rows with y = 0")
     show.add_argument("--json", action="store_true", help="print a JSON list of rows instead")
     show.add_argument(
-        "--alpha", type=_alpha, default=None, help="alpha of the intervals (default: the store's)"
+        "--alpha",
+        type=argtypes.alpha,
+        default=None,
+        help="alpha of the intervals (default: the store's)",
     )
     _add_catalog_arg(show)
     show.set_defaults(func=run_show)
@@ -138,7 +123,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     stats.add_argument("path", type=Path, metavar="PATH", help="knowledge store (SQLite)")
     stats.add_argument("--json", action="store_true", help="print JSON instead")
     stats.add_argument(
-        "--alpha", type=_alpha, default=None, help="alpha of the intervals (default: the store's)"
+        "--alpha",
+        type=argtypes.alpha,
+        default=None,
+        help="alpha of the intervals (default: the store's)",
     )
     _add_catalog_arg(stats)
     stats.set_defaults(func=run_stats)
@@ -186,9 +174,11 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="comma-separated numbers of types (default: 100,1000,10000,30000)",
     )
-    p.add_argument("--reps", type=_positive_int, default=21, help="repetitions (default: 21)")
     p.add_argument(
-        "--candidates", type=_positive_int, default=50, help="candidate types (default: 50)"
+        "--reps", type=argtypes.positive_int, default=21, help="repetitions (default: 21)"
+    )
+    p.add_argument(
+        "--candidates", type=argtypes.positive_int, default=50, help="candidate types (default: 50)"
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.set_defaults(func=run_bench)

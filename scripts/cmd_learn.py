@@ -5,44 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
-
-
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a positive number of seconds, got {text!r}"
-        ) from None
-    if not (v > 0 and v != float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text}")
-    return v
-
+from scripts import argtypes
 
 ROOM_BUDGET_HELP = (
     "simulated seconds the robot may spend in each room: when they are spent it leaves the room "
     "(the examination in flight completes), whatever is left unexamined (default: no limit, "
     "every room to completion as in the paper's Figure 2)"
 )
-
-
-def _alpha(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {v}")
-    return v
 
 
 def _strategy_names() -> list[str]:
@@ -65,7 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--style", required=True, help="room style name (see assets/styles/) or TOML path"
     )
-    p.add_argument("--rooms", required=True, type=_positive_int, help="how many rooms to learn in")
+    p.add_argument(
+        "--rooms", required=True, type=argtypes.positive_int, help="how many rooms to learn in"
+    )
     p.add_argument(
         "--kb", required=True, type=Path, help="evidence store (SQLite); created or resumed"
     )
@@ -83,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--alpha",
-        type=_alpha,
+        type=argtypes.alpha,
         default=None,
         help="confidence level of the intervals (default: the store's, 0.10 for a new one)",
     )
@@ -99,13 +70,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--max-examinations",
-        type=_positive_int,
+        type=argtypes.positive_int,
         default=None,
         metavar="K",
         help="stop after K examinations (resume later with the same command)",
     )
     p.add_argument(
-        "--room-budget", type=_seconds, default=None, metavar="SECONDS", help=ROOM_BUDGET_HELP
+        "--room-budget",
+        type=argtypes.seconds,
+        default=None,
+        metavar="SECONDS",
+        help=ROOM_BUDGET_HELP,
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_learn)
@@ -147,8 +122,12 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "DIR/learning.md and DIR/learning.png.",
     )
     p.add_argument("--style", default="office", help="room style (default: office)")
-    p.add_argument("--rooms", type=_positive_int, default=20, help="rooms per run (default: 20)")
-    p.add_argument("--seeds", type=_positive_int, default=5, help="seeds per strategy (default: 5)")
+    p.add_argument(
+        "--rooms", type=argtypes.positive_int, default=20, help="rooms per run (default: 20)"
+    )
+    p.add_argument(
+        "--seeds", type=argtypes.positive_int, default=5, help="seeds per strategy (default: 5)"
+    )
     p.add_argument(
         "--strategies",
         default=",".join(_strategy_names()),
@@ -163,13 +142,19 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--truth-samples",
-        type=_positive_int,
+        type=argtypes.positive_int,
         default=300,
         help="rooms sampled for the ground truth (default: 300)",
     )
-    p.add_argument("--alpha", type=_alpha, default=0.10, help="interval confidence (default: 0.10)")
     p.add_argument(
-        "--room-budget", type=_seconds, default=None, metavar="SECONDS", help=ROOM_BUDGET_HELP
+        "--alpha", type=argtypes.alpha, default=0.10, help="interval confidence (default: 0.10)"
+    )
+    p.add_argument(
+        "--room-budget",
+        type=argtypes.seconds,
+        default=None,
+        metavar="SECONDS",
+        help=ROOM_BUDGET_HELP,
     )
     p.set_defaults(func=run_bench)
 

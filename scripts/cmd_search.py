@@ -5,25 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
-
-
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {v}")
-    return v
+from scripts import argtypes
 
 
 def _policy_names() -> list[str]:
@@ -38,7 +20,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
     p.add_argument(
         "--budget-seconds",
-        type=_seconds,
+        type=argtypes.seconds,
         default=DEFAULT_BUDGET_S,
         metavar="B",
         help=f"simulated seconds before an episode counts as failed (default: {DEFAULT_BUDGET_S:.0f})",
@@ -60,7 +42,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--truth-samples",
-        type=_positive_int,
+        type=argtypes.positive_int,
         default=200,
         help="rooms sampled for the ground truth when --truth is not given (default: 200)",
     )
@@ -145,7 +127,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--style", default="office", help="room style (default: office)")
     p.add_argument(
-        "--episodes", type=_positive_int, default=40, help="paired episodes (default: 40)"
+        "--episodes", type=argtypes.positive_int, default=40, help="paired episodes (default: 40)"
     )
     p.add_argument(
         "--policies",

@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+from scripts import argtypes
 
 
 def register_bench(sub: argparse._SubParsersAction) -> None:
@@ -26,12 +18,20 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json and DIR/bench_sim.md.",
     )
     p.add_argument("--out", required=True, type=Path, help="output directory")
-    p.add_argument("--rooms", type=_positive_int, default=5, help="rooms to build (default: 5)")
-    p.add_argument("--gazes", type=_positive_int, default=100, help="gazes per room (default: 100)")
+    p.add_argument(
+        "--rooms", type=argtypes.positive_int, default=5, help="rooms to build (default: 5)"
+    )
+    p.add_argument(
+        "--gazes", type=argtypes.positive_int, default=100, help="gazes per room (default: 100)"
+    )
     p.add_argument("--style", default="office", help="room style (default: office)")
     p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
-    p.add_argument("--width", type=_positive_int, default=320, help="image width (default: 320)")
-    p.add_argument("--height", type=_positive_int, default=240, help="image height (default: 240)")
+    p.add_argument(
+        "--width", type=argtypes.positive_int, default=320, help="image width (default: 320)"
+    )
+    p.add_argument(
+        "--height", type=argtypes.positive_int, default=240, help="image height (default: 240)"
+    )
     p.set_defaults(func=run_bench)
 
 

@@ -9,15 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+from scripts import argtypes
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--style", required=True, help="room style name (see assets/styles/) or TOML path"
     )
     p.add_argument(
-        "--samples", required=True, type=_positive_int, help="how many rooms to generate"
+        "--samples", required=True, type=argtypes.positive_int, help="how many rooms to generate"
     )
     p.add_argument("--out", required=True, type=Path, help="output JSON file")
     p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
