@@ -43,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
-    bench = sub.add_parser("bench", help="run a benchmark (prints a table, writes JSON/Markdown/plot)")
+    bench = sub.add_parser(
+        "bench", help="run a benchmark (prints a table, writes JSON/Markdown/plot)"
+    )
     bench_sub = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
     for name in BENCH_MODULES:
         importlib.import_module(name).register_bench(bench_sub)
@@ -66,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("ctxsearch: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `ctxsearch kb show ... | head`
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

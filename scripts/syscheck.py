@@ -18,7 +18,10 @@ def main() -> int:
         return 1
     for lib in ("EGL", "GL"):
         if ctypes.util.find_library(lib) is None:
-            print(f"ctxsearch: lib{lib} (Mesa) not found, needed for off-screen rendering; install it: {APT}", file=sys.stderr)
+            print(
+                f"ctxsearch: lib{lib} (Mesa) not found, needed for off-screen rendering; install it: {APT}",
+                file=sys.stderr,
+            )
             return 1
     return 0
 
