@@ -63,6 +63,7 @@ from agent.navigation import OccupancyGrid, nearest_free, plan_path
 from agent.strategies import Choice, Strategy
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.rooms import door_entry
 from knowledge import geometry
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
@@ -861,15 +862,7 @@ class _NoCapture:
 def start_pose(layout: RoomLayout, grid: OccupancyGrid) -> RobotPose:
     """Where the robot enters: the free cell nearest a point 0.6 m inside the door, facing into
     the room (in the largest free region if the door's side is cut off)."""
-    door = layout.door
-    hw, hd = layout.width / 2, layout.depth / 2
-    inward = {
-        "north": (door.center, hd - 0.6, -math.pi / 2),
-        "south": (door.center, -hd + 0.6, math.pi / 2),
-        "east": (hw - 0.6, door.center, math.pi),
-        "west": (-hw + 0.6, door.center, 0.0),
-    }
-    x, y, yaw = inward.get(door.wall, (0.0, 0.0, 0.0))
+    x, y, yaw = door_entry(layout)
     labels = grid.labels
     sizes = np.bincount(labels.ravel())
     sizes[0] = 0

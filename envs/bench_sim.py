@@ -124,7 +124,7 @@ def run(
         with world:
             n_geoms.append(world.physics.model.ngeom)
             n_objects.append(len(lay.objects))
-            world.reset_pose(start_pose(lay, world.spec))
+            world.reset_pose(start_pose(lay))
             renderer_ms.append(_ms(lambda world=world: world._renderer(width, height))[0])
             targets = _gaze_targets(rng, gazes, world)
             for k, (pan, tilt) in enumerate(np.vstack([targets[:WARMUP_GAZES], targets])):

@@ -9,7 +9,6 @@ position-servo targets x, y, yaw, pan, tilt) and is what ``envs.world.World`` dr
 
 from __future__ import annotations
 
-import math
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
@@ -22,24 +21,15 @@ from envs.entities import RoomObjects
 from envs.layout import RoomLayout
 from envs.robot import Robot
 from envs.robot_spec import RobotPose, RobotSpec
+from envs.rooms import door_entry
 from knowledge.catalog import Catalog, load_catalog
 
 CONTROL_TIMESTEP = 0.05  # s, composer.Environment's agent step (5 physics steps)
 
 
-def start_pose(layout: RoomLayout, spec: RobotSpec | None = None) -> RobotPose:
-    """Where an episode starts: just inside the door, facing into the room."""
-    spec = spec or RobotSpec()
-    hw, hd = layout.width / 2, layout.depth / 2
-    inset = spec.clearance + 0.1
-    door = layout.door
-    if door.wall == "north":
-        return RobotPose(door.center, hd - inset, -math.pi / 2)
-    if door.wall == "south":
-        return RobotPose(door.center, -hd + inset, math.pi / 2)
-    if door.wall == "east":
-        return RobotPose(hw - inset, door.center, math.pi)
-    return RobotPose(-hw + inset, door.center, 0.0)
+def start_pose(layout: RoomLayout) -> RobotPose:
+    """Where an episode starts: just inside the door, facing into the room (``door_entry``)."""
+    return RobotPose(*door_entry(layout))
 
 
 class RoomTask(composer.Task):
@@ -128,7 +118,7 @@ class RoomTask(composer.Task):
         self, physics: mjcf.Physics, random_state: np.random.RandomState
     ) -> None:
         """Put the robot at the start pose (inside the door, facing the room), head level."""
-        self._robot.set_pose(physics, start_pose(self.layout, self._robot.spec))
+        self._robot.set_pose(physics, start_pose(self.layout))
 
     def get_reward(self, physics: mjcf.Physics) -> float:
         return 0.0

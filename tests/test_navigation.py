@@ -179,7 +179,7 @@ def test_generated_rooms_paths_clear_and_connected(catalog, style_name):
     for seed in range(3):
         layout = generate_room(style, seed, catalog)
         grid = OccupancyGrid.from_layout(layout, SPEC)
-        start = start_pose(layout, SPEC)
+        start = start_pose(layout)
         assert grid.is_free(start.xy)
         reach = grid.reachable_mask(start.xy)
         assert reach.sum() >= 0.95 * grid.free.sum()  # the robot can get (almost) everywhere
