@@ -21,7 +21,17 @@ few straight segments. The search is Dijkstra's algorithm with a binary heap, ru
 ``scipy.sparse.csgraph`` on a graph built once per grid: one search from the robot's position
 gives the driving distance to *every* cell (the view planner ranks many candidate viewpoints by
 it) and every path from there, in about a millisecond for a 6 x 5 m room at 5 cm cells, where a
-pure-Python A* needed about 10 ms when the straight route was blocked. Line of sight is checked by
+pure-Python A* needed about 10 ms when the straight route was blocked.
+
+Caches. A grid is treated as immutable once built (nothing may change ``free`` afterwards): its
+graph, connected components, candidate lattices and the results of its last
+``SEARCH_CACHE_SIZE`` searches (an LRU keyed by the start cell) are computed on first use and kept
+for the grid's lifetime; they go away with the grid (one per room). The cached distance and
+predecessor arrays are read-only, so a caller cannot corrupt them. The robot returns to the same
+few cells often (the strategies' travel estimates, the view planner's cost of every gaze, the
+drive that executes it), and a search costs about a millisecond, so most queries are hits.
+
+Line of sight is checked by
 sampling the segment every quarter cell, so the guarantee is: every point of a returned path
 lies in a free cell, i.e. within one cell diagonal of a point at least ``clearance`` from every
 obstacle, hence at least ``clearance - 0.71 * resolution`` from it (with the default 5 cm margin
@@ -31,6 +41,7 @@ and 5 cm cells the base itself never touches an obstacle).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -44,6 +55,7 @@ from envs.robot_spec import RobotSpec
 from knowledge.geometry import Box
 
 _SQRT2 = math.sqrt(2.0)
+SEARCH_CACHE_SIZE = 16  # Dijkstra results kept per grid (least recently used dropped first)
 
 
 @dataclass
@@ -60,7 +72,12 @@ class OccupancyGrid:
     clearance: float = 0.0
     _labels: np.ndarray | None = field(default=None, init=False, repr=False)
     _graph: csr_matrix | None = field(default=None, init=False, repr=False)
-    _field: tuple[int, np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
+    _searches: OrderedDict[int, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=OrderedDict, init=False, repr=False, compare=False
+    )
+    _lattices: dict[int, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     # ----------------------------------------------------------------- construction
     @classmethod
@@ -207,18 +224,39 @@ class OccupancyGrid:
         return self._graph
 
     def _search(self, start_cell: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-        """Dijkstra from one cell: (distances (H*W,) in metres, predecessors (H*W,)); the last
-        search is cached, so a distance query and a path from the same start cost one search."""
+        """Dijkstra from one cell: (distances (H*W,) in metres, predecessors (H*W,)), both
+        read-only. The last ``SEARCH_CACHE_SIZE`` searches of this grid are kept (LRU by start
+        cell), so distance queries and paths from a cell the robot was at recently cost nothing."""
         w = self.shape[1]
         s = start_cell[0] * w + start_cell[1]
-        if self._field is None or self._field[0] != s:
-            dist, pred = dijkstra(self.graph, indices=s, return_predecessors=True)
-            self._field = (s, dist, pred)
-        return self._field[1], self._field[2]
+        hit = self._searches.get(s)
+        if hit is not None:
+            self._searches.move_to_end(s)
+            return hit
+        dist, pred = dijkstra(self.graph, indices=s, return_predecessors=True)
+        dist.flags.writeable = False
+        pred.flags.writeable = False
+        self._searches[s] = (dist, pred)
+        if len(self._searches) > SEARCH_CACHE_SIZE:
+            self._searches.popitem(last=False)
+        return dist, pred
+
+    def lattice_cells(self, step: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the free cells on the lattice of every ``step``-th row and column
+        (offset ``step // 2``), in row-major order; cached per step. Read-only arrays."""
+        hit = self._lattices.get(step)
+        if hit is None:
+            lattice = np.zeros(self.shape, bool)
+            lattice[step // 2 :: step, step // 2 :: step] = True
+            rows, cols = np.nonzero(self.free & lattice)
+            rows.flags.writeable = False
+            cols.flags.writeable = False
+            hit = self._lattices[step] = (rows, cols)
+        return hit
 
     def distances_from(self, xy: np.ndarray) -> np.ndarray:
         """(H, W) driving distance in metres along the grid from the free cell nearest ``xy`` to
-        every cell (inf where unreachable or blocked)."""
+        every cell (inf where unreachable or blocked). Read-only (a view of the cached search)."""
         start = nearest_free(self, xy)
         if start is None:
             return np.full(self.shape, np.inf)
@@ -306,7 +344,8 @@ def plan_path(grid: OccupancyGrid, start_xy: np.ndarray, goal_xy: np.ndarray) ->
     goal = np.asarray(goal_xy, float).reshape(2)
     if not grid.is_free(goal):
         return None
-    if np.allclose(start, goal, atol=1e-9):
+    # np.allclose(start, goal, atol=1e-9) without its overhead
+    if all(abs(a - b) <= 1e-9 + 1e-5 * abs(b) for a, b in zip(start, goal, strict=True)):
         return goal[None, :].copy()
     prefix: list[np.ndarray] = [start]
     if not grid.is_free(start):
@@ -324,11 +363,12 @@ def plan_path(grid: OccupancyGrid, start_xy: np.ndarray, goal_xy: np.ndarray) ->
     if not np.isfinite(dist[j]):
         return None
     cells = [j]
-    while pred[j] >= 0:
-        j = int(pred[j])
+    while (j := int(pred[j])) >= 0:
         cells.append(j)
-    cells.reverse()
-    pts = np.array([grid.to_xy(*divmod(i, w)) for i in cells])
+    rows, cols = np.divmod(np.array(cells[::-1]), w)
+    pts = np.column_stack(
+        [grid.x0 + (cols + 0.5) * grid.resolution, grid.y0 + (rows + 0.5) * grid.resolution]
+    )
     # Replace the first and last cell centres by the exact start and goal (both lie in those cells).
     pts[0], pts[-1] = start, goal
     pts = _shortcut(grid, pts)

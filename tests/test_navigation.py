@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 
+import agent.navigation as navigation
 from agent.navigation import OccupancyGrid, nearest_free, obstacle_boxes, plan_path
 from envs.layout import Door, RoomLayout
 from envs.parts import world_parts
@@ -171,6 +172,41 @@ def test_nearest_free_and_distances():
     dist = grid.distances_from(np.array([2.2, 1.8]))
     r, c = grid.to_cell(np.array([2.2, 1.3]))
     assert dist[r, c] == pytest.approx(0.5, abs=0.06)
+
+
+def test_search_cache_is_exact_read_only_and_bounded(monkeypatch):
+    monkeypatch.setattr(navigation, "SEARCH_CACHE_SIZE", 3)
+    grid = OccupancyGrid.from_layout(OFFICE, SPEC)
+    fresh = OccupancyGrid.from_layout(OFFICE, SPEC)
+    xs = [
+        np.array([2.22, 1.82]),
+        np.array([-2.4, -2.0]),
+        np.array([2.2, -2.2]),
+        np.array([-0.8, 0.0]),
+    ]
+    first = grid.distances_from(xs[0])
+    assert np.shares_memory(grid.distances_from(xs[0] + 0.01), first)  # same cell: a cache hit
+    with pytest.raises(ValueError):
+        first[0, 0] = 1.0  # cached fields are read-only
+    for x in xs[1:]:
+        grid.distances_from(x)
+    assert len(grid._searches) == 3  # the least recently used search was dropped
+    for x in xs:  # hits, misses and evictions all give what a fresh search gives
+        np.testing.assert_array_equal(grid.distances_from(x), fresh.distances_from(x))
+        fresh._searches.clear()
+    goal = np.array([-2.4, 2.0])
+    np.testing.assert_array_equal(plan_path(grid, xs[1], goal), plan_path(fresh, xs[1], goal))
+
+
+def test_lattice_cells():
+    grid = OccupancyGrid.from_layout(OFFICE, SPEC)
+    rows, cols = grid.lattice_cells(6)
+    lattice = np.zeros(grid.shape, bool)
+    lattice[3::6, 3::6] = True
+    want_r, want_c = np.nonzero(grid.free & lattice)
+    np.testing.assert_array_equal(rows, want_r)
+    np.testing.assert_array_equal(cols, want_c)
+    assert grid.lattice_cells(6)[0] is rows  # cached
 
 
 @pytest.mark.parametrize("style_name", available_styles())

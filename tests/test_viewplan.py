@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+import agent.viewplan as viewplan_module
 from agent.navigation import OccupancyGrid, plan_path
 from agent.viewplan import (
     Gaze,
@@ -261,6 +262,75 @@ def test_execute_gaze_drives_aims_and_captures(catalog):
     world2 = FakeWorld(final)
     execute_gaze(world2, grid, gaze)
     assert [c[0] for c in world2.calls] == ["head", "capture"]
+
+
+def test_execute_gaze_reuses_the_planned_path_only_from_its_start(catalog, monkeypatch):
+    grid = OccupancyGrid.from_layout(OFFICE, SPEC)
+    vol = relation_volume(catalog.relation("IN-FRONT-OF-DESK"), DESK)
+    start = RobotPose(-2.5, -2.0, 0.0)
+    gaze = plan_gazes(grid, vol, start, SPEC)[0]
+    assert gaze.path is not None and len(gaze.path) >= 2
+    planned: list[tuple] = []
+
+    def counting_plan_path(g, a, b):
+        planned.append((tuple(a), tuple(b)))
+        return plan_path(g, a, b)
+
+    monkeypatch.setattr(viewplan_module, "plan_path", counting_plan_path)
+    world = FakeWorld(start)
+    execute_gaze(world, grid, gaze)
+    assert planned == []  # standing where gaze.path starts: the planned path is driven
+    assert world.calls[0][1] is gaze.path
+    # A robot standing a little off (a physical drive ends near, not at, a point) replans.
+    off = RobotPose(-2.5 + 1e-4, -2.0, 0.0)
+    world2 = FakeWorld(off)
+    execute_gaze(world2, grid, gaze)
+    assert len(planned) == 1
+    np.testing.assert_allclose(world2.calls[0][1][0], off.xy)
+    np.testing.assert_allclose(world2.calls[0][1][-1], gaze.pose.xy)
+
+
+def _visibility_reference(cams, heading, tilt, points, width, height, max_distance):
+    """The frustum test written plainly: camera axes stacked, dot products by einsum."""
+    ch, sh, ct, st = np.cos(heading), np.sin(heading), np.cos(tilt), np.sin(tilt)
+    fwd = np.stack([ct * ch, ct * sh, st], -1)
+    right = np.stack([sh, -ch, np.zeros_like(ch)], -1)
+    up = np.stack([-st * ch, -st * sh, ct], -1)
+    rel = points[None, :, :] - cams[:, None, :]
+    z = np.einsum("ctk,cnk->ctn", fwd, rel)
+    x = np.einsum("ctk,cnk->ctn", right, rel)
+    y = np.einsum("ctk,cnk->ctn", up, rel)
+    tan_y = math.tan(math.radians(SPEC.fovy_deg) / 2)
+    tan_x = tan_y * width / height
+    dist = np.linalg.norm(rel, axis=-1)[:, None, :]
+    return (z > 0.05) & (np.abs(x) <= z * tan_x) & (np.abs(y) <= z * tan_y) & (dist <= max_distance)
+
+
+@pytest.mark.parametrize("block", [1, 700, 65536])
+def test_visibility_matches_the_plain_frustum_test(monkeypatch, block):
+    monkeypatch.setattr(viewplan_module, "_VISIBILITY_BLOCK", block)
+    rng = np.random.default_rng(3)
+    cams = np.column_stack([rng.uniform(-3, 3, (40, 2)), np.full(40, SPEC.camera_height)])
+    aims = rng.uniform([-2, -2, 0], [2, 2, 1.5], (5, 3))
+    points = rng.uniform([-2.5, -2.5, 0], [2.5, 2.5, 2], (120, 3))
+    heading, tilt = viewplan_module._aim_angles(cams, aims, SPEC)
+    got = viewplan_module._visibility(cams, heading, tilt, points, SPEC, 320, 240, 2.5)
+    want = _visibility_reference(cams, heading, tilt, points, 320, 240, 2.5)
+    assert got.shape == (40, 5, 120) and 0 < want.sum() < want.size
+    np.testing.assert_array_equal(got, want)
+
+
+def test_unit_weight_gains_are_the_weighted_formula():
+    # With unit weights the planner counts new points (a 0/1 matrix-vector product); that must
+    # equal, bit for bit, the general sum of max(w - cov, 0) it uses for other weights.
+    rng = np.random.default_rng(4)
+    seen_w = (rng.random((300, 173)) < 0.4).astype(np.float32)
+    hit = rng.random(173) < 0.3
+    cov = hit.astype(np.float32)
+    unit = viewplan_module._gains(seen_w, cov, hit, 173, unit=True)
+    general = viewplan_module._gains(seen_w, cov, hit, 173, unit=False)
+    assert unit.dtype == general.dtype == np.float32
+    np.testing.assert_array_equal(unit, general)
 
 
 def test_pinhole_view_is_a_camera():
