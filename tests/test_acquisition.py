@@ -7,16 +7,10 @@ import math
 
 import pytest
 
-from agent.acquisition import (
-    KinematicBody,
-    OraclePerception,
-    group_volumes,
-    learn,
-    relation_boxes,
-    room_seed,
-    start_pose,
-)
+from agent.acquisition import learn, room_seed, start_pose
+from agent.exam_volumes import group_volumes, relation_boxes
 from agent.navigation import OccupancyGrid
+from agent.perception_modes import KinematicBody, OraclePerception
 from envs.layout import Door, RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.catalog import parse_catalog

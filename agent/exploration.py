@@ -1,0 +1,97 @@
+"""Figure 2, lines 4-7: find a nearby recognizable object not yet examined, by looking around and
+touring the room's free space (``Explorer``, driven by agent.acquisition's ``RoomLearner``)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from agent import strategies as strat
+from agent.navigation import nearest_free
+from knowledge.geometry import ObjectInstance
+
+if TYPE_CHECKING:
+    from agent.acquisition import RoomLearner
+
+LOOK_TILT = -0.35  # rad: the look-around tilt (sees the floor from about 1 m out and desk tops)
+LOOK_PANS_DEG = (-150.0, -90.0, -30.0, 30.0, 90.0, 150.0)  # a 360 degree sweep in six images
+
+
+class Explorer:
+    """Figure 2, line 5: find a nearby recognizable object not yet examined.
+
+    Remembers every object its look-arounds recognized. Asked for an object, it returns the
+    nearest remembered one not in EXAMINED; failing that it looks around at the current spot
+    (unless it already looked within ``spacing / 2``), then drives to the nearest unvisited
+    viewpoint of a tour (a ``spacing`` lattice over the reachable free space) and looks there,
+    until it has one or the tour is over (None: the room is done).
+    """
+
+    def __init__(self, learner: RoomLearner, spacing: float = 1.5):
+        self.L = learner
+        self.spacing = spacing
+        self.seen: dict[int, ObjectInstance] = {}
+        self.looks: list[np.ndarray] = []
+        grid = learner.grid
+        reach = grid.reachable_mask(learner.start_pose.xy)
+        xs, ys = grid.cell_centers()
+        pts = []
+        for y in np.arange(ys[0] + spacing / 2, ys[-1] + 1e-9, spacing):
+            for x in np.arange(xs[0] + spacing / 2, xs[-1] + 1e-9, spacing):
+                p = nearest_free(grid, np.array([x, y]), reach)
+                if p is not None and np.hypot(*(p - (x, y))) <= spacing / 2:
+                    pts.append(p)
+        # deduplicate (two lattice points may snap to one cell)
+        uniq: list[np.ndarray] = []
+        for p in pts:
+            if all(np.hypot(*(p - q)) > 1e-6 for q in uniq):
+                uniq.append(p)
+        self.todo = uniq
+
+    def find(self, examined: set[int]) -> ObjectInstance | None:
+        """A recognizable object not in ``examined`` (the nearest known), or None."""
+        L = self.L
+        while True:
+            cands = [o for oid, o in sorted(self.seen.items()) if oid not in examined]
+            if cands:
+                return strat.nearest_object(cands, L.costs.at(L.body.pose()))
+            if L.budget_spent():  # no new exploration step once the room's time is spent
+                L.left_early = True
+                return None
+            here = L.body.pose().xy
+            if not any(np.hypot(*(here - q)) <= self.spacing / 2 for q in self.looks):
+                self.look_around()
+                continue
+            if not self.todo:
+                return None
+            field = L.grid.distances_from(here)
+            d = [field[L.grid.to_cell(p)] for p in self.todo]
+            k = int(np.argmin(d))
+            if not math.isfinite(d[k]):
+                self.todo = []
+                return None
+            goal = self.todo.pop(k)
+            L.drive_to(goal)
+            if L.budget_spent():
+                L.left_early = True
+                return None
+            self.look_around()
+
+    def look_around(self) -> None:
+        """A pan sweep at the current spot: six images, everything recognized is remembered."""
+        L = self.L
+        p = L.body.pose()
+        self.looks.append(p.xy)
+        self.todo = [q for q in self.todo if np.hypot(*(q - p.xy)) > self.spacing / 2]
+        pans = [math.radians(a) for a in LOOK_PANS_DEG]
+        if abs(p.pan - pans[-1]) < abs(p.pan - pans[0]):
+            pans = pans[::-1]
+        for pan in pans:
+            L.body.move_head(pan, LOOK_TILT)
+            frame = L.body.capture(rgb=L.log.wants_rgb, depth=True)
+            objs = L.perception.see(frame)
+            for o in objs:
+                self.seen.setdefault(o.id, o)
+            L.log.frame(L, frame, objs, purpose="look")

@@ -1,0 +1,196 @@
+"""The rerun recording of a learning run (agent.acquisition): one recording per room."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from agent.exam_volumes import relation_boxes
+from knowledge.geometry import ObjectInstance
+
+if TYPE_CHECKING:
+    from agent.acquisition import ExamResult, RoomLearner
+    from agent.strategies import Choice
+
+
+class RunLog:
+    """What a run writes to rerun (agent.recording.Recorder), one recording per room.
+
+    Per room: the room in 3D (labelled boxes), the robot's path and head (camera pose) over the
+    run clock, the camera as a pinhole with its RGB and segmentation images for every gaze, the
+    examined object's relation volumes highlighted, a text log of every choice with each
+    candidate type's score, and time series of the mean interval width and of n per type.
+
+    A recording holds one room (the Recorder's room entities are static), so a run of several
+    rooms writes ``FILE.rrd`` for the first room of the call and ``FILE.room<i>.rrd`` for room i
+    after it; ``rerun FILE*.rrd`` opens them together. Without a path nothing is recorded.
+    """
+
+    def __init__(self, path: str | Path | None):
+        self.path = Path(path) if path is not None else None
+        self.rec = None
+        self.files: list[Path] = []
+        self._step = 0
+
+    @property
+    def enabled(self) -> bool:
+        """True while a recording is open."""
+        return self.rec is not None
+
+    @property
+    def wants_rgb(self) -> bool:
+        """Render RGB only when it is recorded."""
+        return self.rec is not None
+
+    @property
+    def wants_frames(self) -> bool:
+        """Look at every examination frame (oracle mode skips it unless recording)."""
+        return self.rec is not None
+
+    def start_room(self, L: RoomLearner) -> None:
+        """Open the room's recording and log the room, its start and the knowledge so far."""
+        if self.path is None:
+            return
+        from agent.recording import Recorder
+
+        path = (
+            self.path
+            if not self.files
+            else self.path.with_name(
+                f"{self.path.stem}.room{L.room_index}{self.path.suffix or '.rrd'}"
+            )
+        )
+        self.rec = Recorder(path)
+        self.files.append(path)
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_room(L.layout, L.catalog)
+        self.rec.log_text(
+            f"room {L.room_index} (style {L.layout.style}, seed {L.layout.seed}): "
+            f"{len(L.layout.objects)} objects; run {L.run.run}"
+        )
+        self.robot(L)
+        self.knowledge(L)
+
+    def end_room(self, L: RoomLearner, n_exams: int) -> None:
+        """Close the room's recording."""
+        if self.rec is None:
+            return
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_text(
+            f"room {L.room_index} done: {n_exams} examinations, "
+            f"{L.clock - L.run.clock_offset:.1f} s simulated"
+            + (" (time budget spent: leaving)" if L.left_early else "")
+        )
+        self.rec.close()
+        self.rec = None
+
+    def robot(self, L: RoomLearner) -> None:
+        """The robot's base pose and path, and where the head points (camera pose)."""
+        if self.rec is None:
+            return
+        from agent.viewplan import camera_at
+
+        pose = L.body.pose()
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_robot(pose, L.spec)
+        self.rec.log_camera(_Shot(camera_at(pose, L.spec)))
+
+    def frame(
+        self, L: RoomLearner, frame: Any, objs: Sequence[ObjectInstance], purpose: str
+    ) -> None:
+        """One image: the camera pinhole, RGB and segmentation (camera mode), detections."""
+        if self.rec is None:
+            return
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_robot(L.body.pose(), L.spec)
+        if frame is None:  # oracle: the pose of the camera, no pixels
+            from agent.viewplan import camera_at
+
+            self.rec.log_camera(_Shot(camera_at(L.body.pose(), L.spec)))
+        else:  # RGB and segmentation; depth is left out (it would double the file's size)
+            shot = _Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)
+            self.rec.log_camera(shot, getattr(L.perception, "last_detections", ()))
+        if purpose == "look" and objs:
+            self.rec.log_text(
+                "look-around recognizes " + ", ".join(f"{o.type} #{o.id}" for o in objs),
+                level="DEBUG",
+            )
+
+    def choice(self, L: RoomLearner, choice: Choice) -> None:
+        """The decision of lines 8-13 with every candidate type's score."""
+        if self.rec is None:
+            return
+        self._step += 1
+        self.rec.set_time(L.clock, self._step)
+        ranked = sorted(choice.scores.items(), key=lambda kv: -kv[1])
+        scores = ", ".join(f"{t} {s:.4f}" for t, s in ranked)
+        n_unex = len(L.unexamined)
+        self.rec.log_text(
+            f"exam {L.run.examinations + 1}: {L.run.strategy.name} chooses {choice.type} "
+            f"(object #{choice.obj.id}) among {n_unex} unexamined; scores: {scores}"
+        )
+
+    def examine_start(self, L: RoomLearner, obj: ObjectInstance, gazes: Sequence[Any]) -> None:
+        """Highlight the examined object's relation volumes and show its planned gazes."""
+        if self.rec is None:
+            return
+        rels = L.catalog.type(obj.type).relations
+        self.rec.log_volumes(
+            "world/volumes/examined",
+            relation_boxes(L.catalog, obj),
+            labels=[r.name for r in rels],
+            color=(1.0, 0.85, 0.1),
+        )
+        self.rec.log_volumes(
+            "world/volumes/examined_object",
+            [obj.box()],
+            labels=[f"examining {obj.type} #{obj.id}"],
+            color=(1.0, 0.3, 0.1),
+        )
+        self.rec.log_text(
+            f"examining {obj.type} #{obj.id}: {len(rels)} relation volumes, "
+            f"{len(gazes)} gazes planned",
+            level="DEBUG",
+        )
+
+    def examination(self, L: RoomLearner, res: ExamResult) -> None:
+        """The examination's outcome and the knowledge's new state."""
+        if self.rec is None:
+            return
+        self.rec.set_time(L.clock, self._step)
+        found = ", ".join(f"{r}({o.type} #{o.id})" for r, o in res.related) or "nothing"
+        self.rec.log_text(f"{res.choice.obj.type} #{res.choice.obj.id}: {found}")
+        self.knowledge(L)
+
+    def text(self, L: RoomLearner, msg: str) -> None:
+        """A line in the text log."""
+        if self.rec is None:
+            return
+        self.rec.set_time(L.clock, self._step)
+        self.rec.log_text(msg, level="WARN")
+
+    def knowledge(self, L: RoomLearner) -> None:
+        """Time series: mean interval width and n per type."""
+        if self.rec is None:
+            return
+        self.rec.log_scalar("knowledge/mean_width", L.kb.mean_width())
+        for t in L.catalog.type_names:
+            self.rec.log_scalar(f"knowledge/n/{t}", L.kb.n(t))
+
+    def close(self) -> None:
+        """Close an open recording (interrupted runs keep what was logged)."""
+        if self.rec is not None:
+            self.rec.close()
+            self.rec = None
+
+
+@dataclass(frozen=True)
+class _Shot:
+    """A frame without pixels: only the camera (the oracle's gazes, head moves)."""
+
+    camera: Any
+    rgb: Any = None
+    depth: Any = None
+    instance_ids: Any = None

@@ -1,0 +1,273 @@
+"""Perception modes of the learning loop (agent.acquisition): what one image recognizes and which
+objects an examined object is related to, and the body whose motions and images are charged.
+
+``camera`` renders segmentation in MuJoCo (envs.world) and runs the detector (agent.perception);
+``oracle`` reads relations from the true layout and decides what a look-around recognizes
+geometrically (type's max_range, inside the frustum, clear line of sight past furniture boxes),
+without rendering, on a ``KinematicBody``. Both charge the same ``TimeModel`` seconds for the same
+planned drives, head moves and images, so simulated time is comparable.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from agent.viewplan import camera_axes
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from knowledge import geometry
+from knowledge.catalog import Catalog
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import ObjectInstance
+
+PERCEPTION_MODES = ("camera", "oracle")
+
+
+# =========================================================================== the oracle's body
+class KinematicBody:
+    """The robot without physics or rendering: a pose and a clock charged by the TimeModel.
+
+    Same interface as envs.world.World where the loop uses it (``sim_time``, ``pose``,
+    ``reset_pose``, ``drive``, ``move_head``, ``capture``, ``spec``), so agent.viewplan's
+    ``execute_gaze`` charges the oracle exactly what it charges the camera mode.
+    """
+
+    def __init__(self, spec: RobotSpec | None = None, time_model: TimeModel | None = None):
+        self.spec = spec or RobotSpec()
+        self.time_model = time_model or TimeModel()
+        self.sim_time = 0.0
+        self._pose = RobotPose(0.0, 0.0, 0.0)
+
+    def reset_pose(self, pose: RobotPose) -> None:
+        """Put the robot at ``pose`` (no time charged)."""
+        pan, tilt = self.spec.clip_head(pose.pan, pose.tilt)
+        self._pose = RobotPose(float(pose.x), float(pose.y), float(pose.yaw), pan, tilt)
+
+    def pose(self) -> RobotPose:
+        """The current base pose and head angles."""
+        return self._pose
+
+    def drive(self, path: np.ndarray, final_yaw: float) -> float:
+        """Follow ``path`` (K, 2) and turn to ``final_yaw``; the seconds it took."""
+        p = self._pose
+        path = np.asarray(path, float).reshape(-1, 2)
+        dt = self.time_model.drive_time(path, p.yaw, final_yaw)
+        end = path[-1] if len(path) else p.xy
+        self._pose = RobotPose(float(end[0]), float(end[1]), wrap_angle(final_yaw), p.pan, p.tilt)
+        self.sim_time += dt
+        return dt
+
+    def move_head(self, pan: float, tilt: float) -> float:
+        """Slew the head to (pan, tilt), clipped to the limits; the seconds it took."""
+        p = self._pose
+        pan, tilt = self.spec.clip_head(pan, tilt)
+        dt = self.time_model.head_time(p.pan, p.tilt, pan, tilt)
+        self._pose = RobotPose(p.x, p.y, p.yaw, pan, tilt)
+        self.sim_time += dt
+        return dt
+
+    def capture(self, rgb: bool = False, depth: bool = True) -> None:
+        """Charge one image; the oracle renders nothing."""
+        self.sim_time += self.time_model.image_cost
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+# =========================================================================== perception modes
+def _in_box_frames(p: np.ndarray, boxes: geometry.BoxArray) -> np.ndarray:
+    """(M, K, 3): points p (M, 3) in the frame of every box k (origin at its centre, x along its
+    yaw)."""
+    c, s = np.cos(boxes.yaws), np.sin(boxes.yaws)  # (K,)
+    d = p[:, None, :] - boxes.centers[None, :, :]
+    return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]], -1)
+
+
+def _segment_hits_boxes(a: np.ndarray, b: np.ndarray, boxes: geometry.BoxArray) -> np.ndarray:
+    """(M, K) bool: segment a[m] -> b[m] passes through box k (slab test in each box's frame)."""
+    pa, pb = _in_box_frames(a, boxes), _in_box_frames(b, boxes)
+    v = pb - pa
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-boxes.halves[None] - pa) / v
+        t2 = (boxes.halves[None] - pa) / v
+    tmin = np.where(
+        np.abs(v) < 1e-12,
+        np.where(np.abs(pa) <= boxes.halves[None], -np.inf, np.inf),
+        np.minimum(t1, t2),
+    )
+    tmax = np.where(
+        np.abs(v) < 1e-12,
+        np.where(np.abs(pa) <= boxes.halves[None], np.inf, -np.inf),
+        np.maximum(t1, t2),
+    )
+    enter = np.maximum(tmin.max(-1), 0.0)
+    leave = np.minimum(tmax.min(-1), 1.0)
+    return enter < leave - 1e-6
+
+
+class OraclePerception:
+    """Relations from the true layout; recognition from geometry. No rendering."""
+
+    name = "oracle"
+    reads_truth = True
+
+    def __init__(
+        self,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        time_model: TimeModel,
+        width: int = 320,
+        height: int = 240,
+    ):
+        self.layout, self.catalog, self.spec = layout, catalog, spec
+        self.body = KinematicBody(spec, time_model)
+        self.width, self.height = width, height
+        objs = layout.objects
+        self._objs = list(objs)
+        self._centers = np.array([o.position for o in objs], float).reshape(-1, 3)
+        self._half = np.array([o.size for o in objs], float).reshape(-1, 3) / 2
+        self._range = np.array([catalog.type(o.type).max_range for o in objs], float)
+        # Occluders: furniture-sized boxes (anything with a side over 30 cm).
+        self._occ_idx = np.flatnonzero(self._half.max(1) > 0.15) if len(objs) else np.zeros(0, int)
+        self._occ = geometry.BoxArray.from_instances([objs[i] for i in self._occ_idx])
+        self._tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
+        self._tan_x = self._tan_y * width / height
+        self._radius = np.linalg.norm(self._half, axis=1)
+        self._vis_cache: dict[tuple[float, float], np.ndarray] = {}
+        if len(objs):
+            self._sight = self._sight_points()
+            flat = self._sight.reshape(-1, 3)
+            self._sight_inside = _points_in_boxes(flat, self._occ).reshape(
+                self._sight.shape[0], len(objs), len(self._occ)
+            )
+
+    def see(self, frame: Any) -> list[ObjectInstance]:
+        """The objects a look from the current pose recognizes: within the type's max_range,
+        inside the frustum, and with a clear line of sight (to the centre, the top or a top
+        corner) past the furniture boxes that do not contain it."""
+        if not self._objs:
+            return []
+        p = self.body.pose()
+        cam = np.array([p.x, p.y, self.spec.camera_height])
+        right, up, back = camera_axes(p.yaw + p.pan, p.tilt).T
+        fwd = -back
+        rel = self._centers - cam
+        z, x, y = rel @ fwd, rel @ right, rel @ up
+        rad = self._radius  # bounding-sphere radius: any part in view
+        ok = self._visible_from(p.x, p.y).copy()
+        ok &= z > -rad
+        ok &= np.abs(x) <= z * self._tan_x + rad * math.sqrt(1 + self._tan_x**2)
+        ok &= np.abs(y) <= z * self._tan_y + rad * math.sqrt(1 + self._tan_y**2)
+        return [self._objs[i] for i in np.flatnonzero(ok)]
+
+    def _visible_from(self, x: float, y: float) -> np.ndarray:
+        """(N,) bool: in range and in clear line of sight from the camera above (x, y); it does
+        not depend on where the head points, so it is computed once per position."""
+        key = (round(x, 6), round(y, 6))
+        vis = self._vis_cache.get(key)
+        if vis is not None:
+            return vis
+        cam = np.array([x, y, self.spec.camera_height])
+        vis = np.linalg.norm(self._centers - cam, axis=1) <= self._range
+        idx = np.flatnonzero(vis)
+        if len(idx) and len(self._occ):
+            pts = self._sight[:, idx, :]  # (S, M, 3)
+            S, M = pts.shape[:2]
+            ends = pts.reshape(-1, 3)
+            hits = _segment_hits_boxes(np.repeat(cam[None], len(ends), 0), ends, self._occ)
+            # A box holding the end point (the object itself, the desk a chair is under) does
+            # not hide it.
+            blocked = (hits & ~self._sight_inside[:, idx, :].reshape(-1, len(self._occ))).any(1)
+            vis[idx] = (~blocked.reshape(S, M)).any(0)
+        if len(self._vis_cache) > 256:
+            self._vis_cache.clear()
+        self._vis_cache[key] = vis
+        return vis
+
+    def _sight_points(self) -> np.ndarray:
+        """(6, N, 3): points of every object a line of sight may reach: its centre, the centre of
+        its top face and (just inside) the four corners of its top face."""
+        c, h = self._centers, self._half
+        yaw = np.array([o.yaw for o in self._objs])
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        pts = [c, c + np.column_stack([0 * cy, 0 * cy, h[:, 2]])]
+        for sx, sy_ in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            lx, ly = sx * h[:, 0] * 0.9, sy_ * h[:, 1] * 0.9
+            pts.append(c + np.column_stack([cy * lx - sy * ly, sy * lx + cy * ly, h[:, 2]]))
+        return np.stack(pts)
+
+    def related(
+        self, obj: ObjectInstance, seen: Sequence[ObjectInstance]
+    ) -> list[tuple[str, ObjectInstance]]:
+        """RELATED-OBJECTS/-TYPES read from the true layout."""
+        return geometry.related(self.catalog, obj, self._objs)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def _points_in_boxes(pts: np.ndarray, boxes: geometry.BoxArray) -> np.ndarray:
+    """(M, K) bool: point m inside box k (boundary included, to 1e-9 m)."""
+    return (np.abs(_in_box_frames(pts, boxes)) <= boxes.halves[None] + 1e-9).all(-1)
+
+
+class CameraPerception:
+    """Rendered segmentation in MuJoCo and the detector (agent.perception)."""
+
+    name = "camera"
+    reads_truth = False
+
+    def __init__(
+        self,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        time_model: TimeModel,
+        width: int = 320,
+        height: int = 240,
+        rgb: bool = False,
+    ):
+        from agent.perception import objects_by_id
+        from envs.world import World
+
+        self.layout, self.catalog, self.spec, self.rgb = layout, catalog, spec, rgb
+        self.body = World(layout, catalog, width=width, height=height)
+        self._objects = objects_by_id(layout)
+
+    def see(self, frame: Any) -> list[ObjectInstance]:
+        """The detector's objects (poses read from the simulator) in a captured frame."""
+        from agent.perception import detect
+
+        self.last_detections = detect(frame, self._objects, self.catalog)
+        return [d.pose for d in self.last_detections]
+
+    def related(
+        self, obj: ObjectInstance, seen: Sequence[ObjectInstance]
+    ) -> list[tuple[str, ObjectInstance]]:
+        """RELATED-OBJECTS/-TYPES from the detected poses."""
+        return geometry.related(self.catalog, obj, seen)
+
+    def close(self) -> None:
+        """Release the renderer."""
+        self.body.close()
+
+
+def make_perception(
+    mode: str,
+    layout: RoomLayout,
+    catalog: Catalog,
+    spec: RobotSpec,
+    time_model: TimeModel,
+    rgb: bool = False,
+):
+    """A perception mode by name ('camera' or 'oracle')."""
+    if mode == "oracle":
+        return OraclePerception(layout, catalog, spec, time_model)
+    if mode == "camera":
+        return CameraPerception(layout, catalog, spec, time_model, rgb=rgb)
+    raise CtxsearchError(f"unknown perception mode '{mode}' (known: {', '.join(PERCEPTION_MODES)})")
