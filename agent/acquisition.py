@@ -367,11 +367,7 @@ def start_pose(layout: RoomLayout, grid: OccupancyGrid) -> RobotPose:
     """Where the robot enters: the free cell nearest a point 0.6 m inside the door, facing into
     the room (in the largest free region if the door's side is cut off)."""
     x, y, yaw = door_entry(layout)
-    labels = grid.labels
-    sizes = np.bincount(labels.ravel())
-    sizes[0] = 0
-    mask = labels == int(np.argmax(sizes)) if len(sizes) > 1 else None
-    p = nearest_free(grid, np.array([x, y]), mask)
+    p = nearest_free(grid, np.array([x, y]), grid.largest_region())
     if p is None:
         raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
     return RobotPose(float(p[0]), float(p[1]), yaw)

@@ -66,11 +66,7 @@ class GridCosts:
         r0, c0, r1, c1 = max(0, r0), max(0, c0), min(h - 1, r1), min(w - 1, c1)
         rows, cols = np.mgrid[r0 : r1 + 1, c0 : c1 + 1]
         flat = (rows * w + cols).ravel()
-        d = self._cells[flat] - box.center[:2]
-        c, s = math.cos(box.yaw), math.sin(box.yaw)
-        lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
-        ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
-        dist = np.hypot(np.maximum(lx, 0), np.maximum(ly, 0))
+        dist = box.footprint_distance(self._cells[flat])
         return flat[self._free_flat[flat] & (dist <= reach)]
 
     def travel_s(self, obj: ObjectInstance) -> float:

@@ -181,6 +181,14 @@ class OccupancyGrid:
         return out
 
     # ----------------------------------------------------------------- connectivity
+    def largest_region(self) -> np.ndarray | None:
+        """Mask of the largest connected free region (None if there is no free cell)."""
+        sizes = np.bincount(self.labels.ravel())
+        if len(sizes) <= 1:
+            return None
+        sizes[0] = 0
+        return self.labels == int(np.argmax(sizes))
+
     @property
     def labels(self) -> np.ndarray:
         """Connected components of the free cells (8-connected); 0 on blocked cells."""

@@ -159,12 +159,10 @@ class SearchResult:
 
 def random_start(layout: RoomLayout, grid: OccupancyGrid, rng: np.random.Generator) -> RobotPose:
     """A start pose: a uniformly drawn free cell of the largest free region, random heading."""
-    labels = grid.labels
-    sizes = np.bincount(labels.ravel())
-    if len(sizes) <= 1:
+    region = grid.largest_region()
+    if region is None:
         raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
-    sizes[0] = 0
-    rows, cols = np.nonzero(labels == int(np.argmax(sizes)))
+    rows, cols = np.nonzero(region)
     k = int(rng.integers(len(rows)))
     xy = grid.to_xy(int(rows[k]), int(cols[k]))
     return RobotPose(float(xy[0]), float(xy[1]), float(rng.uniform(-math.pi, math.pi)))

@@ -439,14 +439,6 @@ def region_probabilities(regions: Sequence[Region], unseen: np.ndarray) -> np.nd
     return 1.0 - np.prod(1.0 - share, axis=1)
 
 
-def _footprint_distance(box: Box, xy: np.ndarray) -> np.ndarray:
-    d = xy - np.asarray(box.center[:2], float)
-    c, s = math.cos(box.yaw), math.sin(box.yaw)
-    lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
-    ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
-    return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
-
-
 @dataclass
 class CostModel:
     """Expected seconds to look into a box from the robot's position (drive + head + images)."""
@@ -474,7 +466,7 @@ class CostModel:
         distance field from ``xy``, flattened, if already computed)."""
         if field_ is None:
             field_ = self.grid.distances_from(xy).ravel()
-        near = self._free & (_footprint_distance(box, self._cells) <= self.view_distance)
+        near = self._free & (box.footprint_distance(self._cells) <= self.view_distance)
         d = float(field_[near].min()) if near.any() else math.inf
         if not math.isfinite(d):
             d = float(np.hypot(*(np.asarray(box.center[:2]) - np.asarray(xy))))

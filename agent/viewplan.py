@@ -214,15 +214,6 @@ def _aim_points(box: Box, split: float) -> np.ndarray:
     return np.array(pts)
 
 
-def _footprint_distance(box: Box, xy: np.ndarray) -> np.ndarray:
-    """Ground distance from points ``xy`` (N, 2) to the box's footprint rectangle (0 inside)."""
-    d = xy - np.asarray(box.center[:2], float)
-    c, s = math.cos(box.yaw), math.sin(box.yaw)
-    lx = np.abs(c * d[:, 0] + s * d[:, 1]) - box.half[0]
-    ly = np.abs(-s * d[:, 0] + c * d[:, 1]) - box.half[1]
-    return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
-
-
 def _aim_angles(
     cams: np.ndarray, aims: np.ndarray, spec: RobotSpec
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -353,7 +344,7 @@ def plan_gazes(
     rows, cols = rows[reach], cols[reach]
     xs, ys = grid.cell_centers()
     cand = np.column_stack([xs[cols], ys[rows]])
-    cand = cand[_footprint_distance(box, cand) <= max_distance]
+    cand = cand[box.footprint_distance(cand) <= max_distance]
     cand = np.vstack([start_xy[None, :], cand])
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
     # Heading and tilt of the aim direction for every (candidate, aim): the frusta, and the

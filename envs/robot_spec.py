@@ -51,9 +51,10 @@ class RobotSpec:
 
     def clip_head(self, pan: float, tilt: float) -> tuple[float, float]:
         """Pan and tilt clipped to the joint limits."""
+        pan = wrap_angle(pan)
         return (
-            float(np.clip(wrap_angle(pan), *self.pan_range)),
-            float(np.clip(tilt, *self.tilt_range)),
+            float(min(max(pan, self.pan_range[0]), self.pan_range[1])),
+            float(min(max(tilt, self.tilt_range[0]), self.tilt_range[1])),
         )
 
 

@@ -40,7 +40,14 @@ from envs.parts import WorldSurface, world_parts_array, world_surfaces
 from envs.robot_spec import RobotSpec
 from envs.styles import Rule, Style
 from knowledge.catalog import Catalog, ObjectType, load_catalog
-from knowledge.geometry import EPS, Box, BoxArray, ObjectInstance, relation_volume
+from knowledge.geometry import (
+    EPS,
+    Box,
+    BoxArray,
+    ObjectInstance,
+    footprint_distance,
+    relation_volume,
+)
 
 GRID = 0.1  # m, occupancy grid resolution for the free-space check
 REACH = 0.6  # m beyond the robot's clearance: how close the base must get to a piece's front
@@ -76,14 +83,6 @@ WALLS = ("north", "south", "east", "west")
 def style_hash(name: str) -> int:
     """A stable (cross-process, cross-platform) hash of a style name for seeding."""
     return zlib.crc32(name.encode("utf-8"))
-
-
-def _rect_dist(px: np.ndarray, py: np.ndarray, cx, cy, yaw, hx, hy) -> np.ndarray:
-    """Distance from points to a yaw-rotated rectangle (0 inside)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    dx, dy = px - cx, py - cy
-    lx, ly = c * dx + s * dy, -s * dx + c * dy
-    return np.hypot(np.maximum(np.abs(lx) - hx, 0.0), np.maximum(np.abs(ly) - hy, 0.0))
 
 
 @dataclass
@@ -244,7 +243,7 @@ class _Builder:
     # -- free space -----------------------------------------------------------------------------
     def make_obstacle(self, obj: ObjectInstance, furniture: bool) -> _Obstacle:
         b = obj.box()
-        dist = _rect_dist(self.gx, self.gy, b.center[0], b.center[1], b.yaw, b.half[0], b.half[1])
+        dist = footprint_distance(b, self.gx, self.gy)
         reach = None
         if furniture:
             reach = dist <= self.clear + GRID_SLACK + REACH

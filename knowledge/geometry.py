@@ -12,6 +12,7 @@ the desk but not inside it) do not count as overlapping.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -49,7 +50,9 @@ class ObjectInstance:
 
     def box(self) -> Box:
         """The object's own bounding box."""
-        return Box(np.asarray(self.position, float), float(self.yaw), np.asarray(self.size, float) / 2)
+        return Box(
+            np.asarray(self.position, float), float(self.yaw), np.asarray(self.size, float) / 2
+        )
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,9 @@ class Box:
         """All eight corners, (8, 3)."""
         xy = self.corners_xy()
         zlo, zhi = self.center[2] - self.half[2], self.center[2] + self.half[2]
-        return np.vstack([np.column_stack([xy, np.full(4, zlo)]), np.column_stack([xy, np.full(4, zhi)])])
+        return np.vstack(
+            [np.column_stack([xy, np.full(4, zlo)]), np.column_stack([xy, np.full(4, zhi)])]
+        )
 
     def contains_points(self, pts: np.ndarray) -> np.ndarray:
         """Boolean mask of which points (N, 3) lie inside the box (boundary included)."""
@@ -81,7 +86,16 @@ class Box:
         c, s = np.cos(self.yaw), np.sin(self.yaw)
         lx = c * d[:, 0] + s * d[:, 1]
         ly = -s * d[:, 0] + c * d[:, 1]
-        return (np.abs(lx) <= self.half[0]) & (np.abs(ly) <= self.half[1]) & (np.abs(d[:, 2]) <= self.half[2])
+        return (
+            (np.abs(lx) <= self.half[0])
+            & (np.abs(ly) <= self.half[1])
+            & (np.abs(d[:, 2]) <= self.half[2])
+        )
+
+    def footprint_distance(self, xy: np.ndarray) -> np.ndarray:
+        """Ground-plane distance from points ``xy`` (..., 2) to the box's footprint (0 inside)."""
+        xy = np.asarray(xy, float)
+        return footprint_distance(self, xy[..., 0], xy[..., 1])
 
     @property
     def volume(self) -> float:
@@ -112,15 +126,25 @@ class BoxArray:
         return len(self.yaws)
 
 
+def footprint_distance(box: Box, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Ground-plane distance from points (x, y) (arrays of one shape) to ``box``'s footprint
+    rectangle, 0 inside."""
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    dx, dy = x - box.center[0], y - box.center[1]
+    lx = np.abs(c * dx + s * dy) - box.half[0]
+    ly = np.abs(-s * dx + c * dy) - box.half[1]
+    return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
+
+
 def overlaps(boxes: BoxArray, box: Box, eps: float = EPS) -> np.ndarray:
     """Which of ``boxes`` overlap ``box`` with positive volume (every axis overlap > eps). (N,) bool."""
     n = len(boxes)
     if n == 0:
         return np.zeros(0, bool)
     # z: interval overlap.
-    z_ov = np.minimum(boxes.centers[:, 2] + boxes.halves[:, 2], box.center[2] + box.half[2]) - np.maximum(
-        boxes.centers[:, 2] - boxes.halves[:, 2], box.center[2] - box.half[2]
-    )
+    z_ov = np.minimum(
+        boxes.centers[:, 2] + boxes.halves[:, 2], box.center[2] + box.half[2]
+    ) - np.maximum(boxes.centers[:, 2] - boxes.halves[:, 2], box.center[2] - box.half[2])
     ok = z_ov > eps
     # ground plane: separating-axis test on the 4 edge normals (2 of each rectangle).
     d = boxes.centers[:, :2] - box.center[:2]  # (N, 2)
