@@ -75,8 +75,10 @@ class RelationSpec:
     def local_bounds(self, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The volume's (lo, hi) corners in the reference object's frame for an object of ``size``."""
         size = np.asarray(size, dtype=float)
-        return (np.asarray(self.lo) * size + np.asarray(self.margin_lo),
-                np.asarray(self.hi) * size + np.asarray(self.margin_hi))
+        return (
+            np.asarray(self.lo) * size + np.asarray(self.margin_lo),
+            np.asarray(self.hi) * size + np.asarray(self.margin_hi),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,7 +148,9 @@ class Catalog:
             return self._by_name[name]
         except KeyError:
             names = self.type_names
-            known = ", ".join(names[:30]) + (f", ... ({len(names) - 30} more)" if len(names) > 30 else "")
+            known = ", ".join(names[:30]) + (
+                f", ... ({len(names) - 30} more)" if len(names) > 30 else ""
+            )
             raise CatalogError(self.path, f"unknown type '{name}' (known: {known})") from None
 
     def relation(self, name: str) -> RelationSpec:
@@ -168,12 +172,15 @@ class Catalog:
         """
         doc = [
             {
-                "name": t.name, "kind": t.kind, "shape": t.shape,
-                "size_min": t.size_min, "size_max": t.size_max, "color": t.color,
-                "min_pixels": t.min_pixels, "max_range": t.max_range,
-                "relations": [
-                    [r.name, r.lo, r.hi, r.margin_lo, r.margin_hi] for r in t.relations
-                ],
+                "name": t.name,
+                "kind": t.kind,
+                "shape": t.shape,
+                "size_min": t.size_min,
+                "size_max": t.size_max,
+                "color": t.color,
+                "min_pixels": t.min_pixels,
+                "max_range": t.max_range,
+                "relations": [[r.name, r.lo, r.hi, r.margin_lo, r.margin_hi] for r in t.relations],
             }
             for t in self.types
         ]
@@ -200,17 +207,26 @@ def _parse_size(path: Path, tname: str, value: object) -> tuple[tuple, tuple]:
     if isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value):
         pairs = []
         for v in value:
-            if (len(v) != 2 or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
-                    or v[0] > v[1]):
-                raise CatalogError(path, f"each axis range must be [min, max], got {v!r}",
-                                   type_name=tname, field="size")
+            if (
+                len(v) != 2
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+                or v[0] > v[1]
+            ):
+                raise CatalogError(
+                    path,
+                    f"each axis range must be [min, max], got {v!r}",
+                    type_name=tname,
+                    field="size",
+                )
             pairs.append((float(v[0]), float(v[1])))
         lo = tuple(p[0] for p in pairs)
         hi = tuple(p[1] for p in pairs)
     else:
         lo = hi = _vec3(path, tname, "size", value)
     if min(lo) <= 0:
-        raise CatalogError(path, f"sizes must be positive, got {list(lo)}", type_name=tname, field="size")
+        raise CatalogError(
+            path, f"sizes must be positive, got {list(lo)}", type_name=tname, field="size"
+        )
     return lo, hi
 
 
@@ -219,22 +235,37 @@ def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> Re
         raise CatalogError(path, "a relation must be a table", type_name=tname, field="relation")
     unknown = set(raw) - RELATION_FIELDS
     if unknown:
-        raise CatalogError(path, f"unknown field(s) {sorted(unknown)} in a relation "
-                           f"(allowed: {sorted(RELATION_FIELDS)})", type_name=tname, field="relation")
+        raise CatalogError(
+            path,
+            f"unknown field(s) {sorted(unknown)} in a relation "
+            f"(allowed: {sorted(RELATION_FIELDS)})",
+            type_name=tname,
+            field="relation",
+        )
     name = raw.get("name")
     if not isinstance(name, str) or not _REL_RE.match(name):
-        raise CatalogError(path, f"relation name must be upper-case words joined by '-', got {name!r}",
-                           type_name=tname, field="relation.name")
+        raise CatalogError(
+            path,
+            f"relation name must be upper-case words joined by '-', got {name!r}",
+            type_name=tname,
+            field="relation.name",
+        )
     suffix = relation_suffix(tname)
     if not name.endswith(suffix) or name == suffix[1:]:
-        raise CatalogError(path, f"relation '{name}' must end in '{suffix}' (paper's convention)",
-                           type_name=tname, field="relation.name")
+        raise CatalogError(
+            path,
+            f"relation '{name}' must end in '{suffix}' (paper's convention)",
+            type_name=tname,
+            field="relation.name",
+        )
     for req in ("lo", "hi"):
         if req not in raw:
-            raise CatalogError(path, f"relation '{name}' lacks '{req}'", type_name=tname,
-                               field=f"relation.{req}")
+            raise CatalogError(
+                path, f"relation '{name}' lacks '{req}'", type_name=tname, field=f"relation.{req}"
+            )
     spec = RelationSpec(
-        name=name, ref=tname,
+        name=name,
+        ref=tname,
         lo=_vec3(path, tname, f"{name}.lo", raw["lo"]),
         hi=_vec3(path, tname, f"{name}.hi", raw["hi"]),
         margin_lo=_vec3(path, tname, f"{name}.margin_lo", raw.get("margin_lo", [0, 0, 0])),
@@ -244,8 +275,12 @@ def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> Re
     for size in (size_lo, size_hi):
         lo, hi = spec.local_bounds(np.asarray(size))
         if np.any(hi - lo <= 0):
-            raise CatalogError(path, f"relation '{name}' has an empty volume for size {list(size)}",
-                               type_name=tname, field=f"relation.{name}")
+            raise CatalogError(
+                path,
+                f"relation '{name}' has an empty volume for size {list(size)}",
+                type_name=tname,
+                field=f"relation.{name}",
+            )
     return spec
 
 
@@ -263,42 +298,83 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
     for i, raw in enumerate(raw_types):
         name = raw.get("name") if isinstance(raw, dict) else None
         if not isinstance(name, str) or not _NAME_RE.match(name):
-            raise CatalogError(path, f"type #{i + 1}: name must be a capitalised word, got {name!r}",
-                               field="name")
+            raise CatalogError(
+                path, f"type #{i + 1}: name must be a capitalised word, got {name!r}", field="name"
+            )
         if name in seen:
             raise CatalogError(path, "duplicate type name", type_name=name, field="name")
         seen.add(name)
         unknown = set(raw) - TYPE_FIELDS
         if unknown:
-            raise CatalogError(path, f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TYPE_FIELDS)})",
-                               type_name=name, field=sorted(unknown)[0])
+            raise CatalogError(
+                path,
+                f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TYPE_FIELDS)})",
+                type_name=name,
+                field=sorted(unknown)[0],
+            )
         for req in ("kind", "shape", "size", "color", "min_pixels", "max_range"):
             if req not in raw:
                 raise CatalogError(path, "missing", type_name=name, field=req)
         if raw["kind"] not in KINDS:
-            raise CatalogError(path, f"must be one of {KINDS}, got {raw['kind']!r}", type_name=name, field="kind")
+            raise CatalogError(
+                path, f"must be one of {KINDS}, got {raw['kind']!r}", type_name=name, field="kind"
+            )
         if raw["shape"] not in SHAPES:
-            raise CatalogError(path, f"must be one of {SHAPES}, got {raw['shape']!r}", type_name=name, field="shape")
+            raise CatalogError(
+                path,
+                f"must be one of {SHAPES}, got {raw['shape']!r}",
+                type_name=name,
+                field="shape",
+            )
         size_lo, size_hi = _parse_size(path, name, raw["size"])
         color = _vec3(path, name, "color", raw["color"])
         if not all(0.0 <= c <= 1.0 for c in color):
-            raise CatalogError(path, f"components must be in [0, 1], got {list(color)}", type_name=name, field="color")
+            raise CatalogError(
+                path,
+                f"components must be in [0, 1], got {list(color)}",
+                type_name=name,
+                field="color",
+            )
         mp, mr = raw["min_pixels"], raw["max_range"]
         if not isinstance(mp, int) or isinstance(mp, bool) or mp < 1:
-            raise CatalogError(path, f"must be a positive integer, got {mp!r}", type_name=name, field="min_pixels")
+            raise CatalogError(
+                path, f"must be a positive integer, got {mp!r}", type_name=name, field="min_pixels"
+            )
         if not isinstance(mr, int | float) or isinstance(mr, bool) or mr <= 0:
-            raise CatalogError(path, f"must be a positive number of metres, got {mr!r}", type_name=name, field="max_range")
+            raise CatalogError(
+                path,
+                f"must be a positive number of metres, got {mr!r}",
+                type_name=name,
+                field="max_range",
+            )
         raw_rels = raw.get("relation", [])
         if not isinstance(raw_rels, list):
-            raise CatalogError(path, "must be an array of tables [[type.relation]]", type_name=name, field="relation")
+            raise CatalogError(
+                path,
+                "must be an array of tables [[type.relation]]",
+                type_name=name,
+                field="relation",
+            )
         rels = [_parse_relation(path, name, r, size_lo, size_hi) for r in raw_rels]
         names = [r.name for r in rels]
         if len(set(names)) != len(names):
             dup = next(n for n in names if names.count(n) > 1)
-            raise CatalogError(path, f"duplicate relation '{dup}'", type_name=name, field="relation.name")
-        types.append(ObjectType(name=name, kind=raw["kind"], shape=raw["shape"], size_min=size_lo,
-                                size_max=size_hi, color=color, min_pixels=mp, max_range=float(mr),
-                                relations=tuple(rels)))
+            raise CatalogError(
+                path, f"duplicate relation '{dup}'", type_name=name, field="relation.name"
+            )
+        types.append(
+            ObjectType(
+                name=name,
+                kind=raw["kind"],
+                shape=raw["shape"],
+                size_min=size_lo,
+                size_max=size_hi,
+                color=color,
+                min_pixels=mp,
+                max_range=float(mr),
+                relations=tuple(rels),
+            )
+        )
     return Catalog(types=tuple(types), path=str(path))
 
 

@@ -10,7 +10,9 @@ class CtxsearchError(Exception):
 class CatalogError(CtxsearchError):
     """The object-type catalog is malformed or inconsistent."""
 
-    def __init__(self, path: object, message: str, *, type_name: str | None = None, field: str | None = None):
+    def __init__(
+        self, path: object, message: str, *, type_name: str | None = None, field: str | None = None
+    ):
         where = str(path)
         if type_name:
             where += f": type {type_name}"

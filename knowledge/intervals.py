@@ -52,7 +52,9 @@ def d(y, n, alpha: float = DEFAULT_ALPHA):
     z2 = z * z
     with np.errstate(divide="ignore", invalid="ignore"):
         ph = y / n
-        out = (z / np.sqrt(n)) * np.sqrt(np.maximum(ph * (1 - ph), 0.0) + z2 / (4 * n)) / (1 + z2 / n)
+        out = (
+            (z / np.sqrt(n)) * np.sqrt(np.maximum(ph * (1 - ph), 0.0) + z2 / (4 * n)) / (1 + z2 / n)
+        )
     return np.where(n > 0, out, 0.5)[()]
 
 
