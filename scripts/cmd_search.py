@@ -7,17 +7,27 @@ from pathlib import Path
 
 from scripts import argtypes
 
+# Copies of agent.search.POLICIES' names, agent.search.DEFAULT_BUDGET_S and agent.search_space's
+# RANK_MODES / DEFAULT_RANK, so building the parser (``ctxsearch --help``, ``kb show``) does not
+# import the search stack and scipy.ndimage; tests/test_cli_search.py checks they agree.
+POLICY_NAMES = (
+    "exhaustive",
+    "location",
+    "indirect",
+    "oracle-prior",
+    "oracle-prior-indirect",
+    "oracle",
+)
+DEFAULT_BUDGET_S = 300.0
+RANK_MODES = ("low", "p0", "high")
+DEFAULT_RANK = "low"
+
 
 def _policy_names() -> list[str]:
-    from agent.search import POLICIES
-
-    return list(POLICIES)
+    return list(POLICY_NAMES)
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
-    from agent.search import DEFAULT_BUDGET_S
-    from agent.search_space import DEFAULT_RANK, RANK_MODES
-
     p.add_argument(
         "--budget-seconds",
         type=argtypes.seconds,

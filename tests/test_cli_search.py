@@ -189,3 +189,13 @@ def test_bench_search_writes_its_three_files(store, tmp_path, capsys):
     assert doc["policies"]["exhaustive"]["ratio_to_exhaustive"] == 1.0
     assert "| location |" in (out_dir / "search.md").read_text()
     assert (out_dir / "search.png").stat().st_size > 1000
+
+
+def test_parser_constants_match_the_search_stack():
+    from agent import search, search_space
+    from scripts import cmd_search
+
+    assert tuple(search.POLICIES) == cmd_search.POLICY_NAMES
+    assert cmd_search.DEFAULT_BUDGET_S == search.DEFAULT_BUDGET_S
+    assert tuple(search_space.RANK_MODES) == cmd_search.RANK_MODES
+    assert cmd_search.DEFAULT_RANK == search_space.DEFAULT_RANK
