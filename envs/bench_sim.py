@@ -180,9 +180,53 @@ def run(
         f"{results['load_avg_1min'][0]} before and {results['load_avg_1min'][1]} after. Medians. "
         "A gaze is move_head (servos stepped in MuJoCo) + capture (one draw for segmentation and "
         "depth) + detect; the bare renderer needs two draws for the same images, so the ratio "
-        f"can fall below 1.\n\n{table}\n"
+        f"can fall below 1.\n\n{table}\n\n![time per gaze](bench_sim.png)\n"
     )
+    write_plot(results, out_dir / "bench_sim.png")
     return results
+
+
+def write_plot(r: dict, path: Path) -> None:
+    """A bar plot of one gaze's time, by part, against the bare renderer's, and the build time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [3, 2]})
+    parts = [
+        ("move_head", r["move_head_ms"]),
+        ("capture", r["capture_ms"]),
+        ("detect", r["detect_ms"]),
+    ]
+    left = 0.0
+    for (name, ms), color in zip(parts, ("#8c8c8c", "#1f77b4", "#ff7f0e"), strict=True):
+        ax.barh("ours: one gaze", ms, left=left, color=color, label=name)
+        left += ms
+    ax.barh(
+        "bare mujoco.Renderer\n(seg + depth)",
+        r["bare_render_ms"],
+        color="#2ca02c",
+        label="bare render",
+    )
+    ax.set_xlabel("ms (median)")
+    ax.set_title(f"{r['gazes_per_s']:.0f} gazes/s, overhead ratio {r['overhead_ratio']:.2f}")
+    ax.legend(fontsize=8, loc="lower right")
+    bx.bar(
+        ["build + compile", "per episode"],
+        [r["compile_ms"], r["episode_compile_ms"]],
+        color="#9467bd",
+    )
+    bx.axhline(r["targets"]["compile_ms"], color="k", ls="--", lw=1, label="target")
+    bx.set_ylabel("ms per room (median)")
+    bx.legend(fontsize=8)
+    fig.suptitle(
+        f"bench sim: {r['rooms']} {r['style']} rooms, {r['width']}x{r['height']}, {r['gl_renderer']}",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def format_table(r: dict) -> str:

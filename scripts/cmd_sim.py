@@ -15,7 +15,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         help="simulator speed: layouts/s, build+compile ms, gazes/s, render overhead",
         description="Time the room generator, the MJCF build and compile per room, and gazes "
         "(move the head in MuJoCo, render segmentation and depth, detect) against the same "
-        "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json and DIR/bench_sim.md.",
+        "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json, DIR/bench_sim.md and DIR/bench_sim.png.",
     )
     p.add_argument("--out", required=True, type=Path, help="output directory")
     p.add_argument(
@@ -49,5 +49,7 @@ def run_bench(args: argparse.Namespace) -> int:
         height=args.height,
     )
     print(format_table(results))
-    print(f"wrote {args.out / 'bench_sim.json'} and {args.out / 'bench_sim.md'}")
+    print(
+        f"wrote {args.out / 'bench_sim.json'}, {args.out / 'bench_sim.md'} and {args.out / 'bench_sim.png'}"
+    )
     return 0

@@ -228,3 +228,19 @@ def test_egl_failure_is_a_one_line_error(layout, catalog, monkeypatch):
     msg = str(exc.value)
     assert "\n" not in msg and "apt-get install -y libegl1 libgl1-mesa-dri" in msg
     w.close()
+
+
+@pytest.mark.render
+def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
+    """`ctxsearch bench sim` on a tiny run writes its three files with the issue's keys."""
+    import json
+
+    from scripts.cli import main
+
+    assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "1", "--gazes", "5"]) == 0
+    r = json.loads((tmp_path / "bench_sim.json").read_text())
+    for key in ("layouts_per_s", "compile_ms", "gazes_per_s", "overhead_ratio"):
+        assert r[key] > 0
+    assert (tmp_path / "bench_sim.md").read_text().startswith("# bench sim")
+    assert (tmp_path / "bench_sim.png").stat().st_size > 1000
+    assert "gazes per second" in capsys.readouterr().out
