@@ -41,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch demo``."""
-    from agent.demo import run_demo
+    from scripts.experiments.demo import run_demo
 
     res = run_demo(
         args.out,

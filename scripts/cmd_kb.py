@@ -334,7 +334,7 @@ def run_merge(args: argparse.Namespace) -> int:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench kb``."""
-    from knowledge import bench
+    from scripts.experiments import bench_kb as bench
 
     sizes = args.sizes or bench.DEFAULT_SIZES
 

@@ -161,9 +161,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench learning``."""
-    from agent.bench_learning import bench_learning
     from agent.strategies import make_strategy
     from knowledge.errors import CtxsearchError
+    from scripts.experiments.bench_learning import bench_learning
 
     names = [s.strip() for s in args.strategies.split(",") if s.strip()]
     if not names:

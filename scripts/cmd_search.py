@@ -94,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
-    from agent.bench_search import search_once
+    from scripts.experiments.bench_search import search_once
 
     one = search_once(
         args.style,
@@ -153,8 +153,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
-    from agent.bench_search import bench_search
     from agent.search import parse_policies
+    from scripts.experiments.bench_search import bench_search
 
     names = parse_policies(args.policies)
     res = bench_search(

@@ -37,7 +37,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench sim``."""
-    from envs.bench_sim import format_table, run
+    from scripts.experiments.bench_sim import format_table, run
 
     results = run(
         args.out,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agent.demo import run_demo
+from scripts.experiments.demo import run_demo
 
 
 @pytest.mark.render

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent import search_space as ss
-from agent.bench_search import search_once
 from knowledge.errors import CtxsearchError
+from scripts.experiments.bench_search import search_once
 
 DEMO_STYLE = "office"
 DEMO_TARGET = "Cup"
