@@ -1,11 +1,11 @@
 """The search benchmark: every policy on the same episodes, time to find, and the files.
 
-Paired episodes. ``make_episodes`` draws the episode list once: held-out rooms
-(``search.held_out_seed(seed, i)``, skipping any seed the knowledge store learned in and rooms
-without a small object), a start pose (a uniformly drawn free cell, random heading) and a
-target type drawn uniformly among the small (kind=object) types present in the room. Every
-policy then runs every episode: the room is built once per episode and the robot is put back at
-the same start pose for each policy, with a fresh seen map and nothing known.
+Paired episodes (``episodes.make_episodes``, ``episodes.run_episodes``): the episode list is
+drawn once: held-out rooms (``search.held_out_seed(seed, i)``, skipping any seed the knowledge
+store learned in and rooms without a small object), a start pose (a uniformly drawn free cell,
+random heading) and a target type drawn uniformly among the small (kind=object) types present in
+the room. Every policy then runs every episode: the room is built once per episode and the robot
+is put back at the same start pose for each policy, with a fresh seen map and nothing known.
 
 Statistics per policy: success rate within the budget; median and mean simulated seconds to
 find, **a failure counted at the budget** (so a policy that fails often cannot look fast), each
@@ -32,65 +32,21 @@ from pathlib import Path
 import numpy as np
 
 from agent import search as S
-from agent import search_space as ss
-from agent.navigation import OccupancyGrid
-from envs.robot_spec import RobotSpec
-from knowledge.catalog import Catalog
+from envs.styles import load_style
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
+from scripts.experiments.episodes import (
+    SearchConfig,
+    load_priors,
+    make_episodes,
+    run_episodes,
+    split_name,
+)
 
 BOOTSTRAP_SAMPLES = 2000
 
 
-# =========================================================================== episodes
-def make_episodes(
-    style,
-    n: int,
-    seed: int,
-    catalog: Catalog,
-    budget_s: float = S.DEFAULT_BUDGET_S,
-    exclude_seeds: set[int] | frozenset[int] = frozenset(),
-    spec: RobotSpec | None = None,
-    target: str | None = None,
-    max_tries: int | None = None,
-) -> list[S.Episode]:
-    """``n`` episodes in held-out rooms of ``style`` (a Style), deterministic in ``seed``.
-
-    ``target``: only rooms holding that type, always looking for it (``ctxsearch search``);
-    otherwise the target is drawn among the room's small types."""
-    from envs.rooms import generate_room
-
-    spec = spec or RobotSpec()
-    out: list[S.Episode] = []
-    i = 0
-    limit = max_tries if max_tries is not None else 50 * n + 100
-    while len(out) < n:
-        if i >= limit:
-            what = f"a {target}" if target else "a small object"
-            raise CtxsearchError(
-                f"no held-out room of style '{style.name}' holds {what} (tried {limit} rooms)"
-            )
-        room_seed = S.held_out_seed(seed, i)
-        rng = np.random.default_rng([int(seed), i, 0xE915])
-        i += 1
-        if room_seed in exclude_seeds:
-            continue
-        layout = generate_room(style, room_seed, catalog)
-        small = S.small_types_present(layout, catalog)
-        if target is not None:
-            if target not in {o.type for o in layout.objects}:
-                continue
-            tgt = target
-        elif small:
-            tgt = small[int(rng.integers(len(small)))]
-        else:
-            continue
-        grid = OccupancyGrid.from_layout(layout, spec)
-        start = S.random_start(layout, grid, rng)
-        out.append(S.Episode(len(out), style.name, room_seed, tgt, start, float(budget_s)))
-    return out
-
-
-# =========================================================================== statistics
 def bootstrap_ci(
     values: Sequence[float],
     stat: Callable[[np.ndarray], float] = np.median,
@@ -182,7 +138,6 @@ def aggregate(results: dict[str, list[S.SearchResult]], seed: int = 0) -> dict[s
     return out
 
 
-# =========================================================================== running
 @dataclass
 class BenchResult:
     """What ``bench_search`` produced."""
@@ -193,69 +148,6 @@ class BenchResult:
     table: str
     files: list[Path] = field(default_factory=list)
     wall_s: float = 0.0
-
-
-def split_name(name: str) -> tuple[str, str | None]:
-    """``location@low`` -> ("location", "low"); ``location`` -> ("location", None)."""
-    base, _, rank = name.partition("@")
-    if rank and rank not in ss.RANK_MODES:
-        raise CtxsearchError(
-            f"unknown rank '{rank}' in '{name}' (known: {', '.join(ss.RANK_MODES)})"
-        )
-    S.make_policy(base)
-    return base, rank or None
-
-
-def run_episodes(
-    episodes: Sequence[S.Episode],
-    policies: Sequence[str],
-    catalog: Catalog,
-    style,
-    probs_for: Callable[[str, str | None], ss.ProbabilitySource | None],
-    progress: Callable[[str], None] | None = None,
-    record_dir: Path | None = None,
-) -> dict[str, list[S.SearchResult]]:
-    """Run every policy on every episode (one World per episode, shared by the policies)."""
-    from agent.recording import Recorder
-    from envs.rooms import generate_room
-    from envs.world import World
-
-    results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
-    for ep in episodes:
-        layout = generate_room(style, ep.room_seed, catalog)
-        world = World(layout, catalog)
-        try:
-            grid = OccupancyGrid.from_layout(layout, world.spec)
-            seen = ss.SeenMap.for_room(layout, catalog)
-            for name in policies:
-                base, rank = split_name(name)
-                policy = S.make_policy(base)
-                rec_path = None
-                if record_dir is not None:
-                    rec_path = Path(record_dir) / f"ep{ep.index:03d}_{name.replace('@', '_')}.rrd"
-                with Recorder(rec_path) as rec:
-                    rec.log_room(layout, catalog)
-                    ctx = S.SearchContext(
-                        ep,
-                        layout,
-                        catalog,
-                        world,
-                        grid=grid,
-                        probs=probs_for(base, rank),
-                        recorder=rec,
-                        seen=seen,
-                        policy=name,
-                    )
-                    res = policy.run(ctx)
-                res.policy = name
-                results[name].append(res)
-                if progress is not None:
-                    progress(
-                        f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {res.summary()}"
-                    )
-        finally:
-            world.close()
-    return results
 
 
 def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
@@ -321,184 +213,92 @@ def plot_cdf(
     plt.close(fig)
 
 
+@dataclass(frozen=True)
+class SearchBenchConfig(SearchConfig):
+    """``bench search``: the shared search settings, the knowledge store and how many episodes."""
+
+    kb: Path | None = None  # knowledge store made by `ctxsearch learn`
+    episodes: int = 40
+
+
 def bench_search(
-    kb_path: Path | str,
-    style_name: str,
-    episodes: int,
-    policies: Sequence[str],
+    config: SearchBenchConfig,
     out: Path | str,
     *,
-    budget_s: float = S.DEFAULT_BUDGET_S,
-    seed: int = 0,
-    rank: str = ss.DEFAULT_RANK,
-    truth=None,
-    truth_samples: int = 200,
     catalog: Catalog | None = None,
     progress: Callable[[str], None] | None = print,
 ) -> BenchResult:
-    """The benchmark (module docstring): run, aggregate, write the three files."""
-    from envs.styles import load_style
-    from knowledge.catalog import load_catalog
-
+    """The benchmark (module docstring): run, aggregate, write the three files to ``out``."""
     t_wall = time.perf_counter()
     catalog = catalog or load_catalog()
-    names = list(policies)
+    names = list(config.policies)
     for n in names:
         split_name(n)
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
-    style = load_style(style_name, catalog)
-    need_kb = any(S.POLICIES[split_name(n)[0]].needs == "kb" for n in names)
-    need_truth = any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in names)
-    kb, learned = (None, set())
-    if need_kb or kb_path is not None:
-        kb, learned = S.open_knowledge(kb_path, catalog)
-    truth = S.truth_probabilities(style, catalog, truth_samples, path=truth) if need_truth else None
+    style = load_style(config.style, catalog)
+    priors = load_priors(config, style, catalog, kb_path=config.kb)
+    eps = make_episodes(
+        style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
+    )
+    results = run_episodes(eps, names, catalog, style, priors.for_policy, progress=progress)
+    stats = aggregate(results, seed=config.seed)
+    table = format_table(stats, len(eps), config.budget_s)
+    files = _write_files(config, Path(out), style.name, priors.kb, eps, results, stats, table)
+    return BenchResult(eps, results, stats, table, files, time.perf_counter() - t_wall)
 
-    def probs_for(base: str, r: str | None) -> ss.ProbabilitySource | None:
-        needs = S.POLICIES[base].needs
-        if needs == "kb":
-            return ss.KBProbabilities(kb, r or rank, rooms=len(learned) or None)
-        if needs == "truth":
-            return truth
-        return None
 
-    eps = make_episodes(style, episodes, seed, catalog, budget_s, exclude_seeds=learned)
-    results = run_episodes(eps, names, catalog, style, probs_for, progress=progress)
-    stats = aggregate(results, seed=seed)
-    table = format_table(stats, len(eps), budget_s)
-    out = Path(out)
+def _episode_json(ep: S.Episode, i: int, results: dict[str, list[S.SearchResult]]) -> dict:
+    """Episode ``ep`` (the i-th) and every policy's outcome on it, for search.json."""
+    return {
+        **ep.to_json(),
+        "results": {
+            n: {
+                "found": rs[i].success,
+                "t": round(rs[i].sim_time, 3),
+                "gazes": rs[i].gazes,
+                "path_m": round(rs[i].path_m, 3),
+            }
+            for n, rs in results.items()
+        },
+    }
+
+
+def _write_files(
+    config: SearchBenchConfig,
+    out: Path,
+    style: str,
+    kb: KnowledgeBase | None,
+    eps: list[S.Episode],
+    results: dict[str, list[S.SearchResult]],
+    stats: dict[str, PolicyStats],
+    table: str,
+) -> list[Path]:
+    """Write search.json, search.md and search.png to ``out``; their paths."""
     out.mkdir(parents=True, exist_ok=True)
     doc = {
-        "style": style.name,
+        "style": style,
         "episodes": len(eps),
-        "budget_s": budget_s,
-        "seed": seed,
-        "rank": rank,
-        "kb": str(kb_path) if kb_path is not None else None,
+        "budget_s": config.budget_s,
+        "seed": config.seed,
+        "rank": config.rank,
+        "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
-        "policies": {n: stats[n].to_json() for n in names},
-        "episode_list": [
-            {
-                **ep.to_json(),
-                "results": {
-                    n: {
-                        "found": results[n][i].success,
-                        "t": round(results[n][i].sim_time, 3),
-                        "gazes": results[n][i].gazes,
-                        "path_m": round(results[n][i].path_m, 3),
-                    }
-                    for n in names
-                },
-            }
-            for i, ep in enumerate(eps)
-        ],
+        "policies": {n: st.to_json() for n, st in stats.items()},
+        "episode_list": [_episode_json(ep, i, results) for i, ep in enumerate(eps)],
     }
     files = [out / "search.json", out / "search.md", out / "search.png"]
     files[0].write_text(json.dumps(doc, indent=1) + "\n")
     kb_line = (
-        f"knowledge base `{kb_path}` ({doc['kb_examinations']} examinations), "
+        f"knowledge base `{config.kb}` ({doc['kb_examinations']} examinations), "
         if kb is not None
         else ""
     )
-    md = (
-        f"# Object search: {style.name}\n\n{kb_line}ranking by the interval's `{rank}`, "
-        f"budget {budget_s:.0f} simulated s, seed {seed}.\n\n{table}\n"
+    files[1].write_text(
+        f"# Object search: {style}\n\n{kb_line}ranking by the interval's `{config.rank}`, "
+        f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
     )
-    files[1].write_text(md)
-    plot_cdf(
-        results, budget_s, files[2], f"time to find ({style.name}, {len(eps)} paired episodes)"
-    )
-    return BenchResult(eps, results, stats, table, files, time.perf_counter() - t_wall)
-
-
-# =========================================================================== one episode (CLI, demo)
-@dataclass
-class OneSearch:
-    """One episode of ``ctxsearch search``: the episode and each policy's result."""
-
-    episode: S.Episode
-    results: list[S.SearchResult]
-    files: list[Path] = field(default_factory=list)
-
-
-def search_once(
-    style_name: str,
-    target: str,
-    policies: Sequence[str],
-    *,
-    kb=None,
-    kb_path=None,
-    seed: int = 0,
-    budget_s: float = S.DEFAULT_BUDGET_S,
-    rank: str = ss.DEFAULT_RANK,
-    records: Sequence[Path | None] | None = None,
-    truth=None,
-    truth_samples: int = 200,
-    exclude_seeds: set[int] | frozenset[int] = frozenset(),
-    catalog: Catalog | None = None,
-    rgb: bool = True,
-) -> OneSearch:
-    """Search for ``target`` in the first held-out room (for ``seed``) of ``style_name`` that holds
-    one, with each of ``policies`` in turn from the same start pose (``records[i]``: policy i's
-    rerun recording, or None). ``kb`` (a KnowledgeBase) or ``kb_path`` (a store) gives the learned
-    probabilities; ``truth`` a ground-truth JSON path for the oracle-prior policies."""
-    from agent.recording import Recorder
-    from envs.rooms import generate_room
-    from envs.styles import load_style
-    from envs.world import World
-    from knowledge.catalog import load_catalog
-
-    catalog = catalog or load_catalog()
-    S.check_target(catalog, target)
-    names = list(policies)
-    for n in names:
-        split_name(n)
-    style = load_style(style_name, catalog)
-    learned = set(exclude_seeds)
-    if kb is None and kb_path is not None:
-        kb, seeds = S.open_knowledge(kb_path, catalog)
-        learned |= seeds
-    truth_probs = None
-    if any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in names):
-        truth_probs = S.truth_probabilities(style, catalog, truth_samples, path=truth)
-    ep = make_episodes(style, 1, seed, catalog, budget_s, exclude_seeds=learned, target=target)[0]
-    layout = generate_room(style, ep.room_seed, catalog)
-    records = list(records) if records is not None else [None] * len(names)
-    out: list[S.SearchResult] = []
-    with World(layout, catalog) as world:
-        grid = OccupancyGrid.from_layout(layout, world.spec)
-        seen = ss.SeenMap.for_room(layout, catalog)
-        for name, rec_path in zip(names, records, strict=True):
-            base, r = split_name(name)
-            needs = S.POLICIES[base].needs
-            if needs == "kb" and kb is None:
-                raise CtxsearchError(f"policy '{base}' needs a knowledge store (--kb)")
-            probs = (
-                ss.KBProbabilities(kb, r or rank, rooms=len(learned) or None)
-                if needs == "kb"
-                else truth_probs
-                if needs == "truth"
-                else None
-            )
-            with Recorder(rec_path) as rec:
-                rec.log_room(layout, catalog)
-                rec.log_text(
-                    f"episode: room {style.name}/{ep.room_seed}, target {target}, policy {name}"
-                )
-                ctx = S.SearchContext(
-                    ep,
-                    layout,
-                    catalog,
-                    world,
-                    grid=grid,
-                    probs=probs,
-                    recorder=rec,
-                    seen=seen,
-                    policy=name,
-                )
-                res = S.make_policy(base).run(ctx)
-            res.policy = name
-            out.append(res)
-    return OneSearch(ep, out, [Path(p) for p in records if p is not None])
+    title = f"time to find ({style}, {len(eps)} paired episodes)"
+    plot_cdf(results, config.budget_s, files[2], title)
+    return files
