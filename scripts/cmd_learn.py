@@ -105,7 +105,7 @@ def run_learn(args: argparse.Namespace) -> int:
     )
     for line in s.lines():
         print(line)
-    for f in getattr(s, "files", []):
+    for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
     return 130 if s.interrupted else 0
@@ -164,6 +164,7 @@ def run_bench(args: argparse.Namespace) -> int:
     from agent.strategies import make_strategy
     from knowledge.errors import CtxsearchError
     from scripts.experiments.bench_learning import bench_learning
+    from scripts.experiments.learning_trace import LearningBenchConfig
 
     names = [s.strip() for s in args.strategies.split(",") if s.strip()]
     if not names:
@@ -172,17 +173,17 @@ def run_bench(args: argparse.Namespace) -> int:
         make_strategy(n)  # one-line error for unknown names
     if len(set(names)) != len(names):
         raise CtxsearchError(f"--strategies: a strategy is listed twice in {args.strategies!r}")
-    result = bench_learning(
-        args.style,
-        args.rooms,
-        args.seeds,
-        names,
-        args.out,
+    config = LearningBenchConfig(
+        style=args.style,
+        rooms=args.rooms,
+        seeds=args.seeds,
+        strategies=tuple(names),
         perception=args.perception,
         truth_samples=args.truth_samples,
         alpha=args.alpha,
         room_budget_s=args.room_budget,
     )
+    result = bench_learning(config, args.out)
     print(result.table)
     for f in result.files:
         print(f"wrote {f}")
