@@ -81,6 +81,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     kb_sub = kb.add_subparsers(dest="kb_command", metavar="ACTION", required=True)
 
+    _register_show(kb_sub)
+    _register_stats(kb_sub)
+    _register_merge(kb_sub)
+
+
+def _register_show(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb show``."""
     show = kb_sub.add_parser(
         "show",
         help="print the intervals INT(rel, B) of a store, sorted by lower bound",
@@ -109,6 +116,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_catalog_arg(show)
     show.set_defaults(func=run_show)
 
+
+def _register_stats(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb stats``."""
     stats = kb_sub.add_parser(
         "stats",
         help="summarise a store: examinations, runs, rooms, types examined, mean interval width",
@@ -131,6 +141,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_catalog_arg(stats)
     stats.set_defaults(func=run_stats)
 
+
+def _register_merge(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb merge``."""
     merge = kb_sub.add_parser(
         "merge",
         help="append the evidence of several stores to one (e.g. from several robots)",

@@ -40,6 +40,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--kb", required=True, type=Path, help="evidence store (SQLite); created or resumed"
     )
+    _add_learning_args(p)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_learn)
+
+
+def _add_learning_args(p: argparse.ArgumentParser) -> None:
+    """How ``learn`` learns: strategy, perception, alpha, seed, recording, limits."""
     p.add_argument(
         "--strategy",
         default="hif",
@@ -82,8 +89,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP,
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_learn)
 
 
 def run_learn(args: argparse.Namespace) -> int:
