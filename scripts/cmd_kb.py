@@ -10,6 +10,9 @@ import sys
 import textwrap
 from pathlib import Path
 
+from knowledge.catalog import load_catalog
+from knowledge.errors import StoreError
+from knowledge.store import EvidenceStore, merge_stores
 from scripts import argtypes
 
 SHOW_EXAMPLES = """\
@@ -200,10 +203,6 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 # ---- handlers ------------------------------------------------------------------------------
 def _open_kb(args: argparse.Namespace):
     """(facts about the store, its KnowledgeBase) for args.path; StoreError if unusable."""
-    from knowledge.catalog import load_catalog
-    from knowledge.errors import StoreError
-    from knowledge.store import EvidenceStore
-
     catalog = load_catalog(args.catalog)
     try:
         with EvidenceStore.open(args.path, catalog, create=False) as store:
@@ -331,9 +330,6 @@ def run_stats(args: argparse.Namespace) -> int:
 
 def run_merge(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb merge``."""
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore, merge_stores
-
     catalog = load_catalog(args.catalog)
     added = merge_stores(args.out, args.inputs, catalog)
     with EvidenceStore.open(args.out, catalog, create=False) as store:
@@ -347,6 +343,7 @@ def run_merge(args: argparse.Namespace) -> int:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench kb``."""
+    # Imported here: the benchmark pulls in matplotlib, which `kb show` must not wait for.
     from scripts.experiments import bench_kb as bench
 
     sizes = args.sizes or bench.DEFAULT_SIZES

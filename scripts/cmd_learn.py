@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from agent.strategies import STRATEGIES, make_strategy
+from knowledge.errors import CtxsearchError
 from scripts import argtypes
 
 ROOM_BUDGET_HELP = (
@@ -15,8 +17,6 @@ ROOM_BUDGET_HELP = (
 
 
 def _strategy_names() -> list[str]:
-    from agent.strategies import STRATEGIES
-
     return list(STRATEGIES)
 
 
@@ -93,6 +93,7 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
 
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
+    # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from agent.acquisition import learn
 
     s = learn(
@@ -166,10 +167,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench learning``."""
-    from agent.strategies import make_strategy
-    from knowledge.errors import CtxsearchError
-    from scripts.experiments.bench_learning import bench_learning
-    from scripts.experiments.learning_trace import LearningBenchConfig
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.bench_learning import LearningBenchConfig, bench_learning
 
     names = [s.strip() for s in args.strategies.split(",") if s.strip()]
     if not names:

@@ -37,6 +37,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench sim``."""
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from scripts.experiments.bench_sim import format_table, run
 
     results = run(

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from agent import search as S
 from envs.styles import load_style
@@ -188,12 +189,8 @@ def plot_cdf(
     results: dict[str, list[S.SearchResult]], budget_s: float, path: Path, title: str
 ) -> None:
     """search.png: the share of episodes found within t simulated seconds, per policy."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
+    fig = Figure(figsize=(7, 4.5), dpi=120)
+    ax = fig.subplots()
     for name, rs in results.items():
         t = np.sort([r.sim_time for r in rs if r.success])
         n = len(rs)
@@ -210,7 +207,6 @@ def plot_cdf(
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 @dataclass(frozen=True)
