@@ -23,10 +23,6 @@ RANK_MODES = ("low", "p0", "high")
 DEFAULT_RANK = "low"
 
 
-def _policy_names() -> list[str]:
-    return list(POLICY_NAMES)
-
-
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--budget-seconds",
@@ -79,7 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--policy",
         default="location",
-        choices=_policy_names(),
+        choices=POLICY_NAMES,
         help="search policy (default: location)",
     )
     p.add_argument(

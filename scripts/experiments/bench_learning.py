@@ -63,18 +63,13 @@ class BenchResult:
 
 
 def bench_learning(
-    config: LearningBenchConfig,
-    out: str | Path,
-    catalog: Catalog | None = None,
-    truth: dict | None = None,
-    progress: bool = True,
+    config: LearningBenchConfig, out: str | Path, progress: bool = True
 ) -> BenchResult:
     """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png."""
-    catalog = catalog or load_catalog()
+    catalog = load_catalog()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if truth is None:
-        truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
+    truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
     traces = _run_all(config, truth, catalog, progress)
     data = _data(config, truth, traces)
     c = config

@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 from agent import search as S
 from envs.styles import load_style
 from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
+from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
 from scripts.experiments.episodes import (
     SearchConfig,
@@ -221,12 +221,11 @@ def bench_search(
     config: SearchBenchConfig,
     out: Path | str,
     *,
-    catalog: Catalog | None = None,
     progress: Callable[[str], None] | None = print,
 ) -> BenchResult:
     """The benchmark (module docstring): run, aggregate, write the three files to ``out``."""
     t_wall = time.perf_counter()
-    catalog = catalog or load_catalog()
+    catalog = load_catalog()
     names = list(config.policies)
     for n in names:
         split_name(n)

@@ -66,6 +66,7 @@ def measure(facing: bool, rooms: int, seed: int) -> dict[str, float]:
 
 
 def main() -> None:
+    """Print the table of facing off and on for ROOMS rooms (default 3) and SEED (default 0)."""
     rooms = int(sys.argv[1]) if len(sys.argv) > 1 else 3
     seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
     print(f"office, {rooms} rooms, seed {seed}, hif, camera perception")
