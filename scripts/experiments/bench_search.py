@@ -238,9 +238,10 @@ def bench_search(
     )
     results = run_episodes(eps, names, catalog, style, priors.for_policy, progress=progress)
     stats = aggregate(results, seed=config.seed)
-    table = format_table(stats, len(eps), config.budget_s)
-    files = _write_files(config, Path(out), style.name, priors.kb, eps, results, stats, table)
-    return BenchResult(eps, results, stats, table, files, time.perf_counter() - t_wall)
+    res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
+    res.files = _write_files(config, Path(out), style.name, priors.kb, res)
+    res.wall_s = time.perf_counter() - t_wall
+    return res
 
 
 def _episode_json(ep: S.Episode, i: int, results: dict[str, list[S.SearchResult]]) -> dict:
@@ -264,12 +265,10 @@ def _write_files(
     out: Path,
     style: str,
     kb: KnowledgeBase | None,
-    eps: list[S.Episode],
-    results: dict[str, list[S.SearchResult]],
-    stats: dict[str, PolicyStats],
-    table: str,
+    res: BenchResult,
 ) -> list[Path]:
-    """Write search.json, search.md and search.png to ``out``; their paths."""
+    """Write search.json, search.md and search.png of ``res`` to ``out``; their paths."""
+    eps, results, stats, table = res.episodes, res.results, res.stats, res.table
     out.mkdir(parents=True, exist_ok=True)
     doc = {
         "style": style,
