@@ -37,7 +37,8 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench sim``."""
-    from envs.bench_sim import format_table, run
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.bench_sim import format_table, run
 
     results = run(
         args.out,

@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+from envs.styles import load_style
+from knowledge.catalog import load_catalog
 from scripts import argtypes
 
 
@@ -46,9 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
-    from envs.styles import load_style
+    # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
     from envs.truth import ground_truth
-    from knowledge.catalog import load_catalog
 
     catalog = load_catalog(args.catalog)
     style = load_style(args.style, catalog)

@@ -3,9 +3,10 @@
 For every examination of a camera-mode ``learn`` run (hif, office rooms), the (relation, type)
 pairs the camera found are compared with the pairs the true layout holds for the same object:
 recall (share of the oracle's pairs found), precision, pairs per examination, and simulated
-seconds per examination. Run from the repository root:
+seconds per examination. Its tables are in results/learning_budget/facing.md. Run from the
+repository root:
 
-    MUJOCO_GL=egl .venv/bin/python results/learning_budget/measure_facing.py [ROOMS] [SEED]
+    MUJOCO_GL=egl .venv/bin/python -m scripts.experiments.measure_facing [ROOMS] [SEED]
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ def measure(facing: bool, rooms: int, seed: int) -> dict[str, float]:
 
 
 def main() -> None:
+    """Print the table of facing off and on for ROOMS rooms (default 3) and SEED (default 0)."""
     rooms = int(sys.argv[1]) if len(sys.argv) > 1 else 3
     seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
     print(f"office, {rooms} rooms, seed {seed}, hif, camera perception")
