@@ -4,6 +4,7 @@ head-camera views with detections, and (optionally) a rerun recording."""
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
@@ -14,13 +15,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``room`` sub-command."""
     p = sub.add_parser(
         "room",
-        help="generate and build a room; write overview.png, view_*.png and a rerun recording",
-        description="Generate a room of a style (deterministic by seed), build it in MuJoCo, drive "
-        "the robot to viewpoints looking at its furniture and write DIR/overview.png (top-down), "
-        "DIR/view_*.png (head camera, detections drawn) and, with --record, a rerun recording.",
+        help="generate and build a room or house; write overview.png, view_*.png, layout.json "
+        "and a rerun recording",
+        description="Generate a room or a house of a style (deterministic by seed), build it in "
+        "MuJoCo, drive the robot to viewpoints looking at its furniture and write "
+        "DIR/overview.png (top-down; a house's rooms labelled), DIR/view_*.png (head camera, "
+        "detections drawn), DIR/layout.json (rooms with style and outline, doors, every object "
+        "with type, id, pose, size and room) and, with --record, a rerun recording.",
     )
     p.add_argument(
-        "--style", default="office", help="room style name or TOML path (default: office)"
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
+        "(default: office)",
     )
     p.add_argument("--seed", type=int, default=0, help="room seed (default: 0)")
     p.add_argument("--out", required=True, type=Path, help="output directory")
@@ -183,13 +190,14 @@ def run(args: argparse.Namespace) -> int:
     from agent.recording import Recorder
     from agent.viewplan import execute_gaze, plan_gazes
     from envs.arena import MAX_IMAGE_SIZE
+    from envs.floorplan import layout_dict
+    from envs.houses import generate_layout, resolve_style
     from envs.robot_spec import RobotPose
-    from envs.rooms import generate_room
-    from envs.styles import load_style
     from envs.world import World
     from knowledge.catalog import load_catalog
     from knowledge.errors import CtxsearchError
     from knowledge.geometry import relation_volume
+    from scripts.overview_rooms import draw_room_labels
 
     if args.views < 0:
         raise CtxsearchError(f"--views must be at least 0, got {args.views}")
@@ -199,8 +207,8 @@ def run(args: argparse.Namespace) -> int:
             f"got {args.width}x{args.height}"
         )
     catalog = load_catalog(args.catalog)
-    style = load_style(args.style, catalog)
-    layout = generate_room(style, args.seed, catalog)
+    style = resolve_style(args.style, catalog)
+    layout = generate_layout(style, args.seed, catalog)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -214,8 +222,9 @@ def run(args: argparse.Namespace) -> int:
             if xy is not None:
                 world.reset_pose(RobotPose(float(xy[0]), float(xy[1]), pose.yaw))
         n_furn = sum(catalog.type(o.type).is_furniture for o in layout.objects)
+        kind = f"house ({len(layout.rooms)} rooms)" if layout.is_house else "room"
         print(
-            f"room: style {layout.style}, seed {layout.seed}, {layout.width:.1f} x {layout.depth:.1f} m, "
+            f"{kind}: style {layout.style}, seed {layout.seed}, {layout.width:.1f} x {layout.depth:.1f} m, "
             f"{n_furn} furniture, {len(layout.objects) - n_furn} small objects"
         )
 
@@ -276,11 +285,16 @@ def run(args: argparse.Namespace) -> int:
                 f"  view {i}: {target.type} #{target.id} from ({frame.pose.x:.2f}, {frame.pose.y:.2f}), "
                 f"t = {world.sim_time:.1f} s, detected: {seen}"
             )
-        over = world.render_overview(640, 480)
+        ow, oh = (960, 720) if layout.is_house else (640, 480)
+        over = world.render_overview(ow, oh)
         img = draw_overview(over, world, catalog, np.array(path_xy), views)
+        img = draw_room_labels(img, world, layout)
         p = out / "overview.png"
         cv2.imwrite(str(p), img)
         written.insert(0, p)
+    p = out / "layout.json"
+    p.write_text(json.dumps(layout_dict(layout), indent=1) + "\n")
+    written.insert(1, p)
     rec.close()
     if args.record is not None:
         written.append(Path(args.record))
