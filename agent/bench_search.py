@@ -57,7 +57,7 @@ def make_episodes(
 
     ``target``: only rooms holding that type, always looking for it (``ctxsearch search``);
     otherwise the target is drawn among the room's small types."""
-    from envs.rooms import generate_room
+    from envs.houses import generate_layout
 
     spec = spec or RobotSpec()
     out: list[S.Episode] = []
@@ -74,7 +74,7 @@ def make_episodes(
         i += 1
         if room_seed in exclude_seeds:
             continue
-        layout = generate_room(style, room_seed, catalog)
+        layout = generate_layout(style, room_seed, catalog)
         small = S.small_types_present(layout, catalog)
         if target is not None:
             if target not in {o.type for o in layout.objects}:
@@ -217,12 +217,12 @@ def run_episodes(
 ) -> dict[str, list[S.SearchResult]]:
     """Run every policy on every episode (one World per episode, shared by the policies)."""
     from agent.recording import Recorder
-    from envs.rooms import generate_room
+    from envs.houses import generate_layout
     from envs.world import World
 
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
-        layout = generate_room(style, ep.room_seed, catalog)
+        layout = generate_layout(style, ep.room_seed, catalog)
         world = World(layout, catalog)
         try:
             grid = OccupancyGrid.from_layout(layout, world.spec)
@@ -337,7 +337,7 @@ def bench_search(
     progress: Callable[[str], None] | None = print,
 ) -> BenchResult:
     """The benchmark (module docstring): run, aggregate, write the three files."""
-    from envs.styles import load_style
+    from envs.houses import resolve_style
     from knowledge.catalog import load_catalog
 
     t_wall = time.perf_counter()
@@ -347,7 +347,7 @@ def bench_search(
         split_name(n)
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
-    style = load_style(style_name, catalog)
+    style = resolve_style(style_name, catalog)
     need_kb = any(S.POLICIES[split_name(n)[0]].needs == "kb" for n in names)
     need_truth = any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in names)
     kb, learned = (None, set())
@@ -445,8 +445,7 @@ def search_once(
     rerun recording, or None). ``kb`` (a KnowledgeBase) or ``kb_path`` (a store) gives the learned
     probabilities; ``truth`` a ground-truth JSON path for the oracle-prior policies."""
     from agent.recording import Recorder
-    from envs.rooms import generate_room
-    from envs.styles import load_style
+    from envs.houses import generate_layout, resolve_style
     from envs.world import World
     from knowledge.catalog import load_catalog
 
@@ -455,7 +454,7 @@ def search_once(
     names = list(policies)
     for n in names:
         split_name(n)
-    style = load_style(style_name, catalog)
+    style = resolve_style(style_name, catalog)
     learned = set(exclude_seeds)
     if kb is None and kb_path is not None:
         kb, seeds = S.open_knowledge(kb_path, catalog)
@@ -464,7 +463,7 @@ def search_once(
     if any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in names):
         truth_probs = S.truth_probabilities(style, catalog, truth_samples, path=truth)
     ep = make_episodes(style, 1, seed, catalog, budget_s, exclude_seeds=learned, target=target)[0]
-    layout = generate_room(style, ep.room_seed, catalog)
+    layout = generate_layout(style, ep.room_seed, catalog)
     records = list(records) if records is not None else [None] * len(names)
     out: list[S.SearchResult] = []
     with World(layout, catalog) as world:

@@ -33,7 +33,6 @@ import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from envs.houses import CORRIDOR, HouseStyle
 from envs.layout import Door, Passage, Room, RoomLayout
@@ -41,7 +40,7 @@ from envs.robot_spec import RobotSpec
 from envs.rooms import RoomShell, generate_room
 from envs.styles import Style
 from knowledge.catalog import Catalog, load_catalog
-from knowledge.geometry import Box, ObjectInstance, footprint_distance
+from knowledge.geometry import Box, ObjectInstance
 
 WALL = 0.1  # m, wall thickness (the arena's WALL_THICKNESS)
 DOOR_MARGIN = 0.35  # m kept between a door's edge and the corner of either room it joins
@@ -461,52 +460,6 @@ def wall_obstacles(layout: RoomLayout) -> list[Box]:
         and abs(c[0]) < layout.width / 2
         and abs(c[1]) < layout.depth / 2
     ]
-
-
-def free_space(
-    layout: RoomLayout, robot: RobotSpec | None = None, resolution: float = 0.1
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the robot's base centre can be: (free (nx, ny) bool, cell centres xs (nx,), ys
-    (ny,)): inside the footprint, ``clearance`` from the walls and from every object below the
-    robot's head."""
-    robot = robot or RobotSpec()
-    W, D = layout.width, layout.depth
-    nx, ny = max(2, int(W / resolution)), max(2, int(D / resolution))
-    xs = -W / 2 + (np.arange(nx) + 0.5) * W / nx
-    ys = -D / 2 + (np.arange(ny) + 0.5) * D / ny
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    c = robot.clearance
-    free = (np.abs(gx) <= W / 2 - c) & (np.abs(gy) <= D / 2 - c)
-    boxes = wall_obstacles(layout) + [
-        o.box() for o in layout.objects if o.bottom < robot.camera_height
-    ]
-    for b in boxes:
-        free &= footprint_distance(b, gx, gy) > c
-    return free, xs, ys
-
-
-def reachable_rooms(layout: RoomLayout, robot: RobotSpec | None = None) -> set[int]:
-    """The indices of the rooms with free floor in the free region that holds the entrance's
-    front (for a single room: {0} if its door's front is free)."""
-    free, xs, ys = free_space(layout, robot)
-    labels, _ = ndimage.label(free)
-    from envs.rooms import door_entry
-
-    ex, ey, _ = door_entry(layout)
-    entry = labels[int(np.argmin(np.abs(xs - ex))), int(np.argmin(np.abs(ys - ey)))]
-    if entry == 0:
-        return set()
-    main = labels == entry
-    if not layout.is_house:
-        return {0}
-    out = set()
-    for room in layout.rooms:
-        x0, y0, x1, y1 = room.outline
-        mx = (xs >= x0) & (xs <= x1)
-        my = (ys >= y0) & (ys <= y1)
-        if np.any(main[np.ix_(mx, my)]):
-            out.add(room.index)
-    return out
 
 
 def room_at(layout: RoomLayout, x: float, y: float) -> int | None:

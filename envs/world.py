@@ -300,12 +300,14 @@ class World:
 
     @classmethod
     def from_style(cls, style_name: str, seed: int, catalog: Catalog | None = None, **kw) -> World:
-        """A World for the room ``generate_room`` makes from style ``style_name`` and ``seed``."""
-        from envs.rooms import generate_room
-        from envs.styles import load_style
+        """A World for the room (or house) ``generate_layout`` makes from ``style_name`` (a room
+        or house style) and ``seed``."""
+        from envs.houses import generate_layout, resolve_style
 
         catalog = catalog or load_catalog()
-        return cls(generate_room(load_style(style_name, catalog), seed, catalog), catalog, **kw)
+        return cls(
+            generate_layout(resolve_style(style_name, catalog), seed, catalog), catalog, **kw
+        )
 
     # -- pose and motion ---------------------------------------------------------------------
 

@@ -8,13 +8,13 @@ import functools
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
+from agent.navigation import OccupancyGrid
 from envs.floorplan import (
     _shared_edge,
-    free_space,
     generate_house,
     layout_dict,
-    reachable_rooms,
     room_at,
     wall_boxes,
     wall_obstacles,
@@ -31,7 +31,7 @@ from envs.houses import (
 from envs.layout import Door
 from envs.parts import world_parts
 from envs.robot_spec import RobotSpec
-from envs.rooms import RoomShell, generate_room
+from envs.rooms import RoomShell, door_entry, generate_room
 from envs.styles import Style, StyleError, available_styles, load_style
 from envs.truth import estimate, ground_truth, world_counts
 from knowledge.catalog import load_catalog
@@ -44,6 +44,25 @@ SEEDS = {"apartment": range(6), "family_house": range(4), "office_floor": range(
 @functools.cache
 def cat():
     return load_catalog()
+
+
+def reachable_rooms(lay) -> set[int]:
+    """The rooms with free floor in the navigation grid's free region that holds the entrance's
+    front (the grid the robot plans on: walls with their door gaps, furniture, clearance)."""
+    grid = OccupancyGrid.from_layout(lay, RobotSpec(), resolution=0.1)
+    labels, _ = ndimage.label(grid.free)
+    x, y, _ = door_entry(lay)
+    entry = labels[grid.to_cell(np.array([x, y]))]
+    if entry == 0:
+        return set()
+    xs, ys = grid.cell_centers()
+    out = set()
+    for r in lay.rooms:
+        x0, y0, x1, y1 = r.outline
+        block = labels[np.ix_((ys >= y0) & (ys <= y1), (xs >= x0) & (xs <= x1))]
+        if np.any(block == entry):
+            out.add(r.index)
+    return out
 
 
 @functools.cache
@@ -253,16 +272,14 @@ def test_rule_placements_hold(name):
 
 @pytest.mark.parametrize("name", HOUSES)
 def test_doors_kept_clear(name):
-    spec = RobotSpec()
     for lay in houses(name):
-        free, xs, ys = free_space(lay, spec)
+        grid = OccupancyGrid.from_layout(lay, RobotSpec(), resolution=0.1)
         for p in lay.doors:
             # Both sides of every door opening (0.6 m out) are free floor.
             nx, ny = (0.0, 1.0) if p.axis == "x" else (1.0, 0.0)
             for side in (1, -1) if p.rooms[1] >= 0 else ():
                 x, y = p.center[0] + side * 0.6 * nx, p.center[1] + side * 0.6 * ny
-                i, j = int(np.argmin(np.abs(xs - x))), int(np.argmin(np.abs(ys - y)))
-                assert free[i, j], (lay.seed, p)
+                assert grid.is_free(np.array([x, y])), (lay.seed, p)
 
 
 def test_room_shell_with_two_doors_keeps_both_entries_free():
@@ -323,3 +340,58 @@ def test_house_world_builds_with_robot_at_the_entrance():
         frame = w.capture()
         assert (frame.instance_ids >= 0).any() or (frame.depth > 0).all()
     assert build_s < 3.0  # measured ~0.15-0.3 s on the 2-core VM; generous for CI
+
+
+def test_truth_cli_on_a_house(tmp_path, capsys):
+    import json
+
+    from scripts import cli
+
+    out = tmp_path / "t.json"
+    assert cli.main(["truth", "--style", "apartment", "--samples", "2", "--out", str(out)]) == 0
+    truth = json.loads(out.read_text())
+    assert truth["style"] == "apartment" and truth["samples"] == 2 and truth["rooms"] >= 6
+    assert "2 houses (" in capsys.readouterr().out
+
+
+def test_every_style_flag_says_house(capsys):
+    from scripts import cli
+
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    seen = 0
+    for name, p in sub.choices.items():
+        for parsers in [p, *(getattr(a, "choices", None) or {} for a in p._actions)]:
+            items = parsers.values() if isinstance(parsers, dict) else [parsers]
+            for q in items:
+                if not hasattr(q, "_actions"):
+                    continue
+                for a in q._actions:
+                    if "--style" in a.option_strings:
+                        assert "house style" in a.help, (name, q.prog)
+                        seen += 1
+    assert seen >= 6
+
+
+@pytest.mark.render
+def test_room_cli_on_a_house_writes_plan_views_and_layout(tmp_path, capsys):
+    import json
+
+    import cv2
+
+    from scripts import cli
+
+    out = tmp_path / "house"
+    argv = ["room", "--style", "apartment", "--seed", "1", "--out", str(out), "--views", "1"]
+    assert cli.main(argv) == 0
+    assert "house (" in capsys.readouterr().out
+    img = cv2.imread(str(out / "overview.png"))
+    assert img.shape == (720, 960, 3)
+    assert (out / "view_0.png").exists()
+    data = json.loads((out / "layout.json").read_text())
+    lay = generate_house(load_house("apartment", cat()), 1, cat())
+    assert data == json.loads(json.dumps(layout_dict(lay)))
+    assert data["kind"] == "house" and len(data["rooms"]) == len(lay.rooms)
+    assert {"style", "outline"} <= set(data["rooms"][0])
+    assert {"type", "id", "position", "yaw", "size", "room"} <= set(data["objects"][0])
+    assert all(0 <= o["room"] < len(data["rooms"]) for o in data["objects"])
