@@ -521,3 +521,59 @@ def layout_dict(layout: RoomLayout) -> dict:
             for o in layout.objects
         ],
     }
+
+
+def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | None:
+    """The rooms a camera at (x, y) can see into, by 2-D portal visibility: its own room, and
+    every room seen through a chain of door openings (each opening narrowed to the angular
+    wedge of the openings before it). Exact in plan for rectangular rooms and conservative in
+    height (an opening counts as full height). None where it cannot tell (not inside a room:
+    in a doorway or a wall), meaning every room."""
+    start = room_at(layout, x, y)
+    if start is None:
+        return None
+    doors: dict[int, list[tuple[int, Passage]]] = {r.index: [] for r in layout.rooms}
+    for k, p in enumerate(layout.doors):
+        a, b = p.rooms
+        if b >= 0:
+            doors[a].append((k, p))
+            doors[b].append((k, p))
+    seen = {start}
+
+    def ends(p: Passage) -> tuple[np.ndarray, np.ndarray]:
+        c = np.asarray(p.center, float)
+        d = np.array([p.width / 2, 0.0]) if p.axis == "x" else np.array([0.0, p.width / 2])
+        return c - d, c + d
+
+    def angle(q: np.ndarray, ref: float) -> float:
+        a = math.atan2(q[1] - y, q[0] - x) - ref
+        return math.atan2(math.sin(a), math.cos(a))
+
+    def walk(room: int, lo: float, hi: float, ref: float, used: frozenset[int]) -> None:
+        for k, p in doors[room]:
+            if k in used:
+                continue
+            q0, q1 = ends(p)
+            a0, a1 = sorted((angle(q0, ref), angle(q1, ref)))
+            if a1 - a0 > math.pi:  # the opening straddles the back: keep it (conservative)
+                a0, a1 = -math.pi, math.pi
+            l2, h2 = max(lo, a0), min(hi, a1)
+            if l2 < h2:
+                other = p.rooms[1] if p.rooms[0] == room else p.rooms[0]
+                seen.add(other)
+                walk(other, l2, h2, ref, used | {k})
+
+    for k, p in doors[start]:
+        q0, q1 = ends(p)
+        mid = (q0 + q1) / 2
+        # Too close to the opening's line to bound a wedge: everything beyond may show.
+        line_dist = abs(mid[1] - y) if p.axis == "x" else abs(mid[0] - x)
+        ref = math.atan2(mid[1] - y, mid[0] - x)
+        if line_dist < 0.05:
+            walk(start, -math.pi, math.pi, ref, frozenset())
+            continue
+        a0, a1 = sorted((angle(q0, ref), angle(q1, ref)))
+        other = p.rooms[1] if p.rooms[0] == start else p.rooms[0]
+        seen.add(other)
+        walk(other, a0, a1, ref, frozenset({k}))
+    return frozenset(seen)

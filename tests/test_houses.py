@@ -395,3 +395,55 @@ def test_room_cli_on_a_house_writes_plan_views_and_layout(tmp_path, capsys):
     assert {"style", "outline"} <= set(data["rooms"][0])
     assert {"type", "id", "position", "yaw", "size", "room"} <= set(data["objects"][0])
     assert all(0 <= o["room"] < len(data["rooms"]) for o in data["objects"])
+
+
+def test_visible_rooms_by_portals():
+    from envs.floorplan import visible_rooms
+
+    lay = houses("office_floor")[0]
+    corridor = lay.rooms[-1]
+    assert corridor.style == CORRIDOR
+    everyone = set(range(len(lay.rooms)))
+    cx, cy = corridor.center
+    assert visible_rooms(lay, cx, cy) <= everyone and corridor.index in visible_rooms(lay, cx, cy)
+    for r in lay.rooms[:-1]:
+        seen = visible_rooms(lay, *r.center)
+        assert r.index in seen and corridor.index in seen  # every office opens on the corridor
+    assert visible_rooms(lay, 1e3, 1e3) is None  # outside any room: cannot tell
+    # A room whose door is closed (the door removed) sees nothing else.
+    import dataclasses
+
+    first = next(p for p in lay.doors if p.rooms[1] != -1)
+    shut = dataclasses.replace(lay, doors=tuple(p for p in lay.doors if p is not first))
+    assert visible_rooms(shut, *lay.rooms[first.rooms[0]].center) == {first.rooms[0]}
+
+
+@pytest.mark.render
+def test_room_culling_leaves_the_images_unchanged():
+    from envs.robot_spec import RobotPose
+    from envs.world import World
+
+    rng = np.random.default_rng(5)
+    hidden = 0
+    for lay in (houses("office_floor")[0], houses("apartment")[1]):
+        grid = OccupancyGrid.from_layout(lay)
+        rows, cols = np.nonzero(grid.free)
+        with World(lay, cat()) as w:
+            cull = w._culling
+            assert cull is not None
+            for _ in range(10):
+                i = rng.integers(len(rows))
+                x, y = grid.to_xy(rows[i], cols[i])
+                w.reset_pose(RobotPose(float(x), float(y), float(rng.uniform(-np.pi, np.pi))))
+                w.move_head(float(rng.uniform(-2.5, 2.5)), float(rng.uniform(-0.9, 0.3)))
+                w._culling = cull
+                a = w.capture()
+                hidden += cull.hide(*w._d.cam_xpos[w._cam_id][:2])
+                cull.restore()
+                w._culling = None
+                b = w.capture()
+                assert np.array_equal(a.instance_ids, b.instance_ids)
+                assert np.allclose(a.depth, b.depth)
+            w._culling = cull
+            assert np.all(w._m.geom_rgba[:, 3] > 0)  # restored
+    assert hidden > 0
