@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from envs.houses import CORRIDOR, HouseStyle
+from envs.houses import CORRIDOR, HouseError, HouseStyle
 from envs.layout import Door, Passage, Room, RoomLayout
 from envs.robot_spec import RobotSpec
 from envs.rooms import RoomShell, generate_room
@@ -280,7 +280,12 @@ def _plan(house: HouseStyle, rng: np.random.Generator):
         if bad == 0.0:
             break
     if best is None:
-        raise RuntimeError(f"house style {house.name}: no plan joins all rooms")
+        raise HouseError(
+            house.path,
+            f"no plan of {PLAN_TRIES} tried gives every room a door (rooms too small or "
+            "too many for the footprint?)",
+            field="rooms",
+        )
     return best
 
 

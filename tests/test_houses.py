@@ -447,3 +447,79 @@ def test_room_culling_leaves_the_images_unchanged():
             w._culling = cull
             assert np.all(w._m.geom_rgba[:, 3] > 0)  # restored
     assert hidden > 0
+
+
+GOOD_HOUSE = {
+    "name": "fuzz_house",
+    "house": {
+        "rooms": [2, 3],
+        "footprint": [50, 90],
+        "height": [2.5, 2.8],
+        "plan": "open",
+        "corridor_width": [1.3, 1.5],
+        "door_width": [0.85, 0.95],
+        "entrance": "living_room",
+    },
+    "rooms": {"living_room": 1, "bedroom": [1, 2]},
+}
+ODD_VALUES = [-1, 0, 1e9, float("nan"), float("inf"), "x", [], [1], [1, 2, 3], [2, 1], True, {}]
+
+
+def _toml(doc: dict) -> str:
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, float) and v != v:
+            return "nan"
+        if isinstance(v, float) and v in (float("inf"), float("-inf")):
+            return "inf" if v > 0 else "-inf"
+        if isinstance(v, str):
+            return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+        return repr(v)
+
+    lines = [f"{k} = {val(v)}" for k, v in doc.items() if not isinstance(v, dict)]
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            lines.append(f"[{k}]")
+            lines += [f"{kk} = {val(vv)}" for kk, vv in v.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_any_house_file_gives_a_style_or_a_one_line_error(tmp_path):
+    import copy
+
+    rng = np.random.default_rng(0)
+    p = tmp_path / "fuzz.toml"
+    p.write_text(_toml(GOOD_HOUSE))
+    assert isinstance(load_house(p, cat()), HouseStyle)
+    cases = []
+    for section in ("house", "rooms"):
+        for key in GOOD_HOUSE[section]:
+            for v in ODD_VALUES:
+                doc = copy.deepcopy(GOOD_HOUSE)
+                doc[section][key] = v
+                cases.append(_toml(doc))
+    for _ in range(40):
+        text = bytes(rng.integers(0, 256, int(rng.integers(0, 80))).tolist())
+        cases.append(text)
+        good = _toml(GOOD_HOUSE).encode()
+        cut = int(rng.integers(len(good)))
+        cases.append(good[:cut] + text[:5] + good[cut + 5 :])
+    n_err = 0
+    for text in cases:
+        if isinstance(text, str):
+            p.write_text(text)
+        else:
+            p.write_bytes(text)
+        try:
+            st = load_house(p, cat())
+        except StyleError as exc:
+            assert "\n" not in str(exc) and str(exc).startswith(str(p))
+            n_err += 1
+        else:
+            assert isinstance(st, HouseStyle)
+    assert n_err > len(cases) // 2
