@@ -184,8 +184,9 @@ class RoomArena(composer.Arena):
         hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, WALL_THICKNESS
         root = self._mjcf_root
         wb = root.worldbody
-        # The base floor lies 1 cm down: it shows only under the door openings (thresholds).
-        self._floor.size = [hw + t, hd + t, 0.1]
+        # The rooms' floors cover the whole plan (under the walls too); the base floor is not
+        # needed: shrunk out of sight (drawing a plane costs in proportion to its area).
+        self._floor.size = [0.01, 0.01, 0.1]
         self._floor.pos = [0, 0, -0.01]
         for light in self._lights:
             light.pos = [0, 0, h]
@@ -230,7 +231,7 @@ class RoomArena(composer.Arena):
                 )
                 self._shell += [tex, mat]
                 materials[room.style] = mat
-            x0, y0, x1, y1 = room.outline
+            x0, y0, x1, y1 = _floor_rect(room.outline, hw, hd, t)
             self._shell.append(
                 wb.add(
                     "geom",
@@ -269,6 +270,21 @@ class RoomArena(composer.Arena):
                 group=OVERHEAD_GEOM_GROUP,
             )
         )
+
+
+def _floor_rect(
+    outline: tuple[float, float, float, float], hw: float, hd: float, t: float
+) -> tuple[float, float, float, float]:
+    """A room's floor: its outline grown to the centre line of each inner wall (so neighbouring
+    floors meet under the wall and fill its door openings) and under the outer walls."""
+    x0, y0, x1, y1 = outline
+    e = 1e-6
+    return (
+        x0 - (t if x0 < -hw + e else t / 2),
+        y0 - (t if y0 < -hd + e else t / 2),
+        x1 + (t if x1 > hw - e else t / 2),
+        y1 + (t if y1 > hd - e else t / 2),
+    )
 
 
 def _room_floor_rgb(style: str) -> list[float]:

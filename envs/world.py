@@ -410,7 +410,13 @@ class World:
         and RGB as asked. Charges ``TimeModel.image_cost``."""
         r = self._renderer(self.width, self.height)
         if self._culling is not None:  # a house: leave out the rooms the camera cannot see
-            self._culling.hide(*self._d.cam_xpos[self._cam_id][:2])
+            self._culling.hide(
+                self._d.cam_xpos[self._cam_id],
+                self._d.cam_xmat[self._cam_id],
+                float(self._m.cam_fovy[self._cam_id]),
+                self.width,
+                self.height,
+            )
         try:
             r.update_scene(self._d, self._cam_id, self._head_option)
         finally:

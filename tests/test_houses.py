@@ -431,14 +431,15 @@ def test_room_culling_leaves_the_images_unchanged():
         with World(lay, cat()) as w:
             cull = w._culling
             assert cull is not None
-            for _ in range(10):
+            for _ in range(15):
                 i = rng.integers(len(rows))
                 x, y = grid.to_xy(rows[i], cols[i])
                 w.reset_pose(RobotPose(float(x), float(y), float(rng.uniform(-np.pi, np.pi))))
                 w.move_head(float(rng.uniform(-2.5, 2.5)), float(rng.uniform(-0.9, 0.3)))
                 w._culling = cull
                 a = w.capture()
-                hidden += cull.hide(*w._d.cam_xpos[w._cam_id][:2])
+                cam = (w._d.cam_xpos[w._cam_id], w._d.cam_xmat[w._cam_id])
+                hidden += cull.hide(*cam, float(w._m.cam_fovy[w._cam_id]), w.width, w.height)
                 cull.restore()
                 w._culling = None
                 b = w.capture()
