@@ -3,6 +3,10 @@
 Room frame as in ``envs/layout.py``: the floor is z = 0 and the room spans x in [-w/2, w/2], y in
 [-d/2, d/2]. Walls stand just outside that boundary (the interior is exactly the layout's room).
 
+A house (``layout.is_house``) gets its walls from ``envs.floorplan.wall_boxes`` (outer and
+interior walls, a gap and a lintel at every door), one floor per room in its style's colour, one
+ceiling and a dim light over each of the largest rooms.
+
 Geom groups: the floor and walls are group ``ROOM_GEOM_GROUP`` (0); the ceiling and the lintel
 over the door are group ``OVERHEAD_GEOM_GROUP`` (3), which the head camera shows and the top-down
 overview hides (so the map shows the door gap). Lights

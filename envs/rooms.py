@@ -4,7 +4,9 @@ Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32
 so the same (style, seed) always gives the same layout, on any machine.
 
 Order of work:
-1. Room size and door (a gap in one wall; about 1 m in front of it stays free).
+1. Room size and door (a gap in one wall; about 1 m in front of it stays free). A room of a house
+   gets both from a ``RoomShell`` instead (its size in the plan and all its doors: the front of
+   every door stays free and they all lie in the one free region).
 2. Furniture from ``[furniture]``, largest first, on the floor: desks, shelves, cabinets,
    counters, beds and (often) sofas with their back to a wall and their front facing the room;
    tables and chairs free-standing. Furniture bounding boxes never overlap.
