@@ -443,12 +443,11 @@ LayoutFn = Callable[[int, int], RoomLayout]  # (room index, room seed) -> layout
 
 
 def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
-    """The style's name and its room generator."""
-    from envs.rooms import generate_room
-    from envs.styles import load_style
+    """The style's name and its world generator (a room style's rooms or a house style's houses)."""
+    from envs.houses import generate_layout, resolve_style
 
-    st = load_style(style, catalog)
-    return st.name, lambda index, seed: generate_room(st, seed, catalog)
+    st = resolve_style(style, catalog)
+    return st.name, lambda index, seed: generate_layout(st, seed, catalog)
 
 
 def learn(

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from envs.floorplan import wall_boxes as house_wall_boxes
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec
 from knowledge.catalog import Catalog
@@ -54,7 +55,14 @@ def intrinsics(width: int, height: int, fovy_deg: float) -> np.ndarray:
 
 
 def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
-    """The room's walls as boxes standing just outside its boundary, the door left open."""
+    """The room's walls as boxes standing just outside its boundary, the door left open (a
+    house: its outer and interior walls, the door openings left open)."""
+    if layout.is_house:
+        return [
+            Box(np.array(c, float), 0.0, np.array(hf, float))
+            for name, c, hf in house_wall_boxes(layout, thickness)
+            if not name.endswith("lintel")
+        ]
     w, d, h = layout.width, layout.depth, layout.height
     t = thickness
     # (wall, centre of the wall line, direction along the wall, length)

@@ -91,11 +91,10 @@ class RoomTask(composer.Task):
     def _next_layout(self) -> RoomLayout:
         if self._fixed_layout is not None:
             return self._fixed_layout
-        from envs.rooms import generate_room
-        from envs.styles import load_style
+        from envs.houses import generate_layout, resolve_style
 
-        layout = generate_room(
-            load_style(self._style, self._catalog), self._seed + self._episode, self._catalog
+        layout = generate_layout(
+            resolve_style(self._style, self._catalog), self._seed + self._episode, self._catalog
         )
         self._episode += 1
         return layout

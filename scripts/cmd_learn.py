@@ -32,7 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "examination in flight.",
     )
     p.add_argument(
-        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+        "--style",
+        required=True,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path",
     )
     p.add_argument(
         "--rooms", required=True, type=argtypes.positive_int, help="how many rooms to learn in"
@@ -127,7 +129,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "width, mean |p0 - p_true|, coverage, simulated seconds. Writes DIR/learning.json, "
         "DIR/learning.md and DIR/learning.png.",
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+    )
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=20, help="rooms per run (default: 20)"
     )

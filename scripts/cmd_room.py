@@ -11,13 +11,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``room`` sub-command."""
     p = sub.add_parser(
         "room",
-        help="generate and build a room; write overview.png, view_*.png and a rerun recording",
-        description="Generate a room of a style (deterministic by seed), build it in MuJoCo, drive "
-        "the robot to viewpoints looking at its furniture and write DIR/overview.png (top-down), "
-        "DIR/view_*.png (head camera, detections drawn) and, with --record, a rerun recording.",
+        help="generate and build a room or house; write overview.png, view_*.png, layout.json "
+        "and a rerun recording",
+        description="Generate a room or a house of a style (deterministic by seed), build it in "
+        "MuJoCo, drive the robot to viewpoints looking at its furniture and write "
+        "DIR/overview.png (top-down; a house's rooms labelled), DIR/view_*.png (head camera, "
+        "detections drawn), DIR/layout.json (rooms with style and outline, doors, every object "
+        "with type, id, pose, size and room) and, with --record, a rerun recording.",
     )
     p.add_argument(
-        "--style", default="office", help="room style name or TOML path (default: office)"
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
+        "(default: office)",
     )
     p.add_argument("--seed", type=int, default=0, help="room seed (default: 0)")
     p.add_argument("--out", required=True, type=Path, help="output directory")

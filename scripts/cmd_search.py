@@ -69,7 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
     )
     p.add_argument(
-        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+        "--style",
+        required=True,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path",
     )
     p.add_argument("--target", required=True, help="the object type to find (e.g. Cup)")
     p.add_argument(
@@ -134,7 +136,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+    )
     p.add_argument(
         "--episodes", type=argtypes.positive_int, default=40, help="paired episodes (default: 40)"
     )

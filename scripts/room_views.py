@@ -3,6 +3,7 @@ viewpoints, head-camera views with the detections drawn, and (optionally) a reru
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,14 +16,15 @@ from agent.perception import detect
 from agent.recording import Recorder
 from agent.viewplan import execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
+from envs.floorplan import layout_dict
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose
-from envs.rooms import generate_room
-from envs.styles import load_style
 from envs.world import World
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import relation_volume
+from scripts.overview_rooms import draw_room_labels
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 
@@ -185,8 +187,8 @@ def show_room(config: RoomViewConfig) -> list[Path]:
     """Build the room, take the views, write the images and the recording; the files written."""
     config.check()
     catalog = load_catalog(config.catalog)
-    style = load_style(config.style, catalog)
-    layout = generate_room(style, config.seed, catalog)
+    style = resolve_style(config.style, catalog)
+    layout = generate_layout(style, config.seed, catalog)
     config.out.mkdir(parents=True, exist_ok=True)
     rec = Recorder(config.record)
     with World(layout, catalog, width=config.width, height=config.height) as world:
@@ -195,12 +197,16 @@ def show_room(config: RoomViewConfig) -> list[Path]:
         _log_scene(rec, world, layout, catalog)
         for i, target in enumerate(_furniture_targets(layout, catalog, config.views)):
             viewer.take(i, target)
-        over = world.render_overview(640, 480)
+        ow, oh = (960, 720) if layout.is_house else (640, 480)
+        over = world.render_overview(ow, oh)
         img = draw_overview(over, world, catalog, np.array(viewer.path_xy), viewer.views)
+        img = draw_room_labels(img, world, layout)
         p = config.out / "overview.png"
         cv2.imwrite(str(p), img)
     rec.close()
-    written = [p, *viewer.written]
+    lp = config.out / "layout.json"
+    lp.write_text(json.dumps(layout_dict(layout), indent=1) + "\n")
+    written = [p, lp, *viewer.written]
     if config.record is not None:
         written.append(Path(config.record))
     return written
@@ -221,8 +227,9 @@ def _start_grid(world: World, layout: RoomLayout) -> OccupancyGrid:
 
 def _print_room(layout: RoomLayout, catalog: Catalog) -> None:
     n_furn = sum(catalog.type(o.type).is_furniture for o in layout.objects)
+    kind = f"house ({len(layout.rooms)} rooms)" if layout.is_house else "room"
     print(
-        f"room: style {layout.style}, seed {layout.seed}, {layout.width:.1f} x {layout.depth:.1f} m, "
+        f"{kind}: style {layout.style}, seed {layout.seed}, {layout.width:.1f} x {layout.depth:.1f} m, "
         f"{n_furn} furniture, {len(layout.objects) - n_furn} small objects"
     )
 

@@ -33,7 +33,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from agent import search as S
-from envs.styles import load_style
+from envs.houses import resolve_style
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
@@ -231,7 +231,7 @@ def bench_search(
         split_name(n)
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
-    style = load_style(config.style, catalog)
+    style = resolve_style(config.style, catalog)
     priors = load_priors(config, style, catalog, kb_path=config.kb)
     eps = make_episodes(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned

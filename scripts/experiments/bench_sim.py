@@ -31,9 +31,8 @@ from dm_control import mjcf
 from matplotlib.figure import Figure
 
 from agent.perception import detect
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
-from envs.rooms import generate_room
-from envs.styles import load_style
 from envs.task import RoomTask, start_pose
 from envs.world import World, gl_renderer
 from knowledge.catalog import Catalog, load_catalog
@@ -112,11 +111,11 @@ def run(
     ``out_dir``, and return the results."""
     load_before = os.getloadavg()[0]
     catalog = load_catalog()
-    style_obj = load_style(style, catalog)
+    style_obj = resolve_style(style, catalog)
     n_layouts = max(20, rooms)
     gen_ms, layouts = [], []
     for s in range(seed, seed + n_layouts):
-        ms, lay = _ms(lambda s=s: generate_room(style_obj, s, catalog))
+        ms, lay = _ms(lambda s=s: generate_layout(style_obj, s, catalog))
         gen_ms.append(ms)
         layouts.append(lay)
     layouts = layouts[:rooms]

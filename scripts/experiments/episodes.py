@@ -24,10 +24,9 @@ from agent import search as S
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid
 from agent.recording import Recorder
+from envs.houses import WorldStyle, generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
-from envs.rooms import generate_room
-from envs.styles import Style, load_style
 from envs.world import World
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
@@ -63,7 +62,7 @@ def split_name(name: str) -> tuple[str, str | None]:
 
 
 def make_episodes(
-    style: Style,
+    style: WorldStyle,
     n: int,
     seed: int,
     catalog: Catalog,
@@ -90,7 +89,7 @@ def make_episodes(
         i += 1
         if room_seed in exclude_seeds:
             continue
-        layout = generate_room(style, room_seed, catalog)
+        layout = generate_layout(style, room_seed, catalog)
         tgt = _episode_target(layout, catalog, target, rng)
         if tgt is None:
             continue
@@ -139,7 +138,7 @@ class Priors:
 
 def load_priors(
     config: SearchConfig,
-    style: Style,
+    style: WorldStyle,
     catalog: Catalog,
     kb: KnowledgeBase | None = None,
     kb_path: Path | str | None = None,
@@ -201,13 +200,13 @@ def run_policy(
 
 def _search_room(
     ep: S.Episode,
-    style: Style,
+    style: WorldStyle,
     catalog: Catalog,
     runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
     progress: Callable[[str], None] | None = None,
 ) -> list[S.SearchResult]:
     """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``."""
-    layout = generate_room(style, ep.room_seed, catalog)
+    layout = generate_layout(style, ep.room_seed, catalog)
     with World(layout, catalog) as world:
         grid = OccupancyGrid.from_layout(layout, world.spec)
         seen = ss.SeenMap.for_room(layout, catalog)
@@ -225,7 +224,7 @@ def run_episodes(
     episodes: Sequence[S.Episode],
     policies: Sequence[str],
     catalog: Catalog,
-    style: Style,
+    style: WorldStyle,
     probs_for: ProbsFor,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, list[S.SearchResult]]:
@@ -268,7 +267,7 @@ def search_once(
     names = list(config.policies)
     for n in names:
         split_name(n)
-    style = load_style(config.style, catalog)
+    style = resolve_style(config.style, catalog)
     priors = load_priors(config, style, catalog, kb, kb_path, exclude_seeds)
     ep = make_episodes(
         style, 1, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned, target=target

@@ -17,8 +17,7 @@ import time
 from pathlib import Path
 
 import agent.acquisition as acq
-from envs.rooms import generate_room
-from envs.styles import load_style
+from envs.houses import generate_layout, resolve_style
 from knowledge import geometry
 from knowledge.catalog import load_catalog
 
@@ -27,11 +26,11 @@ def measure(facing: bool, rooms: int, seed: int) -> dict[str, float]:
     """Totals over one camera-mode run with EXAMINE_FACING set to ``facing``."""
     acq.EXAMINE_FACING = facing
     cat = load_catalog()
-    style = load_style("office", cat)
+    style = resolve_style("office", cat)
     layouts: dict[int, object] = {}
 
     def gen(i, s):
-        layouts[s] = generate_room(style, s, cat)
+        layouts[s] = generate_layout(style, s, cat)
         return layouts[s]
 
     tot = {"exams": 0, "cam": 0, "orc": 0, "both": 0, "sim_s": 0.0, "gazes": 0}
