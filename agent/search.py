@@ -888,7 +888,7 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
         raise CtxsearchError(
             f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
         )
-    with EvidenceStore.open(p, catalog, alpha=alpha, create=False) as store:
+    with EvidenceStore.open(p, catalog, alpha=alpha, read_only=True) as store:
         kb = store.knowledge_base()
         learned = _learned_seeds(store)
     if kb.total_examinations == 0:

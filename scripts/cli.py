@@ -15,6 +15,8 @@ import importlib
 import os
 import sys
 
+from knowledge.errors import CtxsearchError
+
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
     "scripts.cmd_kb",
@@ -52,19 +54,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def printable(text: str) -> str:
+    """``text`` on one line with every control or unprintable character written as an escape
+    (what a crafted file puts in a message cannot move the cursor or fake a second line)."""
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ctxsearch`` console script."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
-    from knowledge.errors import CtxsearchError
-
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
+    try:  # Ctrl-C while the parser imports the sub-commands is an interrupt too, not a traceback
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return int(args.func(args) or 0)
-    except CtxsearchError as exc:
-        print(f"ctxsearch: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("ctxsearch: interrupted", file=sys.stderr)
         return 130
@@ -72,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except CtxsearchError as exc:
+        print(f"ctxsearch: error: {printable(str(exc))}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -193,7 +193,7 @@ def _open_kb(args: argparse.Namespace):
 
     catalog = load_catalog(args.catalog)
     try:
-        with EvidenceStore.open(args.path, catalog, create=False) as store:
+        with EvidenceStore.open(args.path, catalog, read_only=True) as store:
             kb = store.knowledge_base(args.alpha)
             info = {
                 "path": str(args.path),
