@@ -166,7 +166,11 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "--out", type=Path, default=Path("results"), metavar="DIR", help="default: results"
+        "--out",
+        type=argtypes.out_dir,
+        default=Path("results"),
+        metavar="DIR",
+        help="default: results",
     )
     p.add_argument(
         "--sizes",
@@ -180,7 +184,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--candidates", type=argtypes.positive_int, default=50, help="candidate types (default: 50)"
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="random seed (default: 0)")
     p.set_defaults(func=run_bench)
 
 

@@ -7,6 +7,8 @@ import argparse
 import math
 from pathlib import Path
 
+from scripts import argtypes
+
 FONT = 0  # cv2.FONT_HERSHEY_SIMPLEX
 
 
@@ -22,8 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--style", default="office", help="room style name or TOML path (default: office)"
     )
-    p.add_argument("--seed", type=int, default=0, help="room seed (default: 0)")
-    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="room seed (default: 0)")
+    p.add_argument("--out", required=True, type=argtypes.out_dir, help="output directory")
     p.add_argument("--record", type=Path, default=None, help="write a rerun recording (.rrd) here")
     p.add_argument("--views", type=int, default=4, help="head-camera views to take (default: 4)")
     p.add_argument("--width", type=int, default=320, help="head-camera image width (default: 320)")
