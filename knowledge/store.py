@@ -799,10 +799,11 @@ class EvidenceStore:
 
 
 def _connect_ro(path: Path) -> sqlite3.Connection:
-    """A read-only connection that never writes: it reads through the WAL where one exists, and
-    immutably where the directory is not writable (no writer can be running there)."""
+    """A read-only connection that never writes nor creates a file: through the WAL where one
+    exists (a writer is running), else an immutable read of the main file (which a WAL writer
+    starting meanwhile changes only when it checkpoints, after about 4 MB of log)."""
     uri = _ro_uri(path)
-    if not Path(str(path) + "-wal").exists() and not os.access(path.resolve().parent, os.W_OK):
+    if not Path(str(path) + "-wal").exists():
         uri += "&immutable=1"
     try:
         return sqlite3.connect(uri, uri=True, timeout=30.0, isolation_level=None)

@@ -15,7 +15,7 @@ import importlib
 import os
 import sys
 
-from knowledge.errors import CtxsearchError
+from knowledge.errors import CtxsearchError, printable
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
@@ -52,12 +52,6 @@ def build_parser() -> argparse.ArgumentParser:
     for name in BENCH_MODULES:
         importlib.import_module(name).register_bench(bench_sub)
     return parser
-
-
-def printable(text: str) -> str:
-    """``text`` on one line with every control or unprintable character written as an escape
-    (what a crafted file puts in a message cannot move the cursor or fake a second line)."""
-    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -248,24 +248,18 @@ def test_learn_on_a_read_only_file_is_a_one_line_error(tmp_path, catalog, capsys
     assert "cannot write knowledge store" in capsys.readouterr().err
 
 
-def test_kb_show_reads_a_store_in_a_read_only_directory(tmp_path, catalog, capsys, monkeypatch):
+def test_kb_show_reads_a_store_in_a_read_only_directory_and_creates_nothing(
+    tmp_path, catalog, capsys
+):
     d = tmp_path / "ro"
     d.mkdir()
     path = _store(d / "s.sqlite", catalog)
     before = digest(path)
     d.chmod(0o555)
     try:
-        import knowledge.store as store_mod
-
-        real_access = os.access  # as a non-root user sees the directory (root may write it)
-        monkeypatch.setattr(
-            store_mod.os,
-            "access",
-            lambda p, mode, **kw: False if mode == os.W_OK else real_access(p, mode, **kw),
-        )
         assert main(["kb", "show", str(path)]) == 0
         assert "ON-TOP-OF-DESK  Monitor  3/3" in capsys.readouterr().out
-        assert sorted(p.name for p in d.iterdir()) == ["s.sqlite"]
+        assert sorted(p.name for p in d.iterdir()) == ["s.sqlite"]  # no -wal, no -shm
     finally:
         d.chmod(0o755)
     assert digest(path) == before
