@@ -61,7 +61,7 @@ RELATION_FIELDS = {"name", "lo", "hi", "margin_lo", "margin_hi"}
 # Sane ranges of the numbers a catalog holds (finite, and far beyond any real room or camera).
 MAX_SIZE = 10.0  # metres per axis
 MAX_RELATIVE = 10.0  # |lo|, |hi| of a relation volume, in object extents
-MAX_MARGIN = 10.0  # |margin| of a relation volume, metres
+MAX_MARGIN = 100.0  # |margin| of a relation volume, metres (rooms are up to 50 m)
 MAX_RANGE = 100.0  # max_range, metres
 MAX_PIXELS = 1_000_000  # min_pixels
 _NAME_RE = re.compile(r"^[A-Z][A-Za-z0-9]*$")
