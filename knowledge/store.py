@@ -772,7 +772,12 @@ class EvidenceStore:
             cur.execute("BEGIN IMMEDIATE")
             try:
                 if self.version < SCHEMA_VERSION:
-                    dropped = _migrate(cur, self.version)
+                    # Another process may have upgraded it since we opened it: ask the file.
+                    row = cur.execute(
+                        "SELECT value FROM meta WHERE key = 'schema_version'"
+                    ).fetchone()
+                    if int(row[0]) < SCHEMA_VERSION:
+                        dropped = _migrate(cur, int(row[0]))
                     upgraded = 1
                 yield cur
             except BaseException:

@@ -313,3 +313,31 @@ def test_merge_reads_its_inputs_read_only(tmp_path, catalog):
         merge_stores(tmp_path / "out.sqlite", [a], catalog)  # the same evidence again
     with EvidenceStore.open(tmp_path / "out.sqlite", catalog) as s:
         assert s.examinations_count() == 3
+
+
+def test_two_processes_opening_a_version_2_store_upgrade_it_once(tmp_path, catalog):
+    path = _store(tmp_path / "v2.sqlite", catalog)
+    _as_version_2(path)
+    with EvidenceStore.open(path, catalog) as a, EvidenceStore.open(path, catalog) as b:
+        assert a.version == b.version == 2
+        _exam(a, 10)  # a upgrades
+        with pytest.raises(StoreError, match="already examined"):
+            _exam(b, 10)  # b sees the upgraded file: no second rebuild, the key holds
+        _exam(b, 11)
+        assert b.version == SCHEMA_VERSION and b.examinations_count() == 5
+
+
+def test_merge_reads_a_version_2_input_with_duplicates_once(tmp_path, catalog):
+    src = _store(tmp_path / "v2.sqlite", catalog)
+    _as_version_2(src)
+    conn = sqlite3.connect(src)
+    conn.execute(
+        "INSERT INTO examinations (run, style, room_seed, object_id, type, sim_time, strategy, "
+        "created) SELECT run, style, room_seed, object_id, type, sim_time, strategy, created "
+        "FROM examinations"
+    )
+    conn.commit()
+    conn.close()
+    before = digest(src)
+    assert merge_stores(tmp_path / "out.sqlite", [src], catalog) == 3
+    assert digest(src) == before
