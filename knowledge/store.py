@@ -552,8 +552,9 @@ class EvidenceStore:
     def mark_room(
         self, run: str, style: str, seed: int, status: str, end_time: float | None = None
     ) -> None:
-        """Set a room's status: 'started' when the robot enters it, 'done' when it is finished;
-        ``end_time`` (the run's simulated clock when it was done) replaces the stored one."""
+        """Set a room's status: 'started' when the robot enters it (a room already done stays
+        done), 'done' when it is finished; ``end_time`` (the run's simulated clock when it was
+        done) replaces the stored one."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
         key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), status)
@@ -566,10 +567,11 @@ class EvidenceStore:
                     "end_time = excluded.end_time",
                     (*key, end),
                 )
-            else:
+            else:  # a room done stays done (another writer of the run may have finished it)
                 cur.execute(
                     "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
-                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status",
+                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status "
+                    "WHERE rooms.status != 'done'",
                     key,
                 )
 
@@ -746,7 +748,7 @@ class EvidenceStore:
         return float(v)
 
     def _name(self, v: object, what: str) -> str:
-        if not isinstance(v, str) or not v:
+        if not isinstance(v, str) or not v or not v.isprintable():
             raise self._bad(f"{what} {v!r} is not a name")
         return v
 
@@ -859,6 +861,10 @@ def _create(path: Path, catalog: Catalog, alpha: float) -> None:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise StoreError(f"{path}: cannot create knowledge store ({_one_line(exc)})") from None
+    except BaseException:  # Ctrl-C while creating: leave nothing behind
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
 
 
 def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: Catalog) -> int:
@@ -946,8 +952,8 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
 
 
 def _text(v: object, what: str) -> str:
-    if not isinstance(v, str) or not v:
-        raise CtxsearchError(f"{what} must be a non-empty string, got {v!r}")
+    if not isinstance(v, str) or not v or not v.isprintable():
+        raise CtxsearchError(f"{what} must be a non-empty printable string, got {v!r}")
     return v
 
 

@@ -341,3 +341,36 @@ def test_merge_reads_a_version_2_input_with_duplicates_once(tmp_path, catalog):
     before = digest(src)
     assert merge_stores(tmp_path / "out.sqlite", [src], catalog) == 3
     assert digest(src) == before
+
+
+def test_a_room_done_stays_done_when_a_late_writer_marks_it_started(tmp_path, catalog):
+    path = _store(tmp_path / "s.sqlite", catalog)
+    with EvidenceStore.open(path, catalog) as s:
+        s.mark_room("r1", "office", 1, "started")  # the second writer's late "entered"
+        assert s.room_status("r1", "office", 1) == "done"
+        assert s.room_end_time("r1", "office", 1) == 9.0
+
+
+def test_run_names_with_control_characters_are_refused_on_write_and_read(tmp_path, catalog):
+    path = _store(tmp_path / "s.sqlite", catalog)
+    with EvidenceStore.open(path, catalog) as s, pytest.raises(CtxsearchError, match="printable"):
+        _exam(s, 50, run="r\x1b[2J")
+    _set(path, "UPDATE examinations SET run = ? WHERE id = 1", "r1\n\x1b[31mok")
+    with EvidenceStore.open(path, catalog) as s, pytest.raises(StoreError, match="is not a name"):
+        s.runs()
+
+
+def test_ctrl_c_while_a_store_is_created_leaves_no_file(tmp_path, catalog, monkeypatch):
+    import knowledge.store as store_mod
+
+    real = store_mod.sqlite3.connect
+
+    def connect_then_interrupt(*a, **kw):
+        conn = real(*a, **kw)
+        conn.execute("CREATE TABLE x (y)")  # something written to the file being built
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(store_mod.sqlite3, "connect", connect_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        EvidenceStore.open(tmp_path / "new.sqlite", catalog)
+    assert list(tmp_path.iterdir()) == []
