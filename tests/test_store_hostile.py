@@ -374,3 +374,30 @@ def test_ctrl_c_while_a_store_is_created_leaves_no_file(tmp_path, catalog, monke
     with pytest.raises(KeyboardInterrupt):
         EvidenceStore.open(tmp_path / "new.sqlite", catalog)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_learn_on_a_store_sqlite_cannot_write_is_a_one_line_error(
+    tmp_path, catalog, capsys, monkeypatch
+):
+    """As learn on a read-only file sees it (root, running the tests, can write any file: the
+    connection is opened read-only instead)."""
+    import knowledge.store as store_mod
+
+    path = _store(tmp_path / "s.sqlite", catalog)
+    before = digest(path)
+    monkeypatch.setattr(
+        store_mod,
+        "_connect",
+        lambda p: sqlite3.connect(store_mod._ro_uri(p), uri=True, isolation_level=None),
+    )
+    argv = ["learn", "--style", "office", "--rooms", "1", "--kb", str(path)]
+    assert main([*argv, "--perception", "oracle", "--no-progress"]) == 2
+    err = _err_line(capsys)
+    assert "cannot write knowledge store (attempt to write a readonly database)" in err
+    assert digest(path) == before
+
+
+def _err_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err
