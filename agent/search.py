@@ -888,7 +888,7 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
         raise CtxsearchError(
             f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
         )
-    with EvidenceStore.open(p, catalog, alpha=alpha, create=False) as store:
+    with EvidenceStore.open(p, catalog, alpha=alpha, read_only=True) as store:
         kb = store.knowledge_base()
         learned = _learned_seeds(store)
     if kb.total_examinations == 0:
@@ -908,24 +908,10 @@ def truth_probabilities(
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
     at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
-    import json
-    from pathlib import Path
-
     if path is not None:
-        p = Path(path)
-        try:
-            doc = json.loads(p.read_text())
-        except FileNotFoundError:
-            raise CtxsearchError(
-                f"{p}: no such ground-truth file (make one with: ctxsearch truth)"
-            ) from None
-        except (OSError, ValueError) as exc:
-            raise CtxsearchError(f"{p}: not a ground-truth JSON file ({exc})") from None
-        style_name = getattr(style, "name", style)
-        if doc.get("style") not in (None, style_name):
-            raise CtxsearchError(
-                f"{p}: ground truth of style '{doc.get('style')}', not '{style_name}'"
-            )
+        from envs.truth import load_truth
+
+        doc = load_truth(path, catalog, getattr(style, "name", style))
         return ss.TableProbabilities.from_truth(doc)
     from envs.truth import ground_truth
 

@@ -24,6 +24,8 @@ ROOM_FIELDS = {"width", "depth", "height", "door_width"}
 RULE_FIELDS = {"ref", "relation", "type", "p", "count", "on"}
 ON_CHOICES = ("auto", "floor", "surface")
 MAX_COUNT = 50
+MAX_ROOM_SIDE = 50.0  # metres: width, depth (and door width) of a room
+MAX_ROOM_HEIGHT = 10.0
 # The expected furniture (mean counts, largest sizes), each footprint grown by the robot's
 # clearance, may cover at most this fraction of the smallest floor the style allows.
 MAX_FILL = 0.6
@@ -99,13 +101,15 @@ def style_path(path_or_name: str | Path) -> Path:
     return STYLES_DIR / f"{p.name}.toml"
 
 
-def _range(path, field: str, value, *, integer: bool, lo_min: float) -> tuple:
+def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: float) -> tuple:
     kind = "integers" if integer else "numbers"
 
     def ok(v):
         if isinstance(v, bool):
             return False
-        return isinstance(v, int) if integer else isinstance(v, int | float)
+        if integer:
+            return isinstance(v, int)
+        return isinstance(v, int | float) and math.isfinite(v)
 
     if ok(value):
         value = [value, value]
@@ -118,6 +122,8 @@ def _range(path, field: str, value, *, integer: bool, lo_min: float) -> tuple:
         raise StyleError(path, f"min {a} is larger than max {b}", field=field)
     if a < lo_min:
         raise StyleError(path, f"must be at least {lo_min}, got {a}", field=field)
+    if b > hi_max:
+        raise StyleError(path, f"must be at most {hi_max:g}, got {b}", field=field)
     return (int(a), int(b)) if integer else (float(a), float(b))
 
 
@@ -137,9 +143,7 @@ def _counts(path, section: str, raw, catalog: Catalog, *, furniture: bool) -> tu
             raise StyleError(
                 path, f"'{tname}' is a small object: put it in [clutter] or a [[rule]]", field=field
             )
-        rng = _range(path, field, val, integer=True, lo_min=0)
-        if rng[1] > MAX_COUNT:
-            raise StyleError(path, f"at most {MAX_COUNT} instances, got {rng[1]}", field=field)
+        rng = _range(path, field, val, integer=True, lo_min=0, hi_max=MAX_COUNT)
         out.append((tname, rng))
     return tuple(out)
 
@@ -183,11 +187,9 @@ def _rule(path, i: int, raw, catalog: Catalog, present: set[str]) -> Rule:
         or math.isnan(p)
     ):
         raise StyleError(path, f"probability must be in [0, 1], got {p!r}", field=f"{where}.p")
-    count = _range(path, f"{where}.count", raw.get("count", 1), integer=True, lo_min=0)
-    if count[1] > MAX_COUNT:
-        raise StyleError(
-            path, f"at most {MAX_COUNT} instances, got {count[1]}", field=f"{where}.count"
-        )
+    count = _range(
+        path, f"{where}.count", raw.get("count", 1), integer=True, lo_min=0, hi_max=MAX_COUNT
+    )
     on = raw.get("on", "auto")
     if on not in ON_CHOICES:
         raise StyleError(path, f"must be one of {ON_CHOICES}, got {on!r}", field=f"{where}.on")
@@ -266,10 +268,28 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
     for req in ("width", "depth"):
         if req not in room:
             raise StyleError(path, "missing", field=f"room.{req}")
-    width = _range(path, "room.width", room["width"], integer=False, lo_min=2.5)
-    depth = _range(path, "room.depth", room["depth"], integer=False, lo_min=2.5)
-    height = _range(path, "room.height", room.get("height", [2.6, 3.0]), integer=False, lo_min=2.2)
-    door = _range(path, "room.door_width", room.get("door_width", 0.9), integer=False, lo_min=0.7)
+    width = _range(
+        path, "room.width", room["width"], integer=False, lo_min=2.5, hi_max=MAX_ROOM_SIDE
+    )
+    depth = _range(
+        path, "room.depth", room["depth"], integer=False, lo_min=2.5, hi_max=MAX_ROOM_SIDE
+    )
+    height = _range(
+        path,
+        "room.height",
+        room.get("height", [2.6, 3.0]),
+        integer=False,
+        lo_min=2.2,
+        hi_max=MAX_ROOM_HEIGHT,
+    )
+    door = _range(
+        path,
+        "room.door_width",
+        room.get("door_width", 0.9),
+        integer=False,
+        lo_min=0.7,
+        hi_max=MAX_ROOM_SIDE,
+    )
     if door[1] > min(width[0], depth[0]) - 1.0:
         raise StyleError(
             path,
@@ -325,6 +345,10 @@ def load_style(path_or_name: str | Path, catalog: Catalog | None = None) -> Styl
         raise StyleError(path, f"no such style file{hint}") from None
     except tomllib.TOMLDecodeError as exc:
         raise StyleError(path, f"TOML syntax error: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise StyleError(path, f"not UTF-8 text (byte {exc.start}); TOML must be UTF-8") from None
+    except RecursionError:
+        raise StyleError(path, "TOML nested too deeply") from None
     except OSError as exc:
         raise StyleError(path, f"cannot read: {exc.strerror}") from None
     return parse_style(doc, path, catalog)

@@ -24,6 +24,7 @@ rooms', and ``se_room`` treats the rooms as the independent units.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable
 from pathlib import Path
@@ -34,6 +35,7 @@ from envs.houses import HouseStyle, generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.styles import Style
 from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance, related
 
 
@@ -157,3 +159,85 @@ def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:
         if e["ref"] == ref and e["relation"] == relation and e["type"] == type_name:
             return e
     return None
+
+
+MAX_SAMPLES = 10**9
+
+
+class TruthError(CtxsearchError):
+    """A ground-truth file that cannot be used (not JSON, wrong shape, another style or catalog)."""
+
+
+def _reject_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number")
+
+
+def parse_truth(doc: object, path: str | Path, catalog: Catalog, style: str | None = None) -> dict:
+    """Validate a ground-truth document (as ``ground_truth`` returns and ``ctxsearch truth``
+    writes) against ``catalog`` (and ``style``, if given); TruthError naming the file otherwise.
+
+    It must be an object with ``style`` (a name), ``samples`` (rooms, >= 1), ``catalog`` (the
+    catalog's fingerprint) and a non-empty ``entries`` list of {ref, relation, type, p, n, ...}
+    with names of the catalog (relation a relation of ref), 0 <= p <= 1 and n >= 1 instances.
+    """
+
+    def bad(msg: str) -> TruthError:
+        return TruthError(f"{path}: not a usable ground-truth file: {msg}")
+
+    if not isinstance(doc, dict):
+        raise bad(f"expected a JSON object, got {type(doc).__name__}")
+    name = doc.get("style")
+    if not isinstance(name, str) or not name:
+        raise bad("no 'style' name")
+    if style is not None and name != style:
+        raise TruthError(f"{path}: ground truth of style {name!r}, not {style!r}")
+    samples = doc.get("samples")
+    if isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= MAX_SAMPLES:
+        raise bad(f"'samples' must be an integer in [1, {MAX_SAMPLES}], got {samples!r}")
+    if doc.get("catalog") != catalog.fingerprint:
+        raise TruthError(
+            f"{path}: ground truth of catalog fingerprint {doc.get('catalog')!r}, but the catalog "
+            f"in use ({catalog.path}) has {catalog.fingerprint}; recompute it with ctxsearch truth"
+        )
+    entries = doc.get("entries")
+    if not isinstance(entries, list) or not entries:
+        raise bad("no 'entries'")
+    for i, e in enumerate(entries):
+        where = f"entry {i}"
+        if not isinstance(e, dict):
+            raise bad(f"{where} is not an object")
+        ref, rel, t = e.get("ref"), e.get("relation"), e.get("type")
+        if not (isinstance(ref, str) and ref in catalog and isinstance(t, str) and t in catalog):
+            raise bad(f"{where}: types {ref!r}, {t!r} are not both in the catalog")
+        if not (isinstance(rel, str) and rel in catalog.type(ref).relation_names):
+            raise bad(f"{where}: {rel!r} is not a relation of {ref}")
+        p, n = e.get("p"), e.get("n")
+        if isinstance(p, bool) or not isinstance(p, int | float) or not 0.0 <= p <= 1.0:
+            raise bad(f"{where}: p must be a number in [0, 1], got {p!r}")
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_SAMPLES * 1000:
+            raise bad(f"{where}: n must be a positive integer, got {n!r}")
+    return doc
+
+
+def load_truth(path: str | Path, catalog: Catalog, style: str | None = None) -> dict:
+    """Read and validate a ground-truth JSON file (``parse_truth``); TruthError (one line,
+    naming the file) for a missing, unreadable, non-UTF-8, non-JSON or wrong-shaped file."""
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except FileNotFoundError:
+        raise TruthError(
+            f"{p}: no such ground-truth file (make one with: ctxsearch truth)"
+        ) from None
+    except IsADirectoryError:
+        raise TruthError(f"{p}: is a directory, not a ground-truth file") from None
+    except OSError as exc:
+        raise TruthError(f"{p}: cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise TruthError(f"{p}: not UTF-8 text (byte {exc.start})") from None
+    except RecursionError:
+        raise TruthError(f"{p}: not a ground-truth JSON file (nested too deeply)") from None
+    except ValueError as exc:
+        raise TruthError(f"{p}: not a ground-truth JSON file ({exc})") from None
+    return parse_truth(doc, p, catalog, style)

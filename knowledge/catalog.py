@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -59,6 +60,12 @@ SHAPES = (
 )
 TYPE_FIELDS = {"name", "kind", "shape", "size", "color", "min_pixels", "max_range", "relation"}
 RELATION_FIELDS = {"name", "lo", "hi", "margin_lo", "margin_hi"}
+# Sane ranges of the numbers a catalog holds (finite, and far beyond any real room or camera).
+MAX_SIZE = 10.0  # metres per axis
+MAX_RELATIVE = 10.0  # |lo|, |hi| of a relation volume, in object extents
+MAX_MARGIN = 100.0  # |margin| of a relation volume, metres (rooms are up to 50 m)
+MAX_RANGE = 100.0  # max_range, metres
+MAX_PIXELS = 1_000_000  # min_pixels
 _NAME_RE = re.compile(r"^[A-Z][A-Za-z0-9]*$")
 _REL_RE = re.compile(r"^[A-Z][A-Z0-9]*(-[A-Z0-9]+)*$")
 
@@ -197,13 +204,30 @@ def relation_suffix(type_name: str) -> str:
     return "-" + type_name.upper()
 
 
-def _vec3(path: Path, tname: str | None, fname: str, value: object) -> tuple[float, float, float]:
+def _is_number(v: object, bound: float) -> bool:
+    """A finite int or float (not a bool) with |v| <= bound."""
+    return (
+        isinstance(v, int | float)
+        and not isinstance(v, bool)
+        and math.isfinite(v)
+        and abs(v) <= bound
+    )
+
+
+def _vec3(
+    path: Path, tname: str | None, fname: str, value: object, bound: float
+) -> tuple[float, float, float]:
     if (
         not isinstance(value, list)
         or len(value) != 3
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        or not all(_is_number(v, bound) for v in value)
     ):
-        raise CatalogError(path, f"expected 3 numbers, got {value!r}", type_name=tname, field=fname)
+        raise CatalogError(
+            path,
+            f"expected 3 finite numbers in [-{bound:g}, {bound:g}], got {value!r}",
+            type_name=tname,
+            field=fname,
+        )
     return (float(value[0]), float(value[1]), float(value[2]))
 
 
@@ -211,14 +235,11 @@ def _parse_size(path: Path, tname: str, value: object) -> tuple[tuple, tuple]:
     if isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value):
         pairs = []
         for v in value:
-            if (
-                len(v) != 2
-                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
-                or v[0] > v[1]
-            ):
+            if len(v) != 2 or not all(_is_number(x, MAX_SIZE) for x in v) or v[0] > v[1]:
                 raise CatalogError(
                     path,
-                    f"each axis range must be [min, max], got {v!r}",
+                    f"each axis range must be [min, max] of finite sizes up to {MAX_SIZE:g} m, "
+                    f"got {v!r}",
                     type_name=tname,
                     field="size",
                 )
@@ -226,7 +247,7 @@ def _parse_size(path: Path, tname: str, value: object) -> tuple[tuple, tuple]:
         lo = tuple(p[0] for p in pairs)
         hi = tuple(p[1] for p in pairs)
     else:
-        lo = hi = _vec3(path, tname, "size", value)
+        lo = hi = _vec3(path, tname, "size", value, MAX_SIZE)
     if min(lo) <= 0:
         raise CatalogError(
             path, f"sizes must be positive, got {list(lo)}", type_name=tname, field="size"
@@ -270,10 +291,14 @@ def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> Re
     spec = RelationSpec(
         name=name,
         ref=tname,
-        lo=_vec3(path, tname, f"{name}.lo", raw["lo"]),
-        hi=_vec3(path, tname, f"{name}.hi", raw["hi"]),
-        margin_lo=_vec3(path, tname, f"{name}.margin_lo", raw.get("margin_lo", [0, 0, 0])),
-        margin_hi=_vec3(path, tname, f"{name}.margin_hi", raw.get("margin_hi", [0, 0, 0])),
+        lo=_vec3(path, tname, f"{name}.lo", raw["lo"], MAX_RELATIVE),
+        hi=_vec3(path, tname, f"{name}.hi", raw["hi"], MAX_RELATIVE),
+        margin_lo=_vec3(
+            path, tname, f"{name}.margin_lo", raw.get("margin_lo", [0, 0, 0]), MAX_MARGIN
+        ),
+        margin_hi=_vec3(
+            path, tname, f"{name}.margin_hi", raw.get("margin_hi", [0, 0, 0]), MAX_MARGIN
+        ),
     )
     # The bounds are affine in each size axis, so checking both ends of the range is enough.
     for size in (size_lo, size_hi):
@@ -331,7 +356,7 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
                 field="shape",
             )
         size_lo, size_hi = _parse_size(path, name, raw["size"])
-        color = _vec3(path, name, "color", raw["color"])
+        color = _vec3(path, name, "color", raw["color"], 1.0)
         if not all(0.0 <= c <= 1.0 for c in color):
             raise CatalogError(
                 path,
@@ -340,14 +365,17 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
                 field="color",
             )
         mp, mr = raw["min_pixels"], raw["max_range"]
-        if not isinstance(mp, int) or isinstance(mp, bool) or mp < 1:
-            raise CatalogError(
-                path, f"must be a positive integer, got {mp!r}", type_name=name, field="min_pixels"
-            )
-        if not isinstance(mr, int | float) or isinstance(mr, bool) or mr <= 0:
+        if not isinstance(mp, int) or isinstance(mp, bool) or not 1 <= mp <= MAX_PIXELS:
             raise CatalogError(
                 path,
-                f"must be a positive number of metres, got {mr!r}",
+                f"must be an integer in [1, {MAX_PIXELS}], got {mp!r}",
+                type_name=name,
+                field="min_pixels",
+            )
+        if not _is_number(mr, MAX_RANGE) or mr <= 0:
+            raise CatalogError(
+                path,
+                f"must be a positive number of metres up to {MAX_RANGE:g}, got {mr!r}",
                 type_name=name,
                 field="max_range",
             )
@@ -393,6 +421,10 @@ def load_catalog(path: str | Path | None = None) -> Catalog:
         raise CatalogError(path, "no such file") from None
     except tomllib.TOMLDecodeError as exc:
         raise CatalogError(path, f"TOML syntax error: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise CatalogError(path, f"not UTF-8 text (byte {exc.start}); TOML must be UTF-8") from None
+    except RecursionError:
+        raise CatalogError(path, "TOML nested too deeply") from None
     except OSError as exc:
         raise CatalogError(path, f"cannot read: {exc.strerror}") from None
     return parse_catalog(doc, path)

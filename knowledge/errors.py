@@ -3,8 +3,18 @@
 from __future__ import annotations
 
 
+def printable(text: str) -> str:
+    """``text`` on one line with every control or unprintable character written as an escape
+    (what a crafted file puts in a message cannot move the cursor or fake a second line)."""
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
+
+
 class CtxsearchError(Exception):
-    """A user-facing error: bad input file, unknown name, incompatible store. One line, no traceback."""
+    """A user-facing error: bad input file, unknown name, incompatible store. One line, no
+    traceback: control characters in the message (echoed from a file) are escaped."""
+
+    def __init__(self, message: object = ""):
+        super().__init__(printable(str(message)))
 
 
 class CatalogError(CtxsearchError):

@@ -5,7 +5,7 @@ strategy) and one row per observed (relation, related type, related object id); 
 knowledge base, hence its intervals, are rebuilt from this log, so runs resume, stores from several
 robots merge (``merge_stores``), and the same evidence can be re-read with another alpha.
 
-Tables (schema version 2)::
+Tables (schema version 3)::
 
     meta          (key TEXT PRIMARY KEY, value TEXT)   app='ctxsearch', schema_version,
                                                        catalog_fingerprint, catalog_path, alpha,
@@ -15,20 +15,37 @@ Tables (schema version 2)::
                                                        the room was done (NULL if not recorded);
                                                        PRIMARY KEY (run, style, seed)
     examinations  (id INTEGER PRIMARY KEY, run, style, room_seed, object_id, type, sim_time,
-                   strategy, created)
+                   strategy, created)                  UNIQUE (EXAM_KEY): one examination of an
+                                                       object per room and run
     observations  (examination_id REFERENCES examinations, relation, type, related_id)
 
-Version 1 (no rooms.end_time) is still read: its rooms have no end time. The first write of an
-end time (``mark_room(..., end_time=...)``, or a merge into it) upgrades a version-1 store in place
-(one transaction: ADD COLUMN, schema_version 2); older ctxsearch then refuses it with its one-line
-"newer schema" error. ``examinations()`` reads the log back, examination by examination.
+The uniqueness key ``EXAM_KEY`` (run, style, room_seed, object_id) is what identifies an
+examination of a run: a second process learning the same run on the same store cannot add an
+examination twice (its write fails with a one-line StoreError and nothing of it is written);
+different runs on one store never collide. A later key (e.g. a day stamp) is one more column in
+``EXAM_KEY`` and a new schema version.
+
+Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time) and
+version 2 (no uniqueness key). The first write to one (``record``, ``mark_room``, a merge into
+it) upgrades it in place to version 3 in one transaction: the tables are rebuilt in this
+version's exact schema and duplicate examinations (same ``EXAM_KEY``, written by two processes
+before version 3) are dropped, keeping the first; older ctxsearch then refuses the store with its
+one-line "newer schema" error. ``examinations()`` reads the log back, examination by examination.
+
+A store's schema (tables, columns, indexes, triggers, views) must be exactly what this version (or
+the older version it claims) writes: anything else, e.g. a trigger that would add evidence on
+every append, is refused. Every value read back is checked (types, finite numbers, names in the
+catalog) and a bad one is a one-line StoreError naming the store.
 
 Every examination is written in one transaction (its row and its observation rows). The store
 uses SQLite's write-ahead log (journal_mode=WAL, synchronous=NORMAL): a process killed at any
 point loses at most the examination in flight (a power cut, at most the last few), commits cost
 no fsync, and readers (``ctxsearch kb show``) do not block a running robot. A file that is not a ctxsearch store, has a newer schema, is corrupt, or was built on a
 different catalog (relation volumes decide what the counts mean) is refused with a one-line
-StoreError after a read-only check: the file is never modified when opening fails.
+StoreError after a read-only check: the file is never modified when opening fails (a file that
+is not ours is only read immutably, its journal is never rolled back), and ``open(...,
+read_only=True)`` (``kb show``, ``kb stats``, search) never writes, even in a read-only
+directory.
 
 Stdlib only (``sqlite3``); no pickles.
 """
@@ -37,6 +54,8 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import functools
+import math
 import os
 import sqlite3
 import time
@@ -51,33 +70,64 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError, StoreError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
+# What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on).
+EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _TABLES = ("meta", "rooms", "examinations", "observations")
 
-_SCHEMA = """
-CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE rooms (
+_META_SQL = "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)"
+_ROOMS_SQL = """CREATE TABLE rooms (
     run TEXT NOT NULL, style TEXT NOT NULL, seed INTEGER NOT NULL,
     status TEXT NOT NULL CHECK (status IN ('started', 'done')),
     end_time REAL,
     PRIMARY KEY (run, style, seed)
-);
-CREATE TABLE examinations (
+)"""
+_EXAMINATIONS_SQL = """CREATE TABLE examinations (
     id INTEGER PRIMARY KEY,
     run TEXT NOT NULL, style TEXT NOT NULL, room_seed INTEGER NOT NULL,
     object_id INTEGER NOT NULL, type TEXT NOT NULL,
     sim_time REAL NOT NULL, strategy TEXT NOT NULL, created REAL NOT NULL
-);
-CREATE INDEX examinations_room ON examinations (run, style, room_seed);
-CREATE TABLE observations (
+)"""
+_OBSERVATIONS_SQL = """CREATE TABLE observations (
     examination_id INTEGER NOT NULL REFERENCES examinations (id),
     relation TEXT NOT NULL, type TEXT NOT NULL, related_id INTEGER NOT NULL
-);
-CREATE INDEX observations_pair ON observations (relation, type, examination_id);
-"""
+)"""
+_OBSERVATIONS_INDEX = (
+    "CREATE INDEX observations_pair ON observations (relation, type, examination_id)"
+)
+_EXAM_KEY_INDEX = f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(EXAM_KEY)})"
+# The schema this version writes, statement by statement (meta first).
+_SCHEMA_STATEMENTS = (
+    _META_SQL,
+    _ROOMS_SQL,
+    _EXAMINATIONS_SQL,
+    _EXAM_KEY_INDEX,
+    _OBSERVATIONS_SQL,
+    _OBSERVATIONS_INDEX,
+)
+# The schemas of older versions, still read (and upgraded to version 3 on the first write).
+_OLD_ROOM_INDEX = "CREATE INDEX examinations_room ON examinations (run, style, room_seed)"
+_OLD_SCHEMAS = {
+    1: (
+        _META_SQL,
+        _ROOMS_SQL.replace("    end_time REAL,\n", ""),
+        _EXAMINATIONS_SQL,
+        _OLD_ROOM_INDEX,
+        _OBSERVATIONS_SQL,
+        _OBSERVATIONS_INDEX,
+    ),
+    2: (
+        _META_SQL,
+        _ROOMS_SQL,
+        _EXAMINATIONS_SQL,
+        _OLD_ROOM_INDEX,
+        _OBSERVATIONS_SQL,
+        _OBSERVATIONS_INDEX,
+    ),
+}
 
 _EXAM_COLS = "run, style, room_seed, object_id, type, sim_time, strategy, created"
 
@@ -106,7 +156,8 @@ def inspect_store(path: str | Path, catalog: Catalog | None = None) -> dict[str,
     """Check, read-only, that ``path`` is a usable ctxsearch store and return its meta table.
 
     With ``catalog`` the store's catalog fingerprint must equal the catalog's. StoreError (one
-    line, starting with the path) otherwise; the file is not modified.
+    line, starting with the path) otherwise; the file is not modified (nor is a journal or WAL
+    beside it).
     """
     path = Path(path)
     if not path.exists():
@@ -126,18 +177,21 @@ def inspect_store(path: str | Path, catalog: Catalog | None = None) -> dict[str,
     # checkpointed, so an immutable read of the main file sees it without creating -wal/-shm files
     # beside a file that may not even be ours. Only where a -wal file exists (a writer is running
     # or was killed) can the main file alone be behind or mid-checkpoint: then read through a
-    # normal read-only connection, which applies the WAL. A hot rollback journal (not ours: stores
-    # use WAL) needs a read-write connection, which rolls it back to the last committed state.
+    # normal read-only connection, which applies the WAL (only once the immutable read found a
+    # ctxsearch store). A hot rollback journal is never ours (stores use WAL): the file is read
+    # immutably, to say what it is, and refused; its journal is left alone.
     journal = Path(str(path) + "-journal")
-    if journal.exists() and journal.stat().st_size > 0:
-        connects = [lambda: sqlite3.connect(str(path))]
-    else:
-        connects = [lambda: sqlite3.connect(_ro_uri(path) + "&immutable=1", uri=True)]
-        if Path(str(path) + "-wal").exists():
-            connects.append(lambda: sqlite3.connect(_ro_uri(path), uri=True))
+    hot_journal = journal.exists() and journal.stat().st_size > 0
+    connects = [lambda: sqlite3.connect(_ro_uri(path) + "&immutable=1", uri=True)]
+    if not hot_journal and Path(str(path) + "-wal").exists():
+        connects.append(lambda: sqlite3.connect(_ro_uri(path), uri=True))
     for i, connect in enumerate(connects):
         try:
-            meta = _read_meta(connect(), path)
+            conn = connect()
+            try:
+                meta = _check_store(conn, path, quick_check=True)
+            finally:
+                conn.close()
             break
         except (sqlite3.DatabaseError, _Corrupt) as exc:
             if i + 1 < len(connects):
@@ -147,51 +201,136 @@ def inspect_store(path: str | Path, catalog: Catalog | None = None) -> dict[str,
             raise StoreError(
                 f"{path}: corrupt or unreadable knowledge store ({_one_line(exc)})"
             ) from None
+    if hot_journal:
+        raise StoreError(
+            f"{path}: has a hot rollback journal ({journal.name}), which ctxsearch never writes; "
+            "refusing to open it (nothing was changed)"
+        )
+    _check_catalog(path, meta, catalog)
+    return meta
+
+
+def _check_catalog(path: Path, meta: dict[str, str], catalog: Catalog | None) -> None:
     if catalog is not None and meta["catalog_fingerprint"] != catalog.fingerprint:
         raise StoreError(
             f"{path}: built on catalog fingerprint {meta['catalog_fingerprint']} "
             f"({meta.get('catalog_path', 'unknown file')}), but the catalog in use ({catalog.path}) "
             f"has fingerprint {catalog.fingerprint}; use the catalog the store was built with"
         )
-    return meta
 
 
-def _read_meta(conn: sqlite3.Connection, path: Path) -> dict[str, str]:
-    """The meta table of an open connection, validated; closes the connection."""
+def _check_store(conn: sqlite3.Connection, path: Path, *, quick_check: bool) -> dict[str, str]:
+    """The meta table of an open connection, validated with the schema (and, with
+    ``quick_check``, SQLite's integrity check)."""
+    tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if "meta" not in tables:
+        raise _not_a_store(path, "no meta table")
     try:
-        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if "meta" not in tables:
-            raise _not_a_store(path, "no meta table")
-        try:
-            meta = {str(k): str(v) for k, v in conn.execute("SELECT key, value FROM meta")}
-        except sqlite3.OperationalError:
-            raise _not_a_store(path, "unexpected meta table") from None
-        if meta.get("app") != APP:
-            raise _not_a_store(path)
-        try:
-            version = int(meta.get("schema_version", ""))
-        except ValueError:
-            raise _not_a_store(path, "bad schema_version") from None
-        if version > SCHEMA_VERSION:
-            raise StoreError(
-                f"{path}: store schema version {version} is newer than this ctxsearch supports "
-                f"({SCHEMA_VERSION}); upgrade ctxsearch to read it"
-            )
-        if version < 1:
-            raise _not_a_store(path, f"unknown schema version {version}")
-        missing = [t for t in _TABLES if t not in tables]
-        if missing or "catalog_fingerprint" not in meta or "alpha" not in meta:
-            raise StoreError(
-                f"{path}: damaged knowledge store (missing {missing or 'meta entries'})"
-            )
+        meta = {k: v for k, v in conn.execute("SELECT key, value FROM meta")}
+    except sqlite3.OperationalError:
+        raise _not_a_store(path, "unexpected meta table") from None
+    if meta.get("app") != APP:
+        raise _not_a_store(path)
+    if not all(isinstance(k, str) and isinstance(v, str) for k, v in meta.items()):
+        raise StoreError(f"{path}: damaged knowledge store (meta holds a value that is not text)")
+    try:
+        version = int(meta.get("schema_version", ""))
+    except ValueError:
+        raise _not_a_store(path, "bad schema_version") from None
+    if version > SCHEMA_VERSION:
+        raise StoreError(
+            f"{path}: store schema version {version} is newer than this ctxsearch supports "
+            f"({SCHEMA_VERSION}); upgrade ctxsearch to read it"
+        )
+    if version < 1:
+        raise _not_a_store(path, f"unknown schema version {version}")
+    missing = [t for t in _TABLES if t not in tables]
+    if missing or "catalog_fingerprint" not in meta or "alpha" not in meta:
+        raise StoreError(f"{path}: damaged knowledge store (missing {missing or 'meta entries'})")
+    problem = _schema_problem(conn, version)
+    if problem:
+        raise StoreError(
+            f"{path}: refused: its schema is not the one ctxsearch writes for version {version} "
+            f"({problem})"
+        )
+    try:
+        _check_alpha(meta["alpha"])
+    except CtxsearchError:
+        raise StoreError(
+            f"{path}: damaged knowledge store (alpha {meta['alpha']!r} is not a number in (0, 1))"
+        ) from None
+    if quick_check:
         check = conn.execute("PRAGMA quick_check").fetchone()[0]
         if check != "ok":
             raise _Corrupt(
                 f"{path}: corrupt knowledge store (sqlite quick_check: {_one_line(check)})"
             )
-        return meta
+    return meta
+
+
+def _schema_signature(conn: sqlite3.Connection, names: Iterable[str] | None = None):
+    """(objects, structure) of a connection's schema: objects maps (type, name) to (table, SQL
+    with whitespace collapsed); structure maps each table and index among ``names`` (default:
+    all) to what SQLite reports of its columns, keys and indexes."""
+    objects: dict[tuple[str, str], tuple[str, str | None]] = {}
+    for typ, name, tbl, sql in conn.execute("SELECT type, name, tbl_name, sql FROM sqlite_master"):
+        objects[(str(typ), str(name))] = (
+            str(tbl),
+            None if sql is None else " ".join(str(sql).split()),
+        )
+    wanted = None if names is None else set(names)
+    structure: dict[str, tuple] = {}
+    for (typ, name), _ in sorted(objects.items()):
+        if wanted is not None and name not in wanted:
+            continue
+        q = name.replace('"', '""')
+        if typ == "table":
+            structure[name] = (
+                tuple(conn.execute(f'PRAGMA table_xinfo("{q}")')),
+                tuple(sorted(conn.execute(f'PRAGMA foreign_key_list("{q}")'))),
+                tuple(sorted(tuple(r[1:]) for r in conn.execute(f'PRAGMA index_list("{q}")'))),
+            )
+        elif typ == "index":
+            structure[name] = tuple(conn.execute(f'PRAGMA index_xinfo("{q}")'))
+    return objects, structure
+
+
+@functools.cache
+def _expected_schema(version: int):
+    """The schema signature a store of ``version`` has, built in memory from its statements."""
+    conn = sqlite3.connect(":memory:")
+    try:
+        for stmt in _SCHEMA_STATEMENTS if version == SCHEMA_VERSION else _OLD_SCHEMAS[version]:
+            conn.execute(stmt)
+        return _schema_signature(conn)
     finally:
         conn.close()
+
+
+def _schema_problem(conn: sqlite3.Connection, version: int) -> str | None:
+    """What differs between the connection's schema and the one ``version`` writes, or None.
+
+    Objects (tables, indexes, triggers, views) and their columns, keys and indexes must match;
+    for the current version the SQL text too (older stores may carry an ALTER-ed text)."""
+    exp_objects, exp_structure = _expected_schema(version)
+    objects = {
+        (str(t), str(n)): None for t, n in conn.execute("SELECT type, name FROM sqlite_master")
+    }
+    extra = sorted(set(objects) - set(exp_objects))
+    if extra:
+        return f"unexpected {extra[0][0]} {extra[0][1]!r}"
+    gone = sorted(set(exp_objects) - set(objects))
+    if gone:
+        return f"no {gone[0][0]} {gone[0][1]!r}"
+    got_objects, got_structure = _schema_signature(conn, [n for _t, n in exp_objects])
+    for key, (tbl, sql) in sorted(exp_objects.items()):
+        got_tbl, got_sql = got_objects[key]
+        if got_tbl != tbl or (version == SCHEMA_VERSION and got_sql != sql):
+            return f"{key[0]} {key[1]!r} is not as ctxsearch creates it"
+    for name, s in sorted(exp_structure.items()):
+        if got_structure.get(name) != s:
+            return f"{name!r} has other columns, keys or indexes"
+    return None
 
 
 @dataclass(frozen=True)
@@ -209,18 +348,37 @@ class Examination:
     related: tuple[tuple[str, str, int], ...]  # (relation, related type, related object id)
 
 
-def _has_end_time(conn: sqlite3.Connection) -> bool:
-    """True when the rooms table has the end_time column (schema version 2)."""
-    return any(r[1] == "end_time" for r in conn.execute("PRAGMA table_info(rooms)"))
-
-
-def _upgrade(cur: sqlite3.Cursor) -> None:
-    """Bring a version-1 store to version 2 inside the caller's transaction."""
-    if not _has_end_time(cur.connection):
-        cur.execute("ALTER TABLE rooms ADD COLUMN end_time REAL")
-        cur.execute(
-            "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
-        )
+def _migrate(cur: sqlite3.Cursor, version: int) -> int:
+    """Bring a store of an older ``version`` to SCHEMA_VERSION inside the caller's transaction:
+    rebuild its tables in this version's exact schema, dropping duplicate examinations (same
+    EXAM_KEY: keep the first and its observations). Returns how many were dropped."""
+    end = "end_time" if version >= 2 else "NULL"
+    cur.execute("DROP INDEX IF EXISTS examinations_room")
+    cur.execute("DROP INDEX IF EXISTS observations_pair")
+    for t in ("observations", "examinations", "rooms"):
+        cur.execute(f"ALTER TABLE {t} RENAME TO _old_{t}")
+    for stmt in _SCHEMA_STATEMENTS[1:]:
+        cur.execute(stmt)
+    cur.execute(
+        "INSERT INTO rooms (run, style, seed, status, end_time) "
+        f"SELECT run, style, seed, status, {end} FROM _old_rooms"
+    )
+    keep = f"SELECT MIN(id) FROM _old_examinations GROUP BY {', '.join(EXAM_KEY)}"
+    cur.execute(
+        f"INSERT INTO examinations (id, {_EXAM_COLS}) SELECT id, {_EXAM_COLS} "
+        f"FROM _old_examinations WHERE id IN ({keep}) ORDER BY id"
+    )
+    total = int(cur.execute("SELECT COUNT(*) FROM _old_examinations").fetchone()[0])
+    kept = int(cur.execute("SELECT COUNT(*) FROM examinations").fetchone()[0])
+    cur.execute(
+        "INSERT INTO observations (examination_id, relation, type, related_id) "
+        "SELECT examination_id, relation, type, related_id FROM _old_observations "
+        "WHERE examination_id IN (SELECT id FROM examinations) ORDER BY rowid"
+    )
+    for t in ("observations", "examinations", "rooms"):
+        cur.execute(f"DROP TABLE _old_{t}")
+    cur.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+    return total - kept
 
 
 class _Corrupt(Exception):
@@ -231,38 +389,67 @@ class EvidenceStore:
     """An open evidence store. Use ``EvidenceStore.open(...)``, as a context manager or ``close()``."""
 
     def __init__(
-        self, conn: sqlite3.Connection, path: Path, catalog: Catalog, alpha: float, meta: dict
+        self,
+        conn: sqlite3.Connection,
+        path: Path,
+        catalog: Catalog,
+        alpha: float,
+        meta: dict,
+        read_only: bool = False,
     ):
         self._conn: sqlite3.Connection | None = conn
         self.path = path
         self.catalog = catalog
         self.alpha = alpha
         self.meta = dict(meta)
-        self._end_time = _has_end_time(conn)  # schema 2; a version-1 store is upgraded on demand
-        if self._end_time:  # an immutable read of the main file may predate an upgrade in the WAL
-            self.meta["schema_version"] = str(SCHEMA_VERSION)
+        self.read_only = read_only
+        self.version = int(self.meta["schema_version"])  # older ones upgrade on the first write
+        self.duplicates_dropped = 0  # by the upgrade of a store older than version 3
 
     # ---- opening ------------------------------------------------------------------------------
     @classmethod
     def open(
-        cls, path: str | Path, catalog: Catalog, alpha: float | None = None, create: bool = True
+        cls,
+        path: str | Path,
+        catalog: Catalog,
+        alpha: float | None = None,
+        create: bool = True,
+        read_only: bool = False,
     ) -> EvidenceStore:
-        """Open the store at ``path`` (creating it unless ``create=False``).
+        """Open the store at ``path`` (creating it unless ``create=False`` or ``read_only``).
 
         A new store records the catalog's fingerprint and ``alpha`` (default 0.10). An existing
         store must have been built on the same catalog; its stored alpha is the default for
-        ``knowledge_base()`` unless ``alpha`` is given (the file's alpha is not changed).
+        ``knowledge_base()`` unless ``alpha`` is given (the file's alpha is not changed). A
+        ``read_only`` store is never written (writes are a StoreError), also in a read-only
+        directory.
         """
         path = Path(path)
         if alpha is not None:
             alpha = _check_alpha(alpha)
         if not path.exists():
-            if not create:
+            if not create or read_only:
                 raise StoreError(f"{path}: no such knowledge store")
             _create(path, catalog, intervals.DEFAULT_ALPHA if alpha is None else alpha)
-        meta = inspect_store(path, catalog)
-        conn = _connect(path)
-        return cls(conn, path, catalog, float(meta["alpha"]) if alpha is None else alpha, meta)
+        inspect_store(path, catalog)
+        conn = _connect_ro(path) if read_only else _connect(path)
+        try:  # again through the connection in use: it sees the WAL, the immutable read did not
+            meta = _check_store(conn, path, quick_check=False)
+            _check_catalog(path, meta, catalog)
+        except sqlite3.DatabaseError as exc:
+            conn.close()
+            raise StoreError(f"{path}: cannot read knowledge store ({_one_line(exc)})") from None
+        except BaseException:
+            conn.close()
+            raise
+        return cls(
+            conn,
+            path,
+            catalog,
+            float(meta["alpha"]) if alpha is None else alpha,
+            meta,
+            read_only=read_only,
+        )
 
     def close(self) -> None:
         """Close the connection (idempotent)."""
@@ -311,7 +498,9 @@ class EvidenceStore:
         ``related`` lists (relation, related type, related object id) for every object found in
         one of the examined object's relation volumes (the same pair may appear for several
         objects: the counts treat it as "at least one"). Everything is validated against the
-        catalog before anything is written (CtxsearchError).
+        catalog before anything is written (CtxsearchError). An examination whose EXAM_KEY is
+        already in the store (another process learning the same run) is a StoreError and
+        nothing is written.
         """
         self.catalog.type(ref_type)
         rows = []
@@ -337,12 +526,19 @@ class EvidenceStore:
             _text(strategy, "strategy"),
             time.time(),
         )
-        with self._transaction() as cur:
-            cur.execute(
-                f"INSERT INTO examinations ({_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?)", exam
-            )
-            eid = int(cur.lastrowid)
-            self._insert_observations(cur, eid, rows)
+        try:
+            with self._transaction() as cur:
+                cur.execute(
+                    f"INSERT INTO examinations ({_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?)", exam
+                )
+                eid = int(cur.lastrowid)
+                self._insert_observations(cur, eid, rows)
+        except sqlite3.IntegrityError:
+            raise StoreError(
+                f"{self.path}: object {exam[3]} of room {exam[1]}/{exam[2]} is already examined "
+                f"in run {exam[0]!r}: another process is learning the same run on this store "
+                "(nothing was written; its evidence is kept once)"
+            ) from None
         return eid
 
     def _insert_observations(
@@ -356,58 +552,63 @@ class EvidenceStore:
     def mark_room(
         self, run: str, style: str, seed: int, status: str, end_time: float | None = None
     ) -> None:
-        """Set a room's status: 'started' when the robot enters it, 'done' when it is finished;
-        ``end_time`` (the run's simulated clock when it was done) replaces the stored one. A
-        version-1 store is upgraded in the same transaction when an end time is given."""
+        """Set a room's status: 'started' when the robot enters it (a room already done stays
+        done), 'done' when it is finished; ``end_time`` (the run's simulated clock when it was
+        done) replaces the stored one."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
         key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), status)
         end = None if end_time is None else _float(end_time, "end_time")
         with self._transaction() as cur:
             if end is not None:
-                _upgrade(cur)
-            if end is not None or self._end_time:
                 cur.execute(
                     "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
                     "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status, "
                     "end_time = excluded.end_time",
                     (*key, end),
                 )
-            else:
+            else:  # a room done stays done (another writer of the run may have finished it)
                 cur.execute(
                     "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
-                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status",
+                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status "
+                    "WHERE rooms.status != 'done'",
                     key,
                 )
-        if end is not None and not self._end_time:
-            self._end_time = True
-            self.meta["schema_version"] = str(SCHEMA_VERSION)
 
     # ---- reading ------------------------------------------------------------------------------
     def room_status(self, run: str, style: str, seed: int) -> str | None:
         """'started', 'done', or None for a room never entered."""
-        row = self.conn.execute(
-            "SELECT status FROM rooms WHERE run = ? AND style = ? AND seed = ?",
-            (run, style, int(seed)),
-        ).fetchone()
-        return None if row is None else str(row[0])
+        with self._reading():
+            row = self.conn.execute(
+                "SELECT status FROM rooms WHERE run = ? AND style = ? AND seed = ?",
+                (run, style, int(seed)),
+            ).fetchone()
+        if row is None:
+            return None
+        if row[0] not in ROOM_STATUSES:
+            raise self._bad(f"room {style}/{seed} of run {run!r} has status {row[0]!r}")
+        return str(row[0])
 
     def room_end_time(self, run: str, style: str, seed: int) -> float | None:
         """The run's simulated clock when the room was done, or None (not done, not recorded,
         or a version-1 store)."""
-        if not self._end_time:
+        if self.version < 2:
             return None
-        row = self.conn.execute(
-            "SELECT end_time FROM rooms WHERE run = ? AND style = ? AND seed = ?",
-            (run, style, int(seed)),
-        ).fetchone()
-        return None if row is None or row[0] is None else float(row[0])
+        with self._reading():
+            row = self.conn.execute(
+                "SELECT end_time FROM rooms WHERE run = ? AND style = ? AND seed = ?",
+                (run, style, int(seed)),
+            ).fetchone()
+        if row is None or row[0] is None:
+            return None
+        return self._number(row[0], f"end time of room {style}/{seed}")
 
     def examinations(self, run: str | None = None) -> Iterator[Examination]:
         """Every examination of the log (of one run, or all) in log order, each with its
         observation rows in the order they were written. The observations of the selected
         examinations are read first, the examinations then streamed; do not write to the store
-        while iterating."""
+        while iterating. A row that does not fit the catalog or holds a bad value is a
+        StoreError naming the store."""
         exams = "SELECT id, run, style, room_seed, object_id, type, sim_time, strategy FROM examinations"
         obs = "SELECT examination_id, relation, type, related_id FROM observations"
         args: tuple = ()
@@ -415,48 +616,68 @@ class EvidenceStore:
             exams += " WHERE run = ?"
             obs += " WHERE examination_id IN (SELECT id FROM examinations WHERE run = ?)"
             args = (run,)
-        related: dict[int, list[tuple[str, str, int]]] = defaultdict(list)
-        for eid, rel, t, rid in self.conn.execute(obs + " ORDER BY rowid", args):
-            related[int(eid)].append((str(rel), str(t), int(rid)))
-        for i, r, st, seed, oid, t, sim, strategy in self.conn.execute(
-            exams + " ORDER BY id", args
-        ):
-            yield Examination(
-                int(i),
-                str(r),
-                str(st),
-                int(seed),
-                int(oid),
-                str(t),
-                float(sim),
-                str(strategy),
-                tuple(related.pop(int(i), ())),
-            )
+        with self._reading():
+            related: dict[int, list[tuple[str, str, int]]] = defaultdict(list)
+            for eid, rel, t, rid in self.conn.execute(obs + " ORDER BY rowid", args):
+                related[self._integer(eid, "observation examination id")].append(
+                    (
+                        self._name(rel, "relation"),
+                        self._name(t, "observed type"),
+                        self._integer(rid, "related object id"),
+                    )
+                )
+            for i, r, st, seed, oid, t, sim, strategy in self.conn.execute(
+                exams + " ORDER BY id", args
+            ):
+                i = self._integer(i, "examination id")
+                where = f"examination {i}"
+                ref = self._name(t, f"{where}: type")
+                if ref not in self.catalog:
+                    raise self._bad(f"{where}: examined type {ref!r} is not in the catalog")
+                rows = tuple(related.pop(i, ()))
+                for rel, b, _rid in rows:
+                    if not self.catalog.has_relation(rel) or self.catalog.relation(rel).ref != ref:
+                        raise self._bad(
+                            f"{where}: {rel!r} is not a relation of {ref} in the catalog"
+                        )
+                    if b not in self.catalog:
+                        raise self._bad(f"{where}: observed type {b!r} is not in the catalog")
+                yield Examination(
+                    i,
+                    self._name(r, f"{where}: run"),
+                    self._name(st, f"{where}: style"),
+                    self._integer(seed, f"{where}: room seed"),
+                    self._integer(oid, f"{where}: object id"),
+                    ref,
+                    self._number(sim, f"{where}: sim_time"),
+                    self._name(strategy, f"{where}: strategy"),
+                    rows,
+                )
 
     def examined(self, run: str, style: str, room_seed: int) -> set[int]:
         """Ids of the objects already examined in that room (to resume without re-examining)."""
-        cur = self.conn.execute(
-            "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?",
-            (run, style, int(room_seed)),
-        )
-        return {int(r[0]) for r in cur}
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?",
+                (run, style, int(room_seed)),
+            )
+            return {self._integer(r[0], "object id") for r in cur}
 
     def examinations_count(self, run: str | None = None) -> int:
         """How many examinations the log holds (of one run, or in all)."""
-        if run is None:
-            return int(self.conn.execute("SELECT COUNT(*) FROM examinations").fetchone()[0])
-        return int(
-            self.conn.execute("SELECT COUNT(*) FROM examinations WHERE run = ?", (run,)).fetchone()[
-                0
-            ]
-        )
+        with self._reading():
+            if run is None:
+                return int(self.conn.execute("SELECT COUNT(*) FROM examinations").fetchone()[0])
+            sql = "SELECT COUNT(*) FROM examinations WHERE run = ?"
+            return int(self.conn.execute(sql, (run,)).fetchone()[0])
 
     def runs(self) -> list[str]:
         """The names of the runs with an examination or a room, sorted."""
-        cur = self.conn.execute(
-            "SELECT run FROM examinations UNION SELECT run FROM rooms ORDER BY 1"
-        )
-        return [str(r[0]) for r in cur]
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT run FROM examinations UNION SELECT run FROM rooms ORDER BY 1"
+            )
+            return [self._name(r[0], "run") for r in cur]
 
     def rooms(self, run: str | None = None) -> list[tuple[str, str, int, str]]:
         """(run, style, seed, status) of every room entered (of one run, or all), sorted."""
@@ -464,10 +685,15 @@ class EvidenceStore:
         args: tuple = ()
         if run is not None:
             sql, args = sql + " WHERE run = ?", (run,)
-        return [
-            (str(a), str(b), int(c), str(d))
-            for a, b, c, d in self.conn.execute(sql + " ORDER BY 1, 2, 3", args)
-        ]
+        out = []
+        with self._reading():
+            for a, b, c, d in self.conn.execute(sql + " ORDER BY 1, 2, 3", args):
+                if d not in ROOM_STATUSES:
+                    raise self._bad(f"a room of run {a!r} has status {d!r}")
+                out.append(
+                    (self._name(a, "run"), self._name(b, "style"), self._integer(c, "seed"), d)
+                )
+        return out
 
     def knowledge_base(
         self, alpha: float | None = None, *, run: str | None = None
@@ -479,12 +705,6 @@ class EvidenceStore:
         """
         kb = KnowledgeBase(self.catalog, self.alpha if alpha is None else _check_alpha(alpha))
         where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
-        n = {
-            str(t): int(c)
-            for t, c in self.conn.execute(
-                f"SELECT type, COUNT(*) FROM examinations{where} GROUP BY type", args
-            )
-        }
         if run is None:
             sql = "SELECT relation, type, COUNT(DISTINCT examination_id) FROM observations GROUP BY relation, type"
         else:
@@ -492,34 +712,110 @@ class EvidenceStore:
                 "SELECT o.relation, o.type, COUNT(DISTINCT o.examination_id) FROM observations o "
                 "JOIN examinations e ON e.id = o.examination_id WHERE e.run = ? GROUP BY o.relation, o.type"
             )
-        ys: dict[str, dict[tuple[str, str], int]] = defaultdict(dict)
-        for rel, t, c in self.conn.execute(sql, args):
-            if not self.catalog.has_relation(rel) or t not in self.catalog:
-                raise StoreError(f"{self.path}: observation ({rel}, {t}) is not in the catalog")
-            ys[self.catalog.relation(rel).ref][(str(rel), str(t))] = int(c)
+        with self._reading():
+            n = {
+                t: int(c)
+                for t, c in self.conn.execute(
+                    f"SELECT type, COUNT(*) FROM examinations{where} GROUP BY type", args
+                )
+            }
+            ys: dict[str, dict[tuple[str, str], int]] = defaultdict(dict)
+            for rel, t, c in self.conn.execute(sql, args):
+                if not self.catalog.has_relation(rel) or t not in self.catalog:
+                    raise self._bad(f"observation ({rel!r}, {t!r}) is not in the catalog")
+                ys[self.catalog.relation(rel).ref][(str(rel), str(t))] = int(c)
         for t in set(n) | set(ys):
             if t not in self.catalog:
-                raise StoreError(f"{self.path}: examined type {t!r} is not in the catalog")
+                raise self._bad(f"examined type {t!r} is not in the catalog")
             try:
                 kb.add_counts(t, n.get(t, 0), ys.get(t, {}))
             except CtxsearchError as exc:
-                raise StoreError(f"{self.path}: inconsistent log: {exc}") from None
+                raise self._bad(f"inconsistent log: {exc}") from None
         return kb
 
     # ---- internals ----------------------------------------------------------------------------
+    def _bad(self, what: str) -> StoreError:
+        return StoreError(f"{self.path}: damaged knowledge store: {what}")
+
+    def _integer(self, v: object, what: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self._bad(f"{what} {v!r} is not an integer")
+        return v
+
+    def _number(self, v: object, what: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self._bad(f"{what} {v!r} is not a finite number")
+        return float(v)
+
+    def _name(self, v: object, what: str) -> str:
+        if not isinstance(v, str) or not v or not v.isprintable():
+            raise self._bad(f"{what} {v!r} is not a name")
+        return v
+
+    @contextlib.contextmanager
+    def _reading(self):
+        try:
+            yield
+        except sqlite3.Error as exc:
+            raise StoreError(
+                f"{self.path}: cannot read knowledge store ({_one_line(exc)})"
+            ) from None
+
     @contextlib.contextmanager
     def _transaction(self):
+        """One write transaction; a store older than SCHEMA_VERSION is upgraded in it first.
+        SQLite failures (read-only file, full disk, lock timeout) are a StoreError; a broken
+        uniqueness key stays an sqlite3.IntegrityError for the caller to word."""
+        if self.read_only:
+            raise StoreError(f"{self.path}: opened read-only")
         cur = self.conn.cursor()
-        cur.execute("BEGIN IMMEDIATE")
+        upgraded = dropped = 0
         try:
-            yield cur
-        except BaseException:
-            cur.execute("ROLLBACK")
-            raise
-        else:
+            cur.execute("BEGIN IMMEDIATE")
+            try:
+                if self.version < SCHEMA_VERSION:
+                    # Another process may have upgraded it since we opened it: ask the file.
+                    row = cur.execute(
+                        "SELECT value FROM meta WHERE key = 'schema_version'"
+                    ).fetchone()
+                    if int(row[0]) < SCHEMA_VERSION:
+                        dropped = _migrate(cur, int(row[0]))
+                    upgraded = 1
+                yield cur
+            except BaseException:
+                with contextlib.suppress(sqlite3.Error):
+                    cur.execute("ROLLBACK")
+                raise
             cur.execute("COMMIT")
+        except sqlite3.IntegrityError:
+            raise
+        except sqlite3.Error as exc:
+            with contextlib.suppress(sqlite3.Error):
+                if self.conn.in_transaction:
+                    cur.execute("ROLLBACK")
+            raise StoreError(
+                f"{self.path}: cannot write knowledge store ({_one_line(exc)}); nothing of "
+                "this write was stored"
+            ) from None
         finally:
             cur.close()
+        if upgraded:
+            self.version = SCHEMA_VERSION
+            self.meta["schema_version"] = str(SCHEMA_VERSION)
+            self.duplicates_dropped += dropped
+
+
+def _connect_ro(path: Path) -> sqlite3.Connection:
+    """A read-only connection that never writes nor creates a file: through the WAL where one
+    exists (a writer is running), else an immutable read of the main file (which a WAL writer
+    starting meanwhile changes only when it checkpoints, after about 4 MB of log)."""
+    uri = _ro_uri(path)
+    if not Path(str(path) + "-wal").exists():
+        uri += "&immutable=1"
+    try:
+        return sqlite3.connect(uri, uri=True, timeout=30.0, isolation_level=None)
+    except sqlite3.Error as exc:
+        raise StoreError(f"{path}: cannot open knowledge store ({_one_line(exc)})") from None
 
 
 def _connect(path: Path) -> sqlite3.Connection:
@@ -551,9 +847,8 @@ def _create(path: Path, catalog: Catalog, alpha: float) -> None:
         try:
             conn.execute("PRAGMA journal_mode = WAL")  # persistent: every later connection uses it
             conn.execute("BEGIN")
-            for stmt in _SCHEMA.split(";"):
-                if stmt.strip():
-                    conn.execute(stmt)
+            for stmt in _SCHEMA_STATEMENTS:
+                conn.execute(stmt)
             conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
             conn.execute("COMMIT")
         finally:
@@ -566,6 +861,10 @@ def _create(path: Path, catalog: Catalog, alpha: float) -> None:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise StoreError(f"{path}: cannot create knowledge store ({_one_line(exc)})") from None
+    except BaseException:  # Ctrl-C while creating: leave nothing behind
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
 
 
 def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: Catalog) -> int:
@@ -574,7 +873,8 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
     Every input must be a store built on ``catalog`` (StoreError naming the file otherwise); all
     inputs are checked before anything is written, and the whole merge is one transaction.
     Examination ids are renumbered; a room marked 'done' in any input is 'done' in the output,
-    with the first end time any of them recorded. A version-1 output is upgraded to version 2.
+    with the first end time any of them recorded. An output older than version 3 is upgraded. An
+    examination that is already in the output (same EXAM_KEY) is a StoreError: nothing is merged.
     A new output gets the first input's alpha. Returns the number of examinations appended.
     """
     out_path = Path(out_path)
@@ -595,17 +895,20 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
         out_path, catalog, alpha=float(metas[0]["alpha"]) if new_out else None
     )
     appended = 0
+    # Duplicates within an input (a store older than version 3) are read once, the first kept.
+    keep = f"SELECT MIN(id) FROM examinations GROUP BY {', '.join(EXAM_KEY)}"
     try:
         with store, store._transaction() as cur:
-            _upgrade(cur)
-            for p in ins:
-                src = _connect(p)
+            for p, meta in zip(ins, metas, strict=True):
+                src = _connect_ro(p)
                 try:
                     src.execute("BEGIN")  # one snapshot of the input, even if a robot is writing it
                     offset = int(
                         cur.execute("SELECT COALESCE(MAX(id), 0) FROM examinations").fetchone()[0]
                     )
-                    rows = src.execute(f"SELECT id, {_EXAM_COLS} FROM examinations ORDER BY id")
+                    rows = src.execute(
+                        f"SELECT id, {_EXAM_COLS} FROM examinations WHERE id IN ({keep}) ORDER BY id"
+                    )
                     while batch := rows.fetchmany(10_000):
                         cur.executemany(
                             f"INSERT INTO examinations (id, {_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -613,14 +916,15 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                         )
                         appended += len(batch)
                     rows = src.execute(
-                        "SELECT examination_id, relation, type, related_id FROM observations ORDER BY rowid"
+                        "SELECT examination_id, relation, type, related_id FROM observations "
+                        f"WHERE examination_id IN ({keep}) ORDER BY rowid"
                     )
                     while batch := rows.fetchmany(50_000):
                         cur.executemany(
                             "INSERT INTO observations (examination_id, relation, type, related_id) VALUES (?, ?, ?, ?)",
                             [(r[0] + offset, *r[1:]) for r in batch],
                         )
-                    end = "end_time" if _has_end_time(src) else "NULL"
+                    end = "end_time" if int(meta["schema_version"]) >= 2 else "NULL"
                     cur.executemany(
                         "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
                         "ON CONFLICT (run, style, seed) DO UPDATE SET status = "
@@ -630,6 +934,11 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                             f"SELECT run, style, seed, status, {end} FROM rooms"
                         ).fetchall(),
                     )
+                except sqlite3.IntegrityError:
+                    raise StoreError(
+                        f"{p}: holds examinations already in {out_path} (same run, room and "
+                        "object): merged, they would count twice; nothing was merged"
+                    ) from None
                 except sqlite3.DatabaseError as exc:
                     raise StoreError(f"{p}: cannot read ({_one_line(exc)})") from None
                 finally:
@@ -643,8 +952,8 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
 
 
 def _text(v: object, what: str) -> str:
-    if not isinstance(v, str) or not v:
-        raise CtxsearchError(f"{what} must be a non-empty string, got {v!r}")
+    if not isinstance(v, str) or not v or not v.isprintable():
+        raise CtxsearchError(f"{what} must be a non-empty printable string, got {v!r}")
     return v
 
 

@@ -4,17 +4,57 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
+
+# Sane upper bounds: far beyond any run on one machine, small enough that nothing sized by a count
+# (a list of room seeds, a table of episodes) can exhaust memory before it is needed.
+MAX_COUNT = 1_000_000
+MAX_SEED = 2**32 - 1
+MAX_PIXELS = 4096  # an image side
+MAX_SECONDS = 1e9
+
+
+def _int(text: str) -> int | None:
+    try:
+        return int(text)
+    except ValueError:
+        return None
 
 
 def positive_int(text: str) -> int:
-    """An integer >= 1."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    """An integer in [1, MAX_COUNT] (rooms, seeds per strategy, episodes, examinations...)."""
+    v = _int(text)
+    if v is None or v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if v > MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_COUNT:_}, got {v:_}")
     return v
+
+
+def seed(text: str) -> int:
+    """A random seed: an integer in [0, 2**32 - 1]."""
+    v = _int(text)
+    if v is None or not 0 <= v <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected a seed in [0, {MAX_SEED}], got {text!r}")
+    return v
+
+
+def pixels(text: str) -> int:
+    """An image side in pixels: an integer in [16, MAX_PIXELS]."""
+    v = _int(text)
+    if v is None or not 16 <= v <= MAX_PIXELS:
+        raise argparse.ArgumentTypeError(
+            f"expected an image size in [16, {MAX_PIXELS}] pixels, got {text!r}"
+        )
+    return v
+
+
+def out_dir(text: str) -> Path:
+    """An output directory: one that exists, or a path where none is (it is created later)."""
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not a directory")
+    return p
 
 
 def seconds(text: str) -> float:
@@ -25,7 +65,7 @@ def seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(
             f"expected a positive number of seconds, got {text!r}"
         ) from None
-    if not (v > 0 and math.isfinite(v)):
+    if not (v > 0 and math.isfinite(v)) or v > MAX_SECONDS:
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text}")
     return v
 
@@ -39,3 +79,11 @@ def alpha(text: str) -> float:
     if not 0.0 < v < 1.0:
         raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {v}")
     return v
+
+
+def out_file(text: str) -> Path:
+    """An output file: a path that is not a directory (an existing file is replaced)."""
+    p = Path(text)
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: is a directory, expected a file")
+    return p

@@ -16,7 +16,7 @@ import importlib
 import os
 import sys
 
-from knowledge.errors import CtxsearchError
+from knowledge.errors import CtxsearchError, printable
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
@@ -59,13 +59,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ctxsearch`` console script."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
+    try:  # Ctrl-C while the parser imports the sub-commands is an interrupt too, not a traceback
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return int(args.func(args) or 0)
-    except CtxsearchError as exc:
-        print(f"ctxsearch: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("ctxsearch: interrupted", file=sys.stderr)
         return 130
@@ -73,6 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except CtxsearchError as exc:
+        print(f"ctxsearch: error: {printable(str(exc))}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

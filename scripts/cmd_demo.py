@@ -20,7 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "reuses a complete store (delete OUT/ to learn again) and redoes the searches.",
     )
     p.add_argument(
-        "--out", type=Path, default=Path("demo"), help="output directory (default: demo)"
+        "--out",
+        type=argtypes.out_dir,
+        default=Path("demo"),
+        help="output directory (default: demo)",
     )
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=6, help="rooms to learn in (default: 6)"

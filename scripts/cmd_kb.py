@@ -182,7 +182,11 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "--out", type=Path, default=Path("results"), metavar="DIR", help="default: results"
+        "--out",
+        type=argtypes.out_dir,
+        default=Path("results"),
+        metavar="DIR",
+        help="default: results",
     )
     p.add_argument(
         "--sizes",
@@ -196,7 +200,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--candidates", type=argtypes.positive_int, default=50, help="candidate types (default: 50)"
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="random seed (default: 0)")
     p.set_defaults(func=run_bench)
 
 
@@ -205,7 +209,7 @@ def _open_kb(args: argparse.Namespace):
     """(facts about the store, its KnowledgeBase) for args.path; StoreError if unusable."""
     catalog = load_catalog(args.catalog)
     try:
-        with EvidenceStore.open(args.path, catalog, create=False) as store:
+        with EvidenceStore.open(args.path, catalog, read_only=True) as store:
             kb = store.knowledge_base(args.alpha)
             info = {
                 "path": str(args.path),

@@ -68,7 +68,10 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         help="confidence level of the intervals (default: the store's, 0.10 for a new one)",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="run seed: room seeds derive from it (default: 0)"
+        "--seed",
+        type=argtypes.seed,
+        default=0,
+        help="run seed: room seeds derive from it (default: 0)",
     )
     p.add_argument(
         "--record",
@@ -145,7 +148,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         default=",".join(_strategy_names()),
         help="comma-separated strategies (default: all)",
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     p.add_argument(
         "--perception",
         default="oracle",

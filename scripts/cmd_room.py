@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scripts import argtypes
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``room`` sub-command."""
@@ -25,8 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
         "(default: office)",
     )
-    p.add_argument("--seed", type=int, default=0, help="room seed (default: 0)")
-    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="room seed (default: 0)")
+    p.add_argument("--out", required=True, type=argtypes.out_dir, help="output directory")
     p.add_argument("--record", type=Path, default=None, help="write a rerun recording (.rrd) here")
     p.add_argument("--views", type=int, default=4, help="head-camera views to take (default: 4)")
     p.add_argument("--width", type=int, default=320, help="head-camera image width (default: 320)")

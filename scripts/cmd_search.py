@@ -81,7 +81,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="search policy (default: location)",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="which held-out room and start pose (default: 0)"
+        "--seed",
+        type=argtypes.seed,
+        default=0,
+        help="which held-out room and start pose (default: 0)",
     )
     p.add_argument(
         "--record", type=Path, default=None, metavar="FILE.rrd", help="write a rerun recording"
@@ -149,8 +152,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         default="exhaustive,location,indirect,oracle-prior,oracle",
         help="comma-separated policies (default: exhaustive,location,indirect,oracle-prior,oracle)",
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no line per episode")
     _add_common(p)
     p.set_defaults(func=run_bench)

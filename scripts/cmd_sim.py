@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from scripts import argtypes
 
@@ -17,7 +16,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         "(move the head in MuJoCo, render segmentation and depth, detect) against the same "
         "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json, DIR/bench_sim.md and DIR/bench_sim.png.",
     )
-    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--out", required=True, type=argtypes.out_dir, help="output directory")
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=5, help="rooms to build (default: 5)"
     )
@@ -27,14 +26,13 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--style",
         default="office",
-        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
+        "(default: office)",
     )
-    p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="first room seed (default: 0)")
+    p.add_argument("--width", type=argtypes.pixels, default=320, help="image width (default: 320)")
     p.add_argument(
-        "--width", type=argtypes.positive_int, default=320, help="image width (default: 320)"
-    )
-    p.add_argument(
-        "--height", type=argtypes.positive_int, default=240, help="image height (default: 240)"
+        "--height", type=argtypes.pixels, default=240, help="image height (default: 240)"
     )
     p.set_defaults(func=run_bench)
 

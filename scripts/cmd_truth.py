@@ -34,8 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--samples", required=True, type=argtypes.positive_int, help="how many rooms to generate"
     )
-    p.add_argument("--out", required=True, type=Path, help="output JSON file")
-    p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
+    p.add_argument("--out", required=True, type=argtypes.out_file, help="output JSON file")
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="first room seed (default: 0)")
     p.add_argument(
         "--catalog",
         type=Path,

@@ -353,7 +353,7 @@ def test_killed_process_loses_only_the_examination_in_flight(tmp_path, catalog):
 
 
 # ---- merging ---------------------------------------------------------------------------------
-def _fill(path: Path, catalog, run: str, n: int, seed: int) -> KnowledgeBase:
+def _fill(path: Path, catalog, run: str, n: int, seed: int, first_id: int = 0) -> KnowledgeBase:
     rng = np.random.default_rng(seed)
     kb = KnowledgeBase(catalog)
     refs = [t.name for t in catalog.types if t.relations]
@@ -375,7 +375,7 @@ def _fill(path: Path, catalog, run: str, n: int, seed: int) -> KnowledgeBase:
                 run=run,
                 style="office",
                 room_seed=1 + i % 2,
-                object_id=i,
+                object_id=first_id + i,
                 ref_type=ref,
                 sim_time=i,
                 strategy="hif",
@@ -396,7 +396,7 @@ def test_merge_into_new_and_existing(tmp_path, catalog):
     ka, kb_, kc = (
         _fill(a, catalog, "ra", 40, 1),
         _fill(b, catalog, "rb", 30, 2),
-        _fill(c, catalog, "ra", 20, 3),
+        _fill(c, catalog, "ra", 20, 3, first_id=1000),  # same run and rooms, other objects
     )
     out = tmp_path / "out.sqlite"
     assert merge_stores(out, [a, b], catalog) == 70
@@ -415,7 +415,7 @@ def test_merge_into_new_and_existing(tmp_path, catalog):
             "WHERE e.id IS NULL OR o.relation NOT LIKE '%-' || UPPER(e.type)"
         ).fetchone()[0]
         assert bad == 0
-    # Append a third store (same run and rooms as a): 'done' wins for the rooms.
+    # Append a third store (same run and rooms as a, other objects): 'done' wins for the rooms.
     with EvidenceStore.open(c, catalog, create=False) as s:
         s.mark_room("ra", "office", 1, "done")
     assert merge_stores(out, [c], catalog) == 20
@@ -523,19 +523,27 @@ def test_room_end_time(store):
         store.mark_room("r1", "office", 3, "done", end_time="late")
 
 
-def _version1(path: Path, catalog) -> None:
-    """A store as schema version 1 wrote it: no rooms.end_time."""
+def _old_version(path: Path, catalog, version: int) -> None:
+    """A store as schema version 1 (no rooms.end_time, no uniqueness key) or 2 (no uniqueness
+    key) wrote it."""
     with EvidenceStore.open(path, catalog) as s:
         exam(s, 1, "Desk")
         s.mark_room("r1", "office", 1, "done")
     conn = sqlite3.connect(path)
-    conn.execute("ALTER TABLE rooms DROP COLUMN end_time")
-    conn.execute("UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    conn.execute("DROP INDEX examinations_key")
+    conn.execute("CREATE INDEX examinations_room ON examinations (run, style, room_seed)")
+    if version == 1:
+        conn.execute("ALTER TABLE rooms DROP COLUMN end_time")
+    conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(version),))
     conn.commit()
     conn.close()
 
 
-def test_version_1_store_is_read_and_upgraded_on_the_first_end_time(tmp_path, catalog):
+def _version1(path: Path, catalog) -> None:
+    _old_version(path, catalog, 1)
+
+
+def test_version_1_store_is_read_and_upgraded_on_the_first_write(tmp_path, catalog):
     path = tmp_path / "v1.sqlite"
     _version1(path, catalog)
     before = digest(path)
@@ -546,8 +554,9 @@ def test_version_1_store_is_read_and_upgraded_on_the_first_end_time(tmp_path, ca
         assert [e.object_id for e in s.examinations()] == [1]
     assert digest(path) == before
     with EvidenceStore.open(path, catalog, create=False) as s:
-        s.mark_room("r1", "office", 2, "started")  # a write without an end time: still v1
-    assert inspect_store(path)["schema_version"] == "1"
+        s.mark_room("r1", "office", 2, "started")  # any write upgrades (the key guards appends)
+        assert s.version == SCHEMA_VERSION
+    assert inspect_store(path)["schema_version"] == str(SCHEMA_VERSION)
     with EvidenceStore.open(path, catalog, create=False) as s:
         s.mark_room("r1", "office", 2, "done", end_time=7.0)
         assert s.meta["schema_version"] == str(SCHEMA_VERSION)
@@ -556,6 +565,7 @@ def test_version_1_store_is_read_and_upgraded_on_the_first_end_time(tmp_path, ca
     with EvidenceStore.open(path, catalog, create=False) as s:
         assert s.meta["schema_version"] == str(SCHEMA_VERSION)
         assert s.rooms() == [("r1", "office", 1, "done"), ("r1", "office", 2, "done")]
+        assert [e.object_id for e in s.examinations()] == [1]
 
 
 def test_merge_keeps_end_times_and_upgrades_a_version_1_output(tmp_path, catalog):
@@ -570,6 +580,10 @@ def test_merge_keeps_end_times_and_upgrades_a_version_1_output(tmp_path, catalog
         assert s.room_end_time("r2", "office", 1) == 42.0
         assert s.room_end_time("r1", "office", 1) is None
     out = tmp_path / "out.sqlite"
-    assert merge_stores(out, [new, tmp_path / "old.sqlite"], catalog) == 3
+    # old now holds new's examination too: merging both would count it twice.
+    with pytest.raises(StoreError, match="already in .*count twice"):
+        merge_stores(out, [new, old], catalog)
+    assert not out.exists()
+    assert merge_stores(out, [old], catalog) == 2
     with EvidenceStore.open(out, catalog, create=False) as s:
         assert s.room_end_time("r2", "office", 1) == 42.0
