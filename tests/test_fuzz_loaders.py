@@ -27,6 +27,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from envs.detector import DETECTORS_DIR, load_detector
+from envs.houses import HOUSES_DIR, load_house
 from envs.styles import STYLES_DIR, load_style
 from envs.truth import ground_truth, load_truth
 from knowledge.catalog import DEFAULT_CATALOG, load_catalog
@@ -101,6 +103,18 @@ LOADERS = {
     ),
     "store": Loader(_open_store, _store_example, "kb.sqlite", "sqlite"),
     "truth": Loader(lambda p: load_truth(p, CATALOG, "office"), _truth_example, "t.json", "json"),
+    "house": Loader(
+        lambda p: load_house(p, CATALOG),
+        (HOUSES_DIR / "apartment.toml").read_bytes,
+        "h.toml",
+        "toml",
+    ),
+    "detector": Loader(
+        lambda p: load_detector(p, CATALOG),
+        (DETECTORS_DIR / "realistic.toml").read_bytes,
+        "d.toml",
+        "toml",
+    ),
 }
 _EXAMPLES: dict[str, bytes] = {}
 
