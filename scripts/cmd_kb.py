@@ -11,7 +11,8 @@ import textwrap
 from pathlib import Path
 
 from knowledge.catalog import load_catalog
-from knowledge.errors import StoreError
+from knowledge.errors import CatalogError, StoreError
+from knowledge.pooling import PooledCounts, interval_rows
 from knowledge.store import EvidenceStore, merge_stores
 from scripts import argtypes
 
@@ -20,6 +21,9 @@ examples:
   ctxsearch kb show demo/kb.sqlite                  intervals with y > 0, best lower bound first
   ctxsearch kb show demo/kb.sqlite --type Desk      only the relations of Desk (ON-TOP-OF-DESK, ...)
   ctxsearch kb show demo/kb.sqlite --related Cup    where Cups were found, relative to what
+  ctxsearch kb show demo/kb.sqlite --type WorkSurface   a class: evidence pooled over its types
+  ctxsearch kb show demo/kb.sqlite --related Container  any Cup, Bottle or Beaker
+  ctxsearch kb show demo/kb.sqlite --type Table --backoff   a rare type backed off to its class
   ctxsearch kb show demo/kb.sqlite --all --alpha 0.05
   ctxsearch kb show demo/kb.sqlite --json > intervals.json
 """
@@ -105,9 +109,18 @@ def _register_show(kb_sub: argparse._SubParsersAction) -> None:
     )
     show.add_argument("path", type=Path, metavar="PATH", help="knowledge store (SQLite)")
     show.add_argument(
-        "--type", dest="ref_type", metavar="T", help="only the relations of reference type T"
+        "--type",
+        dest="ref_type",
+        metavar="T",
+        help="only the relations of reference type or class T (a class pools its types)",
     )
-    show.add_argument("--related", metavar="B", help="only rows about related type B")
+    show.add_argument("--related", metavar="B", help="only rows about related type or class B")
+    show.add_argument(
+        "--backoff",
+        action="store_true",
+        help="types' intervals backed off to their class (knowledge/pooling.py): a type with "
+        "little or no evidence borrows from its class instead of starting from [0, 1]",
+    )
     show.add_argument("--all", action="store_true", help="also the rows with y = 0")
     show.add_argument("--json", action="store_true", help="print a JSON list of rows instead")
     show.add_argument(
@@ -205,12 +218,14 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 
 
 # ---- handlers ------------------------------------------------------------------------------
-def _open_kb(args: argparse.Namespace):
-    """(facts about the store, its KnowledgeBase) for args.path; StoreError if unusable."""
+def _open_kb(args: argparse.Namespace, pooled: bool = False):
+    """(facts about the store, its KnowledgeBase, its pooled counts if ``pooled`` else None) for
+    args.path; StoreError if unusable."""
     catalog = load_catalog(args.catalog)
     try:
         with EvidenceStore.open(args.path, catalog, read_only=True) as store:
             kb = store.knowledge_base(args.alpha)
+            pc = PooledCounts.from_store(store) if pooled else None
             info = {
                 "path": str(args.path),
                 "examinations": store.examinations_count(),
@@ -226,7 +241,7 @@ def _open_kb(args: argparse.Namespace):
         raise StoreError(
             f"{args.path}: corrupt knowledge store ({' '.join(str(exc).split())})"
         ) from None
-    return info, kb
+    return info, kb, pc
 
 
 def _row_dict(r) -> dict:
@@ -259,18 +274,41 @@ def format_rows(rows) -> str:
 
 def run_show(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb show``."""
-    info, kb = _open_kb(args)
-    if args.related is not None:
-        kb.catalog.type(args.related)  # one-line error for an unknown type
-    rows = kb.rows(args.ref_type, include_zero=args.all)
-    if args.related is not None:
-        rows = [r for r in rows if r.type == args.related]
+    catalog = load_catalog(args.catalog)
+    classes = catalog.hierarchy
+    for name in (args.ref_type, args.related):
+        if name is not None and name not in classes and name not in catalog:
+            known = ", ".join(catalog.type_names)
+            kinds = ", ".join(c.name for c in classes.classes) or "none"
+            raise CatalogError(
+                catalog.path, f"unknown type or class '{name}' (types: {known}; classes: {kinds})"
+            )
+    pooled = args.backoff or args.ref_type in classes or args.related in classes
+    info, kb, pc = _open_kb(args, pooled=pooled)
+    if pooled:
+        rows = interval_rows(
+            pc,
+            kb.catalog,
+            kb.alpha,
+            ref=args.ref_type,
+            related=args.related,
+            include_zero=args.all,
+            backoff=args.backoff,
+        )
+    else:
+        rows = kb.rows(args.ref_type, include_zero=args.all)
+        if args.related is not None:
+            rows = [r for r in rows if r.type == args.related]
     if args.json:
         _emit(json.dumps([_row_dict(r) for r in rows], indent=1))
         return 0
     cat = kb.catalog
-    refs = [args.ref_type] if args.ref_type else cat.type_names
-    total = sum(len(cat.type(a).relations) for a in refs) * (1 if args.related else len(cat))
+    class_names = tuple(c.name for c in classes.classes) if pooled else ()
+    refs = [args.ref_type] if args.ref_type else (*cat.type_names, *class_names)
+    n_rel = sum(
+        len(classes.get(a).relations if a in classes else cat.type(a).relations) for a in refs
+    )
+    total = n_rel * (1 if args.related else len(cat) + len(class_names))
     shown_nonzero = sum(1 for r in rows if r.y > 0)
     out = [
         f"{info['path']}: {info['examinations']} examinations, alpha {kb.alpha:g}, "
@@ -291,7 +329,7 @@ def run_show(args: argparse.Namespace) -> int:
 
 def run_stats(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb stats``."""
-    info, kb = _open_kb(args)
+    info, kb, _ = _open_kb(args)
     cat = kb.catalog
     n_by_type = {t: kb.n(t) for t in cat.type_names if kb.n(t) > 0}
     pairs_total = sum(len(t.relations) for t in cat.types) * len(cat)

@@ -11,7 +11,7 @@ import pytest
 from knowledge import intervals
 from knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog
 from knowledge.errors import CatalogError
-from knowledge.hierarchy import Backoff, PooledCounts
+from knowledge.pooling import Backoff, PooledCounts
 
 
 @pytest.fixture(scope="module")
@@ -157,3 +157,51 @@ def test_backoff_beats_flat_for_rare_types(catalog):
             abs(Backoff(pc).estimate("LabBench", "ON-TOP-OF-LABBENCH", "Cup").p - ps["LabBench"])
         )
     assert np.mean(err_back) < 0.5 * np.mean(err_flat)
+
+
+def _store_with_desks(path, catalog):
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(path, catalog) as s:
+        for i, pairs in enumerate(
+            [[("ON-TOP-OF-DESK", "Cup")], [("ON-TOP-OF-DESK", "Bottle")], []]
+        ):
+            s.record(
+                run="r",
+                style="office",
+                room_seed=1,
+                object_id=i,
+                ref_type="Desk",
+                sim_time=float(i),
+                strategy="hif",
+                related=[(r, t, 100 + i) for r, t in pairs],
+            )
+
+
+def test_kb_show_prints_classes_and_backoff(tmp_path, catalog, capsys):
+    from scripts.cli import main
+
+    store = tmp_path / "kb.sqlite"
+    _store_with_desks(store, catalog)
+    assert main(["kb", "show", str(store), "--type", "WorkSurface"]) == 0
+    out = capsys.readouterr().out
+    line = next(
+        ln
+        for ln in out.splitlines()
+        if ln.startswith("ON-TOP-OF-WORKSURFACE") and "Container" in ln
+    )
+    assert "2/3" in line
+    assert main(["kb", "show", str(store), "--related", "Container", "--json"]) == 0
+    rows = __import__("json").loads(capsys.readouterr().out)
+    assert {(r["ref"], r["relation"], r["y"], r["n"]) for r in rows} >= {
+        ("Desk", "ON-TOP-OF-DESK", 2, 3),
+        ("WorkSurface", "ON-TOP-OF-WORKSURFACE", 2, 3),
+    }
+    # A table was never examined: flat it is [0, 1] (not shown), backed off it borrows.
+    assert main(["kb", "show", str(store), "--type", "Table", "--backoff", "--json"]) == 0
+    rows = __import__("json").loads(capsys.readouterr().out)
+    cup = next(r for r in rows if r["relation"] == "ON-TOP-OF-TABLE" and r["type"] == "Container")
+    assert cup["n"] == 0 and 0 < cup["low"] < cup["high"] < 1
+    assert main(["kb", "show", str(store), "--type", "Furniture"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown type or class 'Furniture'" in err and "WorkSurface" in err

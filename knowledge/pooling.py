@@ -1,0 +1,233 @@
+"""Evidence pooled over the type hierarchy (knowledge/hierarchy.py), and backoff for rare types.
+
+Pooled counts (``PooledCounts``), derived from the same evidence log: n_C = the examinations of
+any type under C; y_{R,B} for a class relation R of C = the examinations of a type under C in
+which at least one object of B (a type, or any type under class B) stood in a relation that maps
+onto R. "At least one" is kept per examination, never summed over members.
+
+Backoff (``Backoff``): empirical-Bayes shrinkage of a type A's estimate toward its class C. For
+an entry (A, rel, B) with R = the relation rel maps onto in C:
+
+    p_C    = y_{R,B} / n_C over C's *other* members (leave-one-out)
+    kappa  = 1 / rho - 1, rho = the mean, over C's entries with 0 < p < 1, of the between-member
+             variance of p (method of moments, binomial noise removed) over p (1 - p), i.e. how
+             much the members of C differ; capped at KAPPA_MAX and at the leave-one-out n_C.
+             A class with fewer than two members with evidence says nothing about how they
+             differ: it takes the mean rho of the classes that do, else DEFAULT_RHO (0.5: one
+             pseudo-examination)
+    INT    = Wilson(y_A + kappa p_C, n_A + kappa)
+
+so a type with much evidence keeps its own interval, one with none gets the class's knowledge as
+kappa pseudo-examinations (a never-seen Workbench does not start from [0, 1]), and the more the
+members of a class differ, the less a member borrows. Backoff goes one level up (to the parent
+class's pooled counts), not recursively. Entries whose relation maps onto nothing, and types in
+no class, keep the paper's interval.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from knowledge import intervals
+from knowledge.base import IntervalRow
+from knowledge.catalog import Catalog
+from knowledge.hierarchy import Hierarchy
+from knowledge.store import EvidenceStore
+
+KAPPA_MAX = 50.0  # at most this many pseudo-examinations are borrowed from a class
+# rho where no class has two members with evidence: kappa = 1, a single pseudo-examination.
+DEFAULT_RHO = 0.5
+
+
+# ============================================================================ pooled counts
+@dataclass
+class PooledCounts:
+    """n and y at every level: n[name] for types and classes on the reference side;
+    y[(owner, relation, related)] with ``relation`` one of the owner's (a type's own or a class's
+    generic ones) and ``related`` a type or a class; ``via[(owner, child, relation, related)]``
+    the part of a class's y that came through one direct member (for the backoff)."""
+
+    hierarchy: Hierarchy
+    n: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    y: dict[tuple[str, str, str], int] = field(default_factory=lambda: defaultdict(int))
+    via: dict[tuple[str, str, str, str], int] = field(default_factory=lambda: defaultdict(int))
+
+    def add(self, ref_type: str, pairs: Iterable[tuple[str, str]]) -> None:
+        """Count one examination of an object of ``ref_type`` whose relation volumes held the
+        (relation, related type) ``pairs`` (repeats allowed: each count is 'at least one')."""
+        h = self.hierarchy
+        self.n[ref_type] += 1
+        for c in h.ancestors(ref_type):
+            self.n[c] += 1
+        hits: set[tuple[str, str, str]] = set()
+        vias: set[tuple[str, str, str, str]] = set()
+        for rel, t in pairs:
+            related = (t, *h.ancestors(t))
+            owner, child, r = ref_type, None, rel
+            while r is not None:
+                for b in related:
+                    hits.add((owner, r, b))
+                    if child is not None:
+                        vias.add((owner, child, r, b))
+                child, owner, r = owner, h.parent(owner), h.lift(r)
+                if owner is None:
+                    break
+        for k in hits:
+            self.y[k] += 1
+        for k in vias:
+            self.via[k] += 1
+
+    @classmethod
+    def from_examinations(
+        cls, hierarchy: Hierarchy, exams: Iterable[tuple[str, Iterable[tuple[str, str]]]]
+    ) -> PooledCounts:
+        """Pooled counts of (reference type, related pairs) examinations."""
+        out = cls(hierarchy)
+        for ref, pairs in exams:
+            out.add(ref, pairs)
+        return out
+
+    @classmethod
+    def from_store(cls, store: EvidenceStore, run: str | None = None) -> PooledCounts:
+        """Pooled counts of a store's evidence log (of one run, or all), over its catalog's
+        hierarchy."""
+        return cls.from_examinations(
+            store.catalog.hierarchy,
+            ((e.type, [(r, t) for r, t, _ in e.related]) for e in store.examinations(run)),
+        )
+
+    def interval(
+        self, owner: str, relation: str, related: str, alpha: float
+    ) -> tuple[float, float]:
+        """The paper's interval on the pooled counts."""
+        lo, hi = intervals.interval(
+            self.y.get((owner, relation, related), 0), self.n.get(owner, 0), alpha
+        )
+        return float(lo), float(hi)
+
+
+# ============================================================================ backoff
+@dataclass(frozen=True)
+class BackoffEstimate:
+    """A type's estimate for one entry: the interval, the pseudo-counts it rests on, and what it
+    borrowed (kappa pseudo-examinations at the class's rate p_class)."""
+
+    low: float
+    high: float
+    p: float
+    y_eff: float
+    n_eff: float
+    kappa: float
+    p_class: float | None
+
+
+class Backoff:
+    """Empirical-Bayes backoff of types toward their classes (see the module docstring)."""
+
+    def __init__(self, pooled: PooledCounts, alpha: float = intervals.DEFAULT_ALPHA):
+        self.pooled, self.alpha = pooled, float(alpha)
+        self._rho: dict[str, float | None] = {}
+
+    def rho(self, cname: str) -> float:
+        """How much the members of a class differ: the mean share of between-member variance,
+        rho = tau^2 / (p (1 - p)), over its entries with 0 < p < 1; where the class has no such
+        entry, the mean over the classes that have, else DEFAULT_RHO."""
+        if not self._rho:
+            self._rho = {c.name: self._estimate_rho(c.name) for c in self.pooled.hierarchy.classes}
+        own = self._rho.get(cname)
+        if own is not None:
+            return own
+        known = [r for r in self._rho.values() if r is not None]
+        return float(np.mean(known)) if known else DEFAULT_RHO
+
+    def _estimate_rho(self, cname: str) -> float | None:
+        h, pc = self.pooled.hierarchy, self.pooled
+        kids = [k for k in h.children(cname) if pc.n.get(k, 0) > 0]
+        if len(kids) < 2:
+            return None
+        n = np.array([pc.n[k] for k in kids], float)
+        N = n.sum()
+        rhos = []
+        for rel in h.get(cname).relations:
+            related = {b for (o, r, b) in pc.y if o == cname and r == rel}
+            for b in sorted(related):
+                y = np.array([pc.via.get((cname, k, rel, b), 0) for k in kids], float)
+                p = y.sum() / N
+                if not 0.0 < p < 1.0:
+                    continue
+                spread = float((n * (y / n - p) ** 2).sum())
+                denom = N - float((n * n).sum()) / N
+                if denom <= 0:
+                    continue
+                tau2 = max(0.0, (spread - (len(kids) - 1) * p * (1 - p)) / denom)
+                rhos.append(min(1.0, tau2 / (p * (1 - p))))
+        return float(np.mean(rhos)) if rhos else None
+
+    def estimate(self, ref_type: str, relation: str, related: str) -> BackoffEstimate:
+        """The backed-off interval of entry (ref_type, relation, related)."""
+        pc, h = self.pooled, self.pooled.hierarchy
+        y = pc.y.get((ref_type, relation, related), 0)
+        n = pc.n.get(ref_type, 0)
+        cname, crel = h.parent(ref_type), h.lift(relation)
+        kappa, p_class = 0.0, None
+        if cname is not None and crel is not None:
+            n_rest = pc.n.get(cname, 0) - n
+            if n_rest > 0:
+                y_rest = pc.y.get((cname, crel, related), 0) - pc.via.get(
+                    (cname, ref_type, crel, related), 0
+                )
+                p_class = y_rest / n_rest
+                rho = self.rho(cname)
+                kappa = KAPPA_MAX if rho <= 0 else min(KAPPA_MAX, 1.0 / rho - 1.0)
+                kappa = max(0.0, min(kappa, float(n_rest)))
+        y_eff, n_eff = y + kappa * (p_class or 0.0), n + kappa
+        lo, hi = intervals.interval(y_eff, n_eff, self.alpha)
+        p = y_eff / n_eff if n_eff > 0 else 0.5
+        return BackoffEstimate(float(lo), float(hi), float(p), y_eff, n_eff, kappa, p_class)
+
+
+def _relations_of(catalog: Catalog, owner: str) -> tuple[str, ...]:
+    h = catalog.hierarchy
+    return h.get(owner).relations if owner in h else catalog.type(owner).relation_names
+
+
+def interval_rows(
+    pooled: PooledCounts,
+    catalog: Catalog,
+    alpha: float,
+    *,
+    ref: str | None = None,
+    related: str | None = None,
+    include_zero: bool = False,
+    backoff: bool = False,
+) -> list[IntervalRow]:
+    """Interval rows over types and classes, both sides: of reference ``ref`` (a type or a class;
+    default every one with relations) and related ``related`` (default every type and class),
+    sorted by lower bound like ``KnowledgeBase.rows``. With ``backoff``, a concrete type's rows
+    are its backed-off estimates (``Backoff``; y and n stay its own counts); rows with y = 0 are
+    kept where ``include_zero`` or where backoff gives them a lower bound above 0."""
+    h = catalog.hierarchy
+    names = (*catalog.type_names, *(c.name for c in h.classes))
+    owners = [ref] if ref else [o for o in names if _relations_of(catalog, o)]
+    targets = [related] if related else list(names)
+    bo = Backoff(pooled, alpha) if backoff else None
+    out = []
+    for owner in owners:
+        n = pooled.n.get(owner, 0)
+        for rel in _relations_of(catalog, owner):
+            for b in targets:
+                y = pooled.y.get((owner, rel, b), 0)
+                if bo is not None and owner not in h:
+                    e = bo.estimate(owner, rel, b)
+                    p0, lo, hi = e.p, e.low, e.high
+                else:
+                    p0 = float(intervals.p0(y, n, alpha))
+                    lo, hi = (float(v) for v in intervals.interval(y, n, alpha))
+                if y > 0 or include_zero or lo > 0:
+                    out.append(IntervalRow(owner, rel, b, y, n, p0, lo, hi))
+    out.sort(key=lambda r: (-r.low, r.relation, r.type))
+    return out
