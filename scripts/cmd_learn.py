@@ -8,6 +8,7 @@ from pathlib import Path
 from agent.strategies import STRATEGIES, make_strategy
 from knowledge.errors import CtxsearchError
 from scripts import argtypes
+from scripts.sweep import SweepOptions, add_sweep_arguments
 
 ROOM_BUDGET_HELP = (
     "simulated seconds the robot may spend in each room: when they are spent it leaves the room "
@@ -171,6 +172,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP,
     )
+    add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
 
 
@@ -196,7 +198,7 @@ def run_bench(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         room_budget_s=args.room_budget,
     )
-    result = bench_learning(config, args.out)
+    result = bench_learning(config, args.out, sweep=SweepOptions.from_args(args))
     print(result.table)
     for f in result.files:
         print(f"wrote {f}")

@@ -12,16 +12,50 @@ raises a CtxsearchError ends the sweep with that error (one line, as everywhere)
 
 from __future__ import annotations
 
+import argparse
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TypeVar
 
 from knowledge.errors import CtxsearchError
+from scripts import argtypes
 
 U = TypeVar("U")
 R = TypeVar("R")
 # What a worker process needs to render off-screen like the driver.
 WORKER_ENV = ("MUJOCO_GL", "PYOPENGL_PLATFORM")
+
+
+@dataclass(frozen=True)
+class SweepOptions:
+    """How a sweep runs (not what it computes: the results are the same either way)."""
+
+    workers: int = 1
+    ray_address: str | None = None
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> SweepOptions:
+        """From the flags ``add_sweep_arguments`` adds."""
+        return cls(args.workers, args.ray_address)
+
+
+def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
+    """``--workers N`` and ``--ray-address ADDR`` for a command whose units can run in parallel."""
+    p.add_argument(
+        "--workers",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="N",
+        help="run the independent units as Ray tasks on N local CPUs (default: 1, serial, no Ray); "
+        "the results are the same",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="run the units on an existing Ray cluster (HOST:PORT, or 'auto') instead",
+    )
 
 
 def _progress(total: int, desc: str, enabled: bool):
@@ -40,7 +74,8 @@ def run_units(
     progress: bool = True,
 ) -> list[R]:
     """``[fn(u) for u in units]``, serially or as Ray tasks (see the module docstring), with a
-    progress bar over finished units."""
+    progress bar over finished units. ``fn`` may be a ``functools.partial`` of a module-level
+    function."""
     if workers < 1:
         raise CtxsearchError(f"--workers must be at least 1, got {workers}")
     if workers == 1 and not ray_address:
@@ -51,6 +86,11 @@ def run_units(
                 bar.update(1)
         return out
     return _run_on_ray(fn, units, workers, ray_address, desc, progress)
+
+
+def _apply(fn: Callable[[U], R], unit: U) -> R:
+    """A Ray task: ``fn(unit)`` (Ray's remote takes functions, not partials)."""
+    return fn(unit)
 
 
 def _run_on_ray(fn, units, workers, ray_address, desc, progress):
@@ -76,8 +116,9 @@ def _run_on_ray(fn, units, workers, ray_address, desc, progress):
             where = ray_address or "a local Ray"
             raise CtxsearchError(f"cannot start {where}: {' '.join(str(exc).split())}") from None
     try:
-        task = ray.remote(num_cpus=1, max_retries=0)(fn)
-        pending = {task.remote(u): i for i, u in enumerate(units)}
+        task = ray.remote(num_cpus=1, max_retries=0)(_apply)
+        fn_ref = ray.put(fn)  # shipped to the workers once, not with every unit
+        pending = {task.remote(fn_ref, u): i for i, u in enumerate(units)}
         out: list = [None] * len(units)
         with _progress(len(units), desc, progress) as bar:
             while pending:

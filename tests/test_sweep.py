@@ -53,3 +53,30 @@ def test_two_workers_give_the_serial_results_in_order():
 def test_bad_worker_count():
     with pytest.raises(CtxsearchError, match="at least 1"):
         run_units(square_with_pid, [1], workers=0)
+
+
+def _strip_timing(x):
+    if isinstance(x, dict):
+        return {
+            k: _strip_timing(v)
+            for k, v in x.items()
+            if not any(t in k for t in ("wall", "_per_s", "per_wall"))
+        }
+    if isinstance(x, list):
+        return [_strip_timing(v) for v in x]
+    return x
+
+
+@pytest.mark.slow
+def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
+    import json
+
+    from scripts.cli import main
+
+    args = ["bench", "learning", "--style", "office", "--rooms", "2", "--seeds", "2"]
+    args += ["--strategies", "hif,random", "--truth-samples", "10"]
+    assert main([*args, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
+    a = json.loads((tmp_path / "serial" / "learning.json").read_text())
+    b = json.loads((tmp_path / "ray" / "learning.json").read_text())
+    assert _strip_timing(a) == _strip_timing(b)

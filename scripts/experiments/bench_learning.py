@@ -31,13 +31,12 @@ shortest run's end (before the first examination: the width of the empty knowled
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-
-from tqdm import tqdm
 
 from envs.truth import ground_truth
 from knowledge.catalog import Catalog, load_catalog
@@ -49,6 +48,7 @@ from scripts.experiments.learning_trace import (
     median_curve,
     run_trace,
 )
+from scripts.sweep import SweepOptions, run_units
 
 TRUTH_SEED = 10_000_019  # first room seed of the ground truth (no learning run uses it)
 
@@ -63,14 +63,18 @@ class BenchResult:
 
 
 def bench_learning(
-    config: LearningBenchConfig, out: str | Path, progress: bool = True
+    config: LearningBenchConfig,
+    out: str | Path,
+    progress: bool = True,
+    sweep: SweepOptions | None = None,
 ) -> BenchResult:
-    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png."""
+    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png; the
+    (strategy, seed) runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
     catalog = load_catalog()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
-    traces = _run_all(config, truth, catalog, progress)
+    traces = _run_all(config, truth, catalog, progress, sweep or SweepOptions())
     data = _data(config, truth, traces)
     c = config
     title = (
@@ -87,30 +91,38 @@ def bench_learning(
 
 
 def _run_all(
-    config: LearningBenchConfig, truth: dict, catalog: Catalog, progress: bool
+    config: LearningBenchConfig,
+    truth: dict,
+    catalog: Catalog,
+    progress: bool,
+    sweep: SweepOptions,
 ) -> dict[str, list[Trace]]:
-    """Every strategy's trace for every seed (seed-major order)."""
-    traces: dict[str, list[Trace]] = {s: [] for s in config.strategies}
+    """Every strategy's trace for every seed (seed-major order), one sweep unit per run."""
     jobs = [(s, k) for k in range(config.seeds) for s in config.strategies]
-    bar = None
-    if progress:
-        desc = f"bench learning {config.style}"
-        bar = tqdm(total=len(jobs), unit="run", desc=desc, dynamic_ncols=True)
-    # Throw-away stores: on a RAM disk where there is one (no fsync per examination to wait for).
+    results = run_units(
+        functools.partial(_trace_unit, config, truth, catalog),
+        jobs,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc=f"bench learning {config.style}",
+        progress=progress,
+    )
+    traces: dict[str, list[Trace]] = {s: [] for s in config.strategies}
+    for (s, _), tr in zip(jobs, results, strict=True):
+        traces[s].append(tr)
+    return traces
+
+
+def _trace_unit(
+    config: LearningBenchConfig, truth: dict, catalog: Catalog, job: tuple[str, int]
+) -> Trace:
+    """One sweep unit: ``run_trace`` of (strategy, seed) in a throw-away store, on a RAM disk
+    where there is one (no fsync per examination to wait for)."""
+    strategy, seed = job
     shm = Path("/dev/shm")
     tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
     with tempfile.TemporaryDirectory(prefix="ctxsearch-bench-", dir=tmp_root) as tmp:
-        for s, k in jobs:
-            tr = run_trace(config, k, s, truth, catalog, Path(tmp))
-            traces[s].append(tr)
-            if bar is not None:
-                bar.set_postfix_str(
-                    f"{s} seed {k}: {len(tr.sim_s)} exams, {len(tr.sim_s) / max(tr.wall_s, 1e-9):.0f}/s"
-                )
-                bar.update(1)
-    if bar is not None:
-        bar.close()
-    return traces
+        return run_trace(config, seed, strategy, truth, catalog, Path(tmp))
 
 
 def _data(config: LearningBenchConfig, truth: dict, traces: dict[str, list[Trace]]) -> dict:
