@@ -140,7 +140,25 @@ def ground_truth(
 
         unit = "house" if isinstance(style, HouseStyle) else "room"
         seeds = tqdm(seeds, desc=f"truth {style.name}", unit=unit)
-    rooms = [c for s in seeds for c in world_counts(generate_layout(style, s, catalog), catalog)]
+    return truth_document(style, samples, seed, catalog, sample_counts(style, seeds, catalog))
+
+
+def sample_counts(
+    style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog
+) -> list[tuple[dict[str, int], dict[tuple[str, str, str], int]]]:
+    """The per-room counts (``world_counts``) of the worlds of ``seeds``, in seed order: the
+    independent part of ``ground_truth`` (a sweep can split the seeds)."""
+    return [c for s in seeds for c in world_counts(generate_layout(style, s, catalog), catalog)]
+
+
+def truth_document(
+    style: Style | HouseStyle,
+    samples: int,
+    seed: int,
+    catalog: Catalog,
+    rooms: list[tuple[dict[str, int], dict[tuple[str, str, str], int]]],
+) -> dict:
+    """``ground_truth``'s document from the per-room counts of its samples."""
     out = {
         "style": style.name,
         "samples": int(samples),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -12,6 +13,9 @@ from pathlib import Path
 from envs.houses import resolve_style
 from knowledge.catalog import load_catalog
 from scripts import argtypes
+from scripts.sweep import SweepOptions, add_sweep_arguments, run_units
+
+SEEDS_PER_UNIT = 10  # worlds per sweep unit (one unit: ~0.3 s for single rooms)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,24 +50,31 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--top", type=int, default=12, help="print the K most likely relations (default: 12)"
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_sweep_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
     # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
-    from envs.truth import ground_truth
+    from envs.truth import sample_counts, truth_document
 
     catalog = load_catalog(args.catalog)
     style = resolve_style(args.style, catalog)
     t0 = time.perf_counter()
-    truth = ground_truth(
-        style,
-        args.samples,
-        args.seed,
-        catalog,
+    seeds = list(range(args.seed, args.seed + args.samples))
+    chunks = [seeds[i : i + SEEDS_PER_UNIT] for i in range(0, len(seeds), SEEDS_PER_UNIT)]
+    sweep = SweepOptions.from_args(args)
+    parts = run_units(
+        functools.partial(sample_counts, style, catalog=catalog),
+        chunks,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc=f"truth {style.name} ({SEEDS_PER_UNIT} worlds per unit)",
         progress=not args.no_progress and sys.stderr.isatty(),
     )
+    rooms = [c for part in parts for c in part]
+    truth = truth_document(style, args.samples, args.seed, catalog, rooms)
     dt = time.perf_counter() - t0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     # NaN (se_room of a type seen in one room only) is written as null: strict JSON.

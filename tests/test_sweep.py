@@ -80,3 +80,13 @@ def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
     a = json.loads((tmp_path / "serial" / "learning.json").read_text())
     b = json.loads((tmp_path / "ray" / "learning.json").read_text())
     assert _strip_timing(a) == _strip_timing(b)
+
+
+@pytest.mark.slow
+def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
+    from scripts.cli import main
+
+    args = ["truth", "--style", "office", "--samples", "25", "--no-progress"]
+    assert main([*args, "--out", str(tmp_path / "a.json")]) == 0
+    assert main([*args, "--out", str(tmp_path / "b.json"), "--workers", "2"]) == 0
+    assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
