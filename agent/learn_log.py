@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from agent.exam_volumes import relation_boxes
+from envs.camera import camera_at
 from knowledge.geometry import ObjectInstance
 
 if TYPE_CHECKING:
@@ -90,8 +91,6 @@ class RunLog:
         """The robot's base pose and path, and where the head points (camera pose)."""
         if self.rec is None:
             return
-        from agent.viewplan import camera_at
-
         pose = L.body.pose()
         self.rec.set_time(L.clock, self._step)
         self.rec.log_robot(pose, L.spec)
@@ -106,8 +105,6 @@ class RunLog:
         self.rec.set_time(L.clock, self._step)
         self.rec.log_robot(L.body.pose(), L.spec)
         if frame is None:  # oracle: the pose of the camera, no pixels
-            from agent.viewplan import camera_at
-
             self.rec.log_camera(_Shot(camera_at(L.body.pose(), L.spec)))
         else:  # RGB and segmentation; depth is left out (it would double the file's size)
             shot = _Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)

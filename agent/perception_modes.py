@@ -10,13 +10,12 @@ planned drives, head moves and images, so simulated time is comparable.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from agent.viewplan import camera_axes
+from envs.camera import camera_axes, half_fov_tangents, in_frustum
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from knowledge import geometry
@@ -135,8 +134,7 @@ class OraclePerception:
         # Occluders: furniture-sized boxes (anything with a side over 30 cm).
         self._occ_idx = np.flatnonzero(self._half.max(1) > 0.15) if len(objs) else np.zeros(0, int)
         self._occ = geometry.BoxArray.from_instances([objs[i] for i in self._occ_idx])
-        self._tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
-        self._tan_x = self._tan_y * width / height
+        self._tan_x, self._tan_y = half_fov_tangents(spec.fovy_deg, width, height)
         self._radius = np.linalg.norm(self._half, axis=1)
         self._vis_cache: dict[tuple[float, float], np.ndarray] = {}
         if len(objs):
@@ -158,11 +156,9 @@ class OraclePerception:
         fwd = -back
         rel = self._centers - cam
         z, x, y = rel @ fwd, rel @ right, rel @ up
-        rad = self._radius  # bounding-sphere radius: any part in view
         ok = self._visible_from(p.x, p.y).copy()
-        ok &= z > -rad
-        ok &= np.abs(x) <= z * self._tan_x + rad * math.sqrt(1 + self._tan_x**2)
-        ok &= np.abs(y) <= z * self._tan_y + rad * math.sqrt(1 + self._tan_y**2)
+        # Any part of the object in view: its bounding sphere touches the frustum.
+        ok &= in_frustum(z, x, y, self._tan_x, self._tan_y, near=0.0, radius=self._radius)
         return [self._objs[i] for i in np.flatnonzero(ok)]
 
     def _visible_from(self, x: float, y: float) -> np.ndarray:

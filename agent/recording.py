@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from envs.camera import intrinsics
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec
 from knowledge.catalog import Catalog
@@ -45,12 +46,6 @@ RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
 def rgb255(color: Sequence[float]) -> list[int]:
     """An RGB colour in [0, 1] as 0-255 integers."""
     return [int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in color[:3]]
-
-
-def intrinsics(width: int, height: int, fovy_deg: float) -> np.ndarray:
-    """The pinhole matrix K of a MuJoCo camera (square pixels, principal point at the centre)."""
-    f = (height / 2) / math.tan(math.radians(fovy_deg) / 2)
-    return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
 
 
 def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
@@ -299,7 +294,7 @@ class Recorder:
         rec.log(
             "world/camera/image",
             rr.Pinhole(
-                image_from_camera=intrinsics(width, height, float(cam.fovy_deg)),
+                image_from_camera=intrinsics(float(cam.fovy_deg), width, height),
                 resolution=[width, height],
                 camera_xyz=rr.ViewCoordinates.RDF,
                 image_plane_distance=0.4,

@@ -60,6 +60,7 @@ import numpy as np
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
 from agent.recording import Recorder
+from envs.camera import frustum_mask
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from knowledge.catalog import Catalog
@@ -443,7 +444,7 @@ class SearchContext:
         n = 0
         for g in plan:
             # Re-check against what the images so far really showed.
-            m = ss.frustum_mask(
+            m = frustum_mask(
                 cam, g.heading, g.tilt, self.seen.points, self.spec, rng
             ) & self.seen.unseen(rng)
             if m.sum() < need:
@@ -818,7 +819,7 @@ def estimate_cover_seconds(
         t += len(g) * (head_s + tm.image_cost)
         cam = np.array([xy[0], xy[1], spec.camera_height])
         for x in g:
-            todo &= ~ss.frustum_mask(cam, x.heading, x.tilt, pts, spec, rng)
+            todo &= ~frustum_mask(cam, x.heading, x.tilt, pts, spec, rng)
     return t
 
 

@@ -65,8 +65,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.navigation import OccupancyGrid, nearest_free
+from envs.camera import PinholeCamera, focal_length, frustum_mask
 from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel
+from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, ObjectType
 from knowledge.errors import CtxsearchError
@@ -88,7 +89,7 @@ SWEEP_MIN_SHARE = 0.1  # an image of a sweep must show this share of what is uns
 # =========================================================================== detectability
 def focal_px(spec: RobotSpec, height: int = 240) -> float:
     """The head camera's focal length in pixels for images ``height`` pixels high."""
-    return (height / 2) / math.tan(math.radians(spec.fovy_deg) / 2)
+    return focal_length(spec.fovy_deg, height)
 
 
 def mean_face_area(typ: ObjectType) -> float:
@@ -245,14 +246,12 @@ class SeenMap:
         """An independent copy."""
         return SeenMap(self.points.copy(), self.best.copy())
 
-    def update(self, camera, depth: np.ndarray) -> np.ndarray:
+    def update(self, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
         """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
-        ``camera`` (anything with position, xmat, fovy_deg, width, height). Returns their mask."""
-        from agent.viewplan import project
-
+        ``camera``. Returns their mask."""
         depth = np.asarray(depth, float)
         h, w = depth.shape
-        uv, z = project(camera, self.points)
+        uv, z = camera.project(self.points)
         ok = z > 0.05
         with np.errstate(invalid="ignore"):
             ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
@@ -268,12 +267,10 @@ class SeenMap:
         mask[idx] = True
         return mask
 
-    def mark_frustum(self, camera, max_distance: float) -> None:
+    def mark_frustum(self, camera: PinholeCamera, max_distance: float) -> None:
         """Record an image without depth: every point inside the frustum within ``max_distance``
         (no occlusion; for bodies that render nothing)."""
-        from agent.viewplan import points_in_view
-
-        m = points_in_view(camera, self.points, max_distance)
+        m = camera.sees(self.points, max_distance)
         d = np.linalg.norm(self.points[m] - np.asarray(camera.position, float), axis=1)
         self.best[m] = np.minimum(self.best[m], d)
 
@@ -604,34 +601,6 @@ class SweepGaze:
     gain: int  # unseen points predicted in the frustum
 
 
-def frustum_mask(
-    cam_xyz: np.ndarray,
-    heading: float,
-    tilt: float,
-    points: np.ndarray,
-    spec: RobotSpec,
-    max_range: float,
-    width: int = 320,
-    height: int = 240,
-) -> np.ndarray:
-    """(N,) bool: points inside the frustum of a camera at ``cam_xyz`` looking along world
-    ``heading`` with ``tilt``, within ``max_range``."""
-    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
-    fwd = np.array([ct * ch, ct * sh, st])
-    right = np.array([sh, -ch, 0.0])
-    up = np.array([-st * ch, -st * sh, ct])
-    rel = points - cam_xyz
-    z, x, y = rel @ fwd, rel @ right, rel @ up
-    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
-    tan_x = tan_y * width / height
-    return (
-        (z > 0.05)
-        & (np.abs(x) <= z * tan_x)
-        & (np.abs(y) <= z * tan_y)
-        & (np.linalg.norm(rel, axis=1) <= max_range)
-    )
-
-
 def sweep_gazes(
     xy: np.ndarray,
     current_heading: float,
@@ -665,7 +634,7 @@ def sweep_gazes(
             m = frustum_mask(cam, h, t, points, spec, max_range) & todo
             g = int(m.sum())
             if g >= min_gain:
-                out.append(SweepGaze(float(math.atan2(math.sin(h), math.cos(h))), t, g))
+                out.append(SweepGaze(wrap_angle(h), t, g))
                 todo &= ~m
     return out
 

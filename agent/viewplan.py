@@ -4,11 +4,8 @@ Used by the acquisition loop (look into every relation volume of an object being
 search (look at a candidate region). A *gaze* is a robot pose (base on a free, reachable grid
 cell; pan and tilt within their limits) plus the point the camera is aimed at.
 
-Camera model. As in envs/robot.py, the camera sits on both the pan and the tilt axis, at height
-``spec.camera_height`` above the base centre, so its position is (x, y, camera_height) whatever
-the head does, and it looks along heading yaw + pan, tilted by tilt (positive up).
-Conventions are MuJoCo's: ``xmat``'s columns are the camera's right (x), up (y) and backward (z)
-axes in the world, the camera looks along -z; pixel rows grow downwards.
+Camera model: envs.camera (the head camera at a pose is ``camera_at(pose, spec)``; the frusta of
+all candidate gazes are ``frustum_masks``, its vectorised frustum test).
 
 Planner (``plan_gazes``):
 1. sample points on a lattice filling the box (at most 0.25 m apart, corners included, coarser
@@ -38,77 +35,13 @@ from typing import Any
 import numpy as np
 
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.camera import PinholeCamera, frustum_masks, half_fov_tangents
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle, wrap_angles
 from knowledge.catalog import RelationSpec
 from knowledge.geometry import Box, ObjectInstance
 
-NEAR_CLIP = 0.05  # m: points closer to the camera than this are not seen
 
-
-# --------------------------------------------------------------------------- camera geometry
-def camera_axes(heading: float, tilt: float) -> np.ndarray:
-    """The camera's ``xmat`` (3, 3) for a world heading (yaw + pan) and a tilt (positive up):
-    columns right, up, backward (MuJoCo convention; the camera looks along -column 2)."""
-    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
-    right = [sh, -ch, 0.0]
-    up = [-st * ch, -st * sh, ct]
-    back = [-ct * ch, -ct * sh, -st]
-    return np.array([right, up, back]).T
-
-
-@dataclass(frozen=True)
-class PinholeView:
-    """A pinhole camera in the world: position (3,), ``xmat`` (3, 3) (MuJoCo convention), vertical
-    field of view and image size. Same fields as envs.world.CameraInfo, without a renderer."""
-
-    position: np.ndarray
-    xmat: np.ndarray
-    fovy_deg: float
-    width: int
-    height: int
-
-    @property
-    def focal(self) -> float:
-        """Focal length in pixels (square pixels)."""
-        return (self.height / 2) / math.tan(math.radians(self.fovy_deg) / 2)
-
-    def intrinsics(self) -> np.ndarray:
-        """The 3x3 matrix K (pixel coordinates: x right, y down, origin at the top-left corner)."""
-        f = self.focal
-        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
-
-    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels (N, 2) (x right, y down) and depth along the optical axis (N,) of world points."""
-        return project(self, points)
-
-
-def camera_at(
-    pose: RobotPose, spec: RobotSpec | None = None, width: int = 320, height: int = 240
-) -> PinholeView:
-    """The (approximate, see the module docstring) head camera of the robot at ``pose``."""
-    spec = spec or RobotSpec()
-    return PinholeView(
-        np.array([pose.x, pose.y, spec.camera_height]),
-        camera_axes(pose.yaw + pose.pan, pose.tilt),
-        spec.fovy_deg,
-        width,
-        height,
-    )
-
-
-def project(camera: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (N, 2) and optical-axis depth (N,) of world ``points`` (N, 3) for any camera with
-    ``position``, ``xmat``, ``fovy_deg``, ``width`` and ``height`` (MuJoCo convention)."""
-    pts = np.atleast_2d(np.asarray(points, float))
-    local = (pts - np.asarray(camera.position, float)) @ np.asarray(camera.xmat, float)
-    depth = -local[:, 2]
-    f = (camera.height / 2) / math.tan(math.radians(camera.fovy_deg) / 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.width / 2 + f * local[:, 0] / depth
-        v = camera.height / 2 - f * local[:, 1] / depth
-    return np.column_stack([u, v]), depth
-
-
+# --------------------------------------------------------------------------- sampling
 def box_samples(box: Box, spacing: float = 0.25, max_points: int = 400) -> np.ndarray:
     """World points (N, 3) on a lattice filling ``box``, corners included, at most ``spacing``
     apart (coarser if that would exceed ``max_points``). Ordered x-major, z fastest."""
@@ -128,22 +61,9 @@ def box_samples(box: Box, spacing: float = 0.25, max_points: int = 400) -> np.nd
     return out.reshape(-1, 3)
 
 
-def points_in_view(
-    camera: Any, points: np.ndarray, max_distance: float | None = None
-) -> np.ndarray:
-    """Which world ``points`` (N, 3) fall inside the camera's image (and within ``max_distance``)."""
-    pix, depth = project(camera, points)
-    ok = (depth > NEAR_CLIP) & (pix[:, 0] >= 0) & (pix[:, 0] <= camera.width)
-    ok &= (pix[:, 1] >= 0) & (pix[:, 1] <= camera.height)
-    if max_distance is not None:
-        d = np.linalg.norm(np.atleast_2d(points) - np.asarray(camera.position, float), axis=1)
-        ok &= d <= max_distance
-    return ok
-
-
-def in_view(camera: Any, box: Box, max_distance: float | None = None) -> float:
+def in_view(camera: PinholeCamera, box: Box, max_distance: float | None = None) -> float:
     """The fraction of ``box``'s sample points (lattice incl. corners) inside the camera's frustum."""
-    return float(points_in_view(camera, box_samples(box), max_distance).mean())
+    return float(camera.sees(box_samples(box), max_distance).mean())
 
 
 def aim(
@@ -182,10 +102,6 @@ def facing_for(rel: RelationSpec, ref: ObjectInstance) -> np.ndarray | None:
 
 
 # --------------------------------------------------------------------------- planning
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.sin(a), np.cos(a))
-
-
 @dataclass(frozen=True)
 class Gaze:
     """A robot pose from which to take one image, the point it aims at, and the planner's
@@ -222,58 +138,6 @@ def _aim_angles(
     heading = np.arctan2(d[..., 1], d[..., 0])
     tilt = np.clip(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])), *spec.tilt_range)
     return heading, tilt
-
-
-_VISIBILITY_BLOCK = 65536  # (camera, aim, point) triples per block: temporaries stay in cache
-
-
-def _visibility(
-    cams: np.ndarray,
-    heading: np.ndarray,
-    tilt: np.ndarray,
-    points: np.ndarray,
-    spec: RobotSpec,
-    width: int,
-    height: int,
-    max_distance: float,
-) -> np.ndarray:
-    """(C, T, N) bool: point n inside the frustum of the camera at cams[c] looking along
-    (heading[c, t], tilt[c, t]) and within ``max_distance`` of it.
-
-    A point's camera-frame coordinates are the dot products of its offset with the camera's
-    forward (ct ch, ct sh, st), right (sh, -ch, 0) and up (-st ch, -st sh, ct) axes, written as
-    broadcast sums of products. Cameras are processed in blocks of about ``_VISIBILITY_BLOCK``
-    triples so the float temporaries stay in the CPU cache (a large volume has ten aims and
-    200 points for 150 cameras); blocking changes no value."""
-    n_c, n_t = heading.shape
-    n = len(points)
-    out = np.empty((n_c, n_t, n), bool)
-    ch, sh, ct, st = np.cos(heading), np.sin(heading), np.cos(tilt), np.sin(tilt)
-    fwd = [(ct * ch)[..., None], (ct * sh)[..., None], st[..., None]]  # (C, T, 1) each
-    right = [sh[..., None], (-ch)[..., None]]
-    up = [(-st * ch)[..., None], (-st * sh)[..., None], ct[..., None]]
-    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
-    tan_x = tan_y * width / height
-    step = max(1, _VISIBILITY_BLOCK // max(1, n_t * n))
-    for a in range(0, n_c, step):
-        b = slice(a, min(n_c, a + step))
-        rel = points[None, :, :] - cams[b, None, :]  # (c, N, 3)
-        near = np.linalg.norm(rel, axis=-1) <= max_distance  # (c, N)
-        rx, ry, rz = rel[:, None, :, 0], rel[:, None, :, 1], rel[:, None, :, 2]  # (c, 1, N)
-        z = fwd[0][b] * rx
-        z += fwd[1][b] * ry
-        z += fwd[2][b] * rz
-        ok = out[b]
-        np.greater(z, NEAR_CLIP, out=ok)
-        ok &= near[:, None, :]
-        x = right[0][b] * rx
-        x += right[1][b] * ry
-        ok &= np.abs(x, out=x) <= z * tan_x
-        y = up[0][b] * rx
-        y += up[1][b] * ry
-        y += up[2][b] * rz
-        ok &= np.abs(y, out=y) <= z * tan_y
-    return out
 
 
 def _gains(seen_w: np.ndarray, cov: np.ndarray, hit: np.ndarray, n: int, unit: bool) -> np.ndarray:
@@ -350,7 +214,8 @@ def plan_gazes(
     # Heading and tilt of the aim direction for every (candidate, aim): the frusta, and the
     # head/turn cost estimate.
     aim_heading, aim_tilt = _aim_angles(cams, aims, spec)
-    seen = _visibility(cams, aim_heading, aim_tilt, points, spec, width, height, max_distance)
+    tangents = half_fov_tangents(spec.fovy_deg, width, height)
+    seen = frustum_masks(cams, aim_heading, aim_tilt, points, tangents, max_distance)
     if not seen.any():
         return []
     weights = [np.ones(len(cand))]
@@ -391,9 +256,9 @@ def plan_gazes(
             arrive = np.where(
                 moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), cur_yaw
             )
-            turn = np.where(moved, np.abs(_wrap(arrive - cur_yaw)) / tm.turn_rate, 0.0)
+            turn = np.where(moved, np.abs(wrap_angles(arrive - cur_yaw)) / tm.turn_rate, 0.0)
             t_drive = drive / tm.drive_speed + turn
-            pan = _wrap(aim_heading[ci, ti] - arrive)
+            pan = wrap_angles(aim_heading[ci, ti] - arrive)
             pan0 = np.where(moved, 0.0, cur_pan)  # the head is kept while driving
             t_head = np.maximum(
                 np.abs(pan - pan0) / tm.pan_rate, np.abs(aim_tilt[ci, ti] - cur_tilt) / tm.tilt_rate

@@ -31,6 +31,11 @@ def wrap_angle(a: float) -> float:
     return float(math.atan2(math.sin(a), math.cos(a)))
 
 
+def wrap_angles(a: np.ndarray) -> np.ndarray:
+    """``wrap_angle`` of every element of an array."""
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
 @dataclass(frozen=True)
 class RobotSpec:
     """Geometry, joint limits and camera of the robot."""

@@ -39,15 +39,13 @@ def room(*objects: ObjectInstance) -> RoomLayout:
     )
 
 
-class Cam:
-    """A minimal camera for SeenMap.update."""
+def Cam(position, heading, tilt, width=320, height=240, fovy=58.0):  # noqa: N802
+    """A camera for SeenMap.update."""
+    from envs.camera import PinholeCamera, camera_axes
 
-    def __init__(self, position, heading, tilt, width=320, height=240, fovy=58.0):
-        from agent.viewplan import camera_axes
-
-        self.position = np.asarray(position, float)
-        self.xmat = camera_axes(heading, tilt)
-        self.fovy_deg, self.width, self.height = fovy, width, height
+    return PinholeCamera(
+        np.asarray(position, float), camera_axes(heading, tilt), fovy, width, height
+    )
 
 
 # =========================================================================== pure parts
