@@ -699,8 +699,7 @@ class Indirect(SearchPolicy):
         costs = ss.CostModel(ctx.grid, tm, view_distance=ctx.target_range)
         images = costs.images(relation_volume(best, mid))
         drive = 0.5 * ctx._mean_drive
-        turn = (math.pi / 2) / tm.turn_rate if drive > 0.05 else 0.0
-        return drive / tm.drive_speed + turn + images * (costs.head_s + tm.image_cost)
+        return tm.leg_estimate(drive) + tm.looks_estimate(images, costs.head_s)
 
 
 class OraclePrior(Location):
@@ -816,7 +815,7 @@ def estimate_cover_seconds(
     heading = 0.0
     for xy in sites:
         g = ss.sweep_gazes(xy, heading, pts, todo, spec, rng, tilts=tilts)
-        t += len(g) * (head_s + tm.image_cost)
+        t += tm.looks_estimate(len(g), head_s)
         cam = np.array([xy[0], xy[1], spec.camera_height])
         for x in g:
             todo &= ~frustum_mask(cam, x.heading, x.tilt, pts, spec, rng)

@@ -468,8 +468,7 @@ class CostModel:
         if not math.isfinite(d):
             d = float(np.hypot(*(np.asarray(box.center[:2]) - np.asarray(xy))))
         tm = self.time_model
-        turn = (math.pi / 2) / tm.turn_rate if d > 0.05 else 0.0
-        return d / tm.drive_speed + turn + self.images(box) * (self.head_s + tm.image_cost)
+        return tm.leg_estimate(d) + tm.looks_estimate(self.images(box), self.head_s)
 
 
 def score_regions(
@@ -587,7 +586,7 @@ def tour_seconds(
         d = grid.distances_from(cur)[r, c] if grid.in_grid(r, c) else np.inf
         if not np.isfinite(d):
             d = float(np.hypot(*(s - cur)))
-        t += d / time_model.drive_speed + (math.pi / 2) / time_model.turn_rate
+        t += time_model.leg_estimate(d, always_turn=True)
         cur = s
     return t
 

@@ -256,13 +256,10 @@ def plan_gazes(
             arrive = np.where(
                 moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), cur_yaw
             )
-            turn = np.where(moved, np.abs(wrap_angles(arrive - cur_yaw)) / tm.turn_rate, 0.0)
-            t_drive = drive / tm.drive_speed + turn
+            t_drive = tm.travel_time(drive) + np.where(moved, tm.turn_times(cur_yaw, arrive), 0.0)
             pan = wrap_angles(aim_heading[ci, ti] - arrive)
             pan0 = np.where(moved, 0.0, cur_pan)  # the head is kept while driving
-            t_head = np.maximum(
-                np.abs(pan - pan0) / tm.pan_rate, np.abs(aim_tilt[ci, ti] - cur_tilt) / tm.tilt_rate
-            )
+            t_head = tm.head_times(pan0, cur_tilt, pan, aim_tilt[ci, ti])
             cost = t_drive + t_head + tm.image_cost
             best = int(np.argmax(gain / cost**cost_weight))
             c_i, t_i = int(ci[best]), int(ti[best])

@@ -263,20 +263,19 @@ class World:
             length = float(np.hypot(*(b - a)))
             if length < 1e-9:
                 continue
-            turn = wrap_angle(math.atan2(b[1] - a[1], b[0] - a[0]) - q[2])
+            heading = math.atan2(b[1] - a[1], b[0] - a[0])
+            knots_t.append(knots_t[-1] + tm.turn_time(q[2], heading))
             q = q.copy()
-            q[2] += turn
-            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            q[2] += wrap_angle(heading - q[2])
             knots_q.append(q)
             q = q.copy()
             q[:2] = b
-            knots_t.append(knots_t[-1] + length / tm.drive_speed)
+            knots_t.append(knots_t[-1] + tm.travel_time(length))
             knots_q.append(q)
         if final_yaw is not None:
+            knots_t.append(knots_t[-1] + tm.turn_time(q[2], final_yaw))
             q = q.copy()
-            turn = wrap_angle(final_yaw - q[2])
-            q[2] += turn
-            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            q[2] += wrap_angle(final_yaw - q[2])
             knots_q.append(q)
         self._execute(np.asarray(knots_t), np.asarray(knots_q))
         seconds = float(tm.drive_time(path, wrap_angle(q0[2]), final_yaw))
