@@ -168,7 +168,7 @@ def run_trace(
     room_budget_s: float | None = None,
 ) -> Trace:
     """One learn run in a fresh store, measured after every examination."""
-    from agent.acquisition import learn, style_layouts
+    from agent.learning import LearnConfig, learn, style_layouts
 
     tracker = TruthTracker(truth, catalog, alpha)
     tr = Trace(initial=tracker.metrics())
@@ -209,19 +209,21 @@ def run_trace(
 
     t0 = time.perf_counter()
     summary = learn(
-        style,
-        rooms,
-        workdir / f"{strategy}-{seed}.sqlite",
-        strategy=strategy,
-        perception=perception,
-        alpha=alpha,
-        seed=seed,
-        progress=False,
+        LearnConfig(
+            style,
+            rooms,
+            workdir / f"{strategy}-{seed}.sqlite",
+            strategy=strategy,
+            perception=perception,
+            alpha=alpha,
+            seed=seed,
+            progress=False,
+            room_budget_s=room_budget_s,
+        ),
         catalog=catalog,
         layouts=layouts,
         on_examination=on_exam,
         on_choice=on_choice,
-        room_budget_s=room_budget_s,
     )
     tr.wall_s = time.perf_counter() - t0
     tr.rooms_left_early = summary.rooms_left_early

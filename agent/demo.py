@@ -50,7 +50,7 @@ class DemoResult:
 
 def _learning_complete(kb_path: Path, rooms: int, perception: str) -> bool:
     """True if the store at ``kb_path`` holds the demo's run with ``rooms`` rooms done."""
-    from agent.acquisition import room_seed, run_id
+    from agent.learning import room_seed, run_id
     from knowledge.catalog import load_catalog
     from knowledge.store import EvidenceStore
 
@@ -77,7 +77,7 @@ def run_demo(
     echo=print,
 ) -> DemoResult:
     """Learn, search with and without context, write the report (module docstring)."""
-    from agent.acquisition import learn
+    from agent.learning import LearnConfig, learn
     from knowledge.catalog import load_catalog
 
     t0 = time.perf_counter()
@@ -101,14 +101,16 @@ def run_demo(
             f"[1/3] learning in {rooms} {DEMO_STYLE} rooms ({perception} perception, strategy {DEMO_STRATEGY})"
         )
         s = learn(
-            DEMO_STYLE,
-            rooms,
-            kb_path,
-            strategy=DEMO_STRATEGY,
-            perception=perception,
-            seed=DEMO_SEED,
-            record=learn_rrd,
-            progress=progress,
+            LearnConfig(
+                DEMO_STYLE,
+                rooms,
+                kb_path,
+                strategy=DEMO_STRATEGY,
+                perception=perception,
+                seed=DEMO_SEED,
+                record=learn_rrd,
+                progress=progress,
+            )
         )
         if getattr(s, "interrupted", False):
             raise KeyboardInterrupt

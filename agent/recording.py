@@ -28,12 +28,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from envs.camera import intrinsics
+from envs.camera import Frame, PinholeCamera, intrinsics
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec
 from knowledge.catalog import Catalog
@@ -46,6 +47,17 @@ RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
 def rgb255(color: Sequence[float]) -> list[int]:
     """An RGB colour in [0, 1] as 0-255 integers."""
     return [int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in color[:3]]
+
+
+@dataclass(frozen=True)
+class Shot:
+    """What ``Recorder.log_camera`` shows of an image: the camera and whichever pixels there are
+    (a ``Frame`` is one; the oracle's gazes have a camera and no pixels)."""
+
+    camera: PinholeCamera
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    instance_ids: np.ndarray | None = None
 
 
 def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
@@ -278,7 +290,7 @@ class Recorder:
         self._rec.log(entity, rr.LineStrips3D([pts], colors=[[40, 120, 230]], radii=[0.01]))
 
     # ----------------------------------------------------------------- the camera
-    def log_camera(self, frame: Any, detections: Sequence[Any] = ()) -> None:
+    def log_camera(self, frame: Frame | Shot, detections: Sequence[Any] = ()) -> None:
         """The camera's pose and pinhole, the frame's images and the detections as 2-D boxes."""
         if self._rec is None:
             return
@@ -300,16 +312,16 @@ class Recorder:
                 image_plane_distance=0.4,
             ),
         )
-        if getattr(frame, "rgb", None) is not None:
+        if frame.rgb is not None:
             rec.log("world/camera/image/rgb", rr.Image(frame.rgb))
-        if getattr(frame, "instance_ids", None) is not None:
+        if frame.instance_ids is not None:
             seg = (
                 (np.asarray(frame.instance_ids).astype(np.int64) + 1)
                 .clip(0, 65535)
                 .astype(np.uint16)
             )
             rec.log("world/camera/image/segmentation", rr.SegmentationImage(seg, opacity=0.35))
-        if getattr(frame, "depth", None) is not None:
+        if frame.depth is not None:
             rec.log(
                 "world/camera/image/depth",
                 rr.DepthImage(np.asarray(frame.depth, np.float32), meter=1.0),

@@ -7,7 +7,7 @@ drives, moves the head and takes images through the same World, so the seconds a
 TimeModel's (envs.robot_spec) and comparable across policies.
 
 Held-out rooms. Search rooms are never rooms the robot learned in: ``ctxsearch learn`` derives
-its room seeds from (seed, index) with ``agent.acquisition.room_seed``; search episodes use
+its room seeds from (seed, index) with ``agent.learning.room_seed``; search episodes use
 ``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the benchmark
 skips any seed the store lists among its learned rooms.
 
@@ -75,7 +75,7 @@ MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a lo
 # =========================================================================== episodes and results
 def held_out_seed(seed: int, index: int) -> int:
     """The room seed of search episode ``index`` for benchmark seed ``seed`` (31-bit, spread out,
-    never produced for the same (seed, index) by ``agent.acquisition.room_seed``)."""
+    never produced for the same (seed, index) by ``agent.learning.room_seed``)."""
     return int(
         np.random.SeedSequence([int(seed), int(index), HELD_OUT_TAG]).generate_state(1)[0]
         & 0x7FFFFFFF

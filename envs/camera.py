@@ -154,6 +154,19 @@ class PinholeCamera:
         return self.position + (local * np.asarray(depth, float)[..., None]) @ self.xmat.T
 
 
+@dataclass(frozen=True)
+class Frame:
+    """One image from the head camera: RGB (only when asked), depth in metres along the optical
+    axis (when asked), the object instance id of every pixel (-1: floor, walls, ceiling,
+    background), the camera it was taken with and the robot's pose at the time."""
+
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    instance_ids: np.ndarray
+    camera: PinholeCamera
+    pose: RobotPose
+
+
 def camera_at(
     pose: RobotPose, spec: RobotSpec | None = None, width: int = 320, height: int = 240
 ) -> PinholeCamera:

@@ -29,14 +29,13 @@ import atexit
 import logging
 import math
 import weakref
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from dm_control import mjcf
 
 from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
-from envs.camera import PinholeCamera
+from envs.camera import Frame, PinholeCamera
 from envs.layout import RoomLayout
 from envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
@@ -53,19 +52,6 @@ MAX_SETTLE_S = 3.0  # give up settling after this much physics time (never reach
 EGL_HINT = "apt-get install -y libegl1 libgl1-mesa-dri"
 
 _gl_renderer: str | None = None  # the GL renderer string, once a renderer has been made
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One image from the head camera: RGB (only when asked), depth in metres along the optical
-    axis (when asked), the object instance id of every pixel (-1: floor, walls, ceiling,
-    background), the camera it was taken with and the robot's pose at the time."""
-
-    rgb: np.ndarray | None
-    depth: np.ndarray | None
-    instance_ids: np.ndarray
-    camera: PinholeCamera
-    pose: RobotPose
 
 
 _shared_gl = None  # the process's one GL context, shared by every renderer (see _Renderer)

@@ -88,20 +88,22 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
-    from agent.acquisition import learn
+    from agent.learning import LearnConfig, learn
 
     s = learn(
-        args.style,
-        args.rooms,
-        args.kb,
-        strategy=args.strategy,
-        perception=args.perception,
-        alpha=args.alpha,
-        seed=args.seed,
-        record=args.record,
-        max_examinations=args.max_examinations,
-        progress=not args.no_progress,
-        room_budget_s=args.room_budget,
+        LearnConfig(
+            args.style,
+            args.rooms,
+            args.kb,
+            strategy=args.strategy,
+            perception=args.perception,
+            alpha=args.alpha,
+            seed=args.seed,
+            record=args.record,
+            max_examinations=args.max_examinations,
+            progress=not args.no_progress,
+            room_budget_s=args.room_budget,
+        )
     )
     for line in s.lines():
         print(line)

@@ -7,8 +7,10 @@ import math
 
 import pytest
 
-from agent.acquisition import learn, room_seed, start_pose
+from agent import learning
+from agent.acquisition import start_pose
 from agent.exam_volumes import group_volumes, relation_boxes
+from agent.learning import LearnConfig, room_seed
 from agent.navigation import OccupancyGrid
 from agent.perception_modes import KinematicBody, OraclePerception
 from envs.layout import Door, RoomLayout
@@ -16,6 +18,12 @@ from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.catalog import parse_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
+
+
+def learn(*args, **kw):
+    """``learning.learn`` with the configuration's fields and the hooks as keywords."""
+    hooks = {k: kw.pop(k) for k in ("catalog", "layouts", "on_examination", "on_choice") if k in kw}
+    return learning.learn(LearnConfig(*args, **kw), **hooks)
 
 
 def _rel(name, lo, hi, mlo=(0, 0, 0), mhi=(0, 0, 0)):

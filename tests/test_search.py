@@ -219,7 +219,7 @@ def test_aggregate_counts_failures_at_the_budget():
 
 
 def test_held_out_seeds_differ_from_learning_seeds():
-    from agent.acquisition import room_seed
+    from agent.learning import room_seed
 
     learn = {room_seed(0, i) for i in range(200)}
     search = {S.held_out_seed(0, i) for i in range(200)}
