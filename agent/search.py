@@ -50,22 +50,28 @@ same default.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
+from agent.perception import detect, objects_by_id
 from agent.recording import Recorder
+from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
 from envs.camera import frustum_mask
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.truth import ground_truth
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
-from knowledge.geometry import Box, ObjectInstance
+from knowledge.geometry import Box, ObjectInstance, relation_volume
+from knowledge.store import EvidenceStore
 
 DEFAULT_BUDGET_S = 300.0
 HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
@@ -231,8 +237,6 @@ class SearchContext:
         self.width = int(getattr(body, "width", 320))
         self.height = int(getattr(body, "height", 240))
         if detector is None:
-            from agent.perception import detect, objects_by_id
-
             objs = objects_by_id(layout)
             detector = lambda frame: detect(frame, objs, catalog)  # noqa: E731
         self.detector = detector
@@ -361,8 +365,6 @@ class SearchContext:
     def look_gaze(self, gaze: Any, purpose: str) -> list:
         """Execute a view planner Gaze (drive, turn, aim) and take an image."""
         self.check()
-        from agent.viewplan import execute_gaze
-
         if gaze.path is not None and len(gaze.path) >= 2:
             self.recorder.log_path(gaze.path)
         frame = execute_gaze(self.body, self.grid, gaze, rgb=self.recorder.enabled, depth=True)
@@ -460,8 +462,6 @@ class SearchContext:
     ) -> None:
         """The location constraint: look into the best candidate region (probability per second)
         until none has probability left (see agent.search_space)."""
-        from agent.viewplan import plan_gazes
-
         visited = self._visited
         costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target)
@@ -486,7 +486,7 @@ class SearchContext:
                 self.body.pose(),
                 self.spec,
                 self.time_model,
-                max_distance=min(self.target_range, 2.5),
+                GazePlanOptions(max_distance=min(self.target_range, 2.5)),
                 facing=best.facing,
             )
             self.note(
@@ -694,8 +694,6 @@ class Indirect(SearchPolicy):
         size = tuple((np.asarray(typ.size_min) + np.asarray(typ.size_max)) / 2)
         mid = ObjectInstance(via, -1, (0.0, 0.0, size[2] / 2), 0.0, size)
         best = max(typ.relations, key=lambda r: (probs.p(r.name, ctx.target), r.name))
-        from knowledge.geometry import relation_volume
-
         costs = ss.CostModel(ctx.grid, tm, view_distance=ctx.target_range)
         images = costs.images(relation_volume(best, mid))
         drive = 0.5 * ctx._mean_drive
@@ -726,8 +724,6 @@ class Oracle(SearchPolicy):
     name = "oracle"
 
     def search(self, ctx: SearchContext) -> None:
-        from agent.viewplan import Gaze, aim, plan_gazes
-
         tm, spec = ctx.time_model, ctx.spec
         tried: set[tuple[int, str]] = set()
         instances = list(ctx.layout.of_type(ctx.target))
@@ -758,16 +754,10 @@ class Oracle(SearchPolicy):
                 if (o.id, "near") not in tried:
                     box = o.box()
                     box = Box(box.center, box.yaw, np.maximum(box.half, 0.03))
-                    gz = plan_gazes(
-                        ctx.grid,
-                        box,
-                        pose,
-                        spec,
-                        tm,
-                        max_distance=min(ctx.target_range, 2.5),
-                        coverage_goal=0.5,
-                        max_gazes=2,
+                    near = GazePlanOptions(
+                        max_distance=min(ctx.target_range, 2.5), coverage_goal=0.5, max_gazes=2
                     )
+                    gz = plan_gazes(ctx.grid, box, pose, spec, tm, near)
                     options.append((sum(x.cost for x in gz) if gz else math.inf, o.id, "near", gz))
             options = [opt for opt in options if opt[3] and math.isfinite(opt[0])]
             if not options:
@@ -879,10 +869,6 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
 
     One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
     from the store), a store without examinations."""
-    from pathlib import Path
-
-    from knowledge.store import EvidenceStore
-
     p = Path(path)
     if not p.is_file():
         raise CtxsearchError(
@@ -908,9 +894,6 @@ def truth_probabilities(
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
     at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
-    import json
-    from pathlib import Path
-
     if path is not None:
         p = Path(path)
         try:
@@ -927,6 +910,4 @@ def truth_probabilities(
                 f"{p}: ground truth of style '{doc.get('style')}', not '{style_name}'"
             )
         return ss.TableProbabilities.from_truth(doc)
-    from envs.truth import ground_truth
-
     return ss.TableProbabilities.from_truth(ground_truth(style, samples, seed, catalog))

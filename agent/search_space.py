@@ -63,11 +63,16 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import sparse
 
 from agent.navigation import OccupancyGrid, nearest_free
+from agent.perception import min_pixels_at
+from agent.viewplan import facing_for
 from envs.camera import PinholeCamera, focal_length, frustum_mask
 from envs.layout import RoomLayout
+from envs.parts import world_parts_array
 from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
+from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, ObjectType
 from knowledge.errors import CtxsearchError
@@ -108,8 +113,6 @@ def effective_range(
 ) -> float:
     """How far (m) an instance of ``typ`` is reliably detected (see the module docstring)."""
     spec = spec or RobotSpec()
-    from agent.perception import min_pixels_at
-
     mp = min_pixels_at(typ.min_pixels, width, height)
     pixel_range = focal_px(spec, height) * math.sqrt(mean_face_area(typ) / mp) * safety
     return float(min(typ.max_range, pixel_range))
@@ -151,8 +154,6 @@ class KBProbabilities(ProbabilitySource):
         v = self._cache.get(key)
         if v is None:
             if self.rank == "p0":
-                from knowledge import intervals
-
                 rel = self.kb.catalog.relation(relation)
                 v = float(
                     intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
@@ -221,8 +222,6 @@ class SeenMap:
         z: tuple[float, float, float] = LATTICE_Z,
     ) -> SeenMap:
         """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
-        from envs.parts import world_parts_array
-
         hw, hd = layout.width / 2, layout.depth / 2
         xs = np.arange(-hw + step_xy / 2, hw, step_xy)
         ys = np.arange(-hd + step_xy / 2, hd, step_xy)
@@ -329,8 +328,6 @@ def object_regions(
 ) -> list[Region]:
     """One region per rel in RELATIONS(type(b)) with P(rel(target)) > ``min_p`` whose volume
     holds lattice points (none for an instance of the target type itself)."""
-    from agent.viewplan import facing_for
-
     if b.type == target:
         return []
     out = []
@@ -420,8 +417,6 @@ def merge_regions(regions: Sequence[Region], jaccard: float = MERGE_JACCARD) -> 
 def region_probabilities(regions: Sequence[Region], unseen: np.ndarray) -> np.ndarray:
     """P(T in the unseen part of each region), counting every overlapping region (see the module
     docstring). (R,)"""
-    from scipy import sparse
-
     if not regions:
         return np.zeros(0)
     n = len(unseen)

@@ -29,7 +29,7 @@ Planner (``plan_gazes``):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -151,32 +151,54 @@ def _gains(seen_w: np.ndarray, cov: np.ndarray, hit: np.ndarray, n: int, unit: b
     return np.maximum(seen_w - cov, 0.0).sum(-1) / n
 
 
+@dataclass(frozen=True)
+class GazePlanOptions:
+    """The planner's settings (see the module docstring): how far a viewpoint may stand from the
+    box, the image size, when to stop (``coverage_goal``, ``min_gain``, ``max_gazes``), how to cut
+    and sample the box, the candidate lattice step, and ``cost_weight``: gazes are ranked by
+    gain / cost**cost_weight (1: coverage per second; 0: coverage only, for the best picture
+    whatever the walk)."""
+
+    max_distance: float = 2.5
+    width: int = 320
+    height: int = 240
+    coverage_goal: float = 0.95
+    min_gain: float = 0.03
+    max_gazes: int = 6
+    split: float = 1.2
+    candidate_step: float = 0.3
+    max_points: int = 200
+    cost_weight: float = 1.0
+
+
+@dataclass
+class _Candidates:
+    """Everything the greedy cover scores: candidate base positions and their grid cells, aim
+    points and directions, sample points, and which (position, aim) pair sees which point."""
+
+    cand: np.ndarray  # (C, 2) base positions; row 0 is the start
+    cells: tuple[np.ndarray, np.ndarray]  # (rows, cols) of the candidates
+    aims: np.ndarray  # (T, 3)
+    heading: np.ndarray  # (C, T) world heading of the aim direction
+    tilt: np.ndarray  # (C, T)
+    seen_pairs: np.ndarray  # (C*T, N) bool: pair p = (p // T, p % T)
+
+
 def plan_gazes(
     grid: OccupancyGrid,
     box: Box,
     start_pose: RobotPose,
     spec: RobotSpec | None = None,
     time_model: TimeModel | None = None,
-    *,
-    max_distance: float = 2.5,
+    options: GazePlanOptions | None = None,
     facing: np.ndarray | None = None,
-    width: int = 320,
-    height: int = 240,
-    coverage_goal: float = 0.95,
-    min_gain: float = 0.03,
-    max_gazes: int = 6,
-    split: float = 1.2,
-    candidate_step: float = 0.3,
-    max_points: int = 200,
-    cost_weight: float = 1.0,
 ) -> list[Gaze]:
     """A short sequence of gazes whose frusta together cover ``box`` (see the module docstring).
 
-    The first gaze starts from ``start_pose``, each later one from the previous gaze. Gazes are
-    ranked by gain / cost**``cost_weight`` (1: coverage per second; 0: coverage only, for the best
-    picture whatever the walk). Sample points outside the grid (beyond the walls) are dropped. If
-    ``facing`` leaves no gaze worth taking (the open side is against a wall), the plan is made
-    without it. Returns [] if no reachable viewpoint sees any of the box.
+    The first gaze starts from ``start_pose``, each later one from the previous gaze. Sample
+    points outside the grid (beyond the walls) are dropped. If ``facing`` leaves no gaze worth
+    taking (the open side is against a wall), the plan is made without it. Returns [] if no
+    reachable viewpoint sees any of the box.
 
     Speed (about 1 ms for a small volume; the plans are those of scoring every pair in full):
     the candidate lattice is cached per grid (``OccupancyGrid.lattice_cells``) and the driving
@@ -187,110 +209,150 @@ def plan_gazes(
     """
     spec = spec or RobotSpec()
     tm = time_model or TimeModel()
+    opt = options or GazePlanOptions()
+    c = _candidates(grid, box, start_pose, spec, opt)
+    if c is None:
+        return []
+    weights = [np.ones(len(c.cand))]
+    if facing is not None:
+        f = np.asarray(facing, float)[:2]
+        f = f / max(np.linalg.norm(f), 1e-12)
+        off = c.cand - np.asarray(box.center[:2], float)
+        cos = (off @ f) / np.maximum(np.linalg.norm(off, axis=1), 1e-9)
+        weights.insert(0, np.maximum(0.05, (1.0 + cos) / 2) ** 2)
+    for weight in weights:  # with the facing preference; if that finds nothing, without it
+        gazes = _greedy_cover(grid, c, weight, start_pose, spec, tm, opt)
+        if gazes:
+            return gazes
+    return []
+
+
+def _room_points(grid: OccupancyGrid, box: Box, max_points: int) -> np.ndarray:
+    """The box's sample points inside the grid (points beyond the walls can never be seen)."""
     points = box_samples(box, max_points=max_points)
-    # Points beyond the walls can never be seen: plan for the part of the box inside the room.
     h, w = grid.shape
     lo = np.array([grid.x0, grid.y0])
     inside = np.all(
         (points[:, :2] >= lo) & (points[:, :2] <= lo + grid.resolution * np.array([w, h])), axis=1
     )
-    points = points[inside]
+    return points[inside]
+
+
+def _candidates(
+    grid: OccupancyGrid, box: Box, start_pose: RobotPose, spec: RobotSpec, opt: GazePlanOptions
+) -> _Candidates | None:
+    """Steps 1-4 of the planner; None when no reachable viewpoint sees any of the box."""
+    points = _room_points(grid, box, opt.max_points)
     if len(points) == 0:
-        return []
-    aims = _aim_points(box, split)
+        return None
+    aims = _aim_points(box, opt.split)
     # Candidate base positions: reachable free cells on a coarse lattice near the box.
     start_xy = nearest_free(grid, start_pose.xy)
     if start_xy is None:
-        return []
-    k = max(1, int(round(candidate_step / grid.resolution)))
+        return None
+    k = max(1, int(round(opt.candidate_step / grid.resolution)))
     rows, cols = grid.lattice_cells(k)
     reach = np.isfinite(grid.distances_from(start_xy)[rows, cols])
     rows, cols = rows[reach], cols[reach]
     xs, ys = grid.cell_centers()
     cand = np.column_stack([xs[cols], ys[rows]])
-    cand = cand[box.footprint_distance(cand) <= max_distance]
+    cand = cand[box.footprint_distance(cand) <= opt.max_distance]
     cand = np.vstack([start_xy[None, :], cand])
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
     # Heading and tilt of the aim direction for every (candidate, aim): the frusta, and the
     # head/turn cost estimate.
-    aim_heading, aim_tilt = _aim_angles(cams, aims, spec)
-    tangents = half_fov_tangents(spec.fovy_deg, width, height)
-    seen = frustum_masks(cams, aim_heading, aim_tilt, points, tangents, max_distance)
+    heading, tilt = _aim_angles(cams, aims, spec)
+    tangents = half_fov_tangents(spec.fovy_deg, opt.width, opt.height)
+    seen = frustum_masks(cams, heading, tilt, points, tangents, opt.max_distance)
     if not seen.any():
-        return []
-    weights = [np.ones(len(cand))]
-    if facing is not None:
-        f = np.asarray(facing, float)[:2]
-        f = f / max(np.linalg.norm(f), 1e-12)
-        off = cand - np.asarray(box.center[:2], float)
-        cos = (off @ f) / np.maximum(np.linalg.norm(off, axis=1), 1e-9)
-        weights.insert(0, np.maximum(0.05, (1.0 + cos) / 2) ** 2)
-    n_t, n = len(aims), len(points)
-    seen_pairs = seen.reshape(-1, n)  # (C*T, N): pair p = (p // T, p % T)
+        return None
     # Grid cell of every candidate, for its driving distance.
     r_c = np.floor((cand[:, 1] - grid.y0) / grid.resolution).astype(int)
     c_c = np.floor((cand[:, 0] - grid.x0) / grid.resolution).astype(int)
+    return _Candidates(cand, (r_c, c_c), aims, heading, tilt, seen.reshape(-1, len(points)))
 
+
+def _greedy_cover(
+    grid: OccupancyGrid,
+    c: _Candidates,
+    weight: np.ndarray,
+    start_pose: RobotPose,
+    spec: RobotSpec,
+    tm: TimeModel,
+    opt: GazePlanOptions,
+) -> list[Gaze]:
+    """Step 5: greedy weighted set cover by gain per second from the previous gaze."""
+    n_t, n = len(c.aims), c.seen_pairs.shape[1]
+    # Only pairs that see something can ever be chosen; ``live`` (row-major (c, t) order)
+    # shrinks as pairs fall below min_gain.
+    live = np.flatnonzero(c.seen_pairs.any(axis=1))
+    seen_w = c.seen_pairs[live] * np.repeat(weight.astype(np.float32), n_t)[live, None]
+    unit = bool(np.all(weight == 1.0))
+    cov = np.zeros(n, np.float32)  # weighted coverage so far
+    hit = np.zeros(n, bool)  # in some chosen frustum
+    cur = start_pose
     gazes: list[Gaze] = []
-    for weight in weights:  # with the facing preference; if that finds nothing, without it
-        # Only pairs that see something can ever be chosen; ``live`` (row-major (c, t) order)
-        # shrinks as pairs fall below min_gain.
-        live = np.flatnonzero(seen_pairs.any(axis=1))
-        seen_w = seen_pairs[live] * np.repeat(weight.astype(np.float32), n_t)[live, None]
-        unit = bool(np.all(weight == 1.0))
-        cov = np.zeros(n, np.float32)  # weighted coverage so far
-        hit = np.zeros(n, bool)  # in some chosen frustum
-        cur_xy, cur_yaw = np.asarray(start_pose.xy, float), float(start_pose.yaw)
-        cur_pan, cur_tilt = float(start_pose.pan), float(start_pose.tilt)
-        while len(gazes) < max_gazes and hit.mean() < coverage_goal:
-            gain = _gains(seen_w, cov, hit, n, unit)  # (P,)
-            keep = gain >= min_gain
-            if not keep.any():
-                break
-            if not keep.all():
-                live, seen_w, gain = live[keep], seen_w[keep], gain[keep]
-            ci, ti = np.divmod(live, n_t)
-            p_xy = cand[ci]
-            drive = grid.distances_from(cur_xy)[r_c[ci], c_c[ci]]  # metres along the grid
-            moved = np.hypot(*(p_xy - cur_xy).T) > 1e-3
-            arrive = np.where(
-                moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), cur_yaw
-            )
-            t_drive = tm.travel_time(drive) + np.where(moved, tm.turn_times(cur_yaw, arrive), 0.0)
-            pan = wrap_angles(aim_heading[ci, ti] - arrive)
-            pan0 = np.where(moved, 0.0, cur_pan)  # the head is kept while driving
-            t_head = tm.head_times(pan0, cur_tilt, pan, aim_tilt[ci, ti])
-            cost = t_drive + t_head + tm.image_cost
-            best = int(np.argmax(gain / cost**cost_weight))
-            c_i, t_i = int(ci[best]), int(ti[best])
-            xy = cand[c_i]
-            path = plan_path(grid, cur_xy, xy)
-            yaw = cur_yaw
-            if path is not None and len(path) >= 2:
-                seg = path[-1] - path[-2]
-                if np.hypot(*seg) > 1e-9:
-                    yaw = math.atan2(seg[1], seg[0])
-            pan_i, tilt_i = aim(xy, yaw, spec.camera_height, aims[t_i], spec)
-            if (
-                abs(wrap_angle(yaw + pan_i - aim_heading[c_i, t_i])) > 1e-3
-            ):  # pan limit: turn the base
-                yaw, pan_i = float(aim_heading[c_i, t_i]), 0.0
-            gazes.append(
-                Gaze(
-                    RobotPose(float(xy[0]), float(xy[1]), float(yaw), float(pan_i), float(tilt_i)),
-                    aims[t_i].copy(),
-                    coverage=float(gain[best]),
-                    cost=float(cost[best]),
-                    path=path,
-                )
-            )
-            if not unit:
-                cov = np.maximum(cov, seen_w[best])
-            hit |= seen_pairs[live[best]]
-            cur_xy, cur_yaw, cur_pan, cur_tilt = xy, yaw, pan_i, tilt_i
-        if gazes:
+    while len(gazes) < opt.max_gazes and hit.mean() < opt.coverage_goal:
+        gain = _gains(seen_w, cov, hit, n, unit)  # (P,)
+        keep = gain >= opt.min_gain
+        if not keep.any():
             break
+        if not keep.all():
+            live, seen_w, gain = live[keep], seen_w[keep], gain[keep]
+        ci, ti = np.divmod(live, n_t)
+        cost = _pair_costs(grid, c, ci, ti, cur, tm)
+        best = int(np.argmax(gain / cost**opt.cost_weight))
+        gaze = _gaze(grid, c, int(ci[best]), int(ti[best]), cur, spec)
+        gazes.append(replace(gaze, coverage=float(gain[best]), cost=float(cost[best])))
+        if not unit:
+            cov = np.maximum(cov, seen_w[best])
+        hit |= c.seen_pairs[live[best]]
+        cur = gaze.pose
     return gazes
+
+
+def _pair_costs(
+    grid: OccupancyGrid,
+    c: _Candidates,
+    ci: np.ndarray,
+    ti: np.ndarray,
+    cur: RobotPose,
+    tm: TimeModel,
+) -> np.ndarray:
+    """Seconds from pose ``cur`` to the gaze of every (position ci, aim ti) pair: the drive over
+    the grid distance with its turn, the head slew (the head is kept while driving) and the
+    image (the vectorised TimeModel)."""
+    cur_xy = np.asarray(cur.xy, float)
+    p_xy = c.cand[ci]
+    drive = grid.distances_from(cur_xy)[c.cells[0][ci], c.cells[1][ci]]  # metres along the grid
+    moved = np.hypot(*(p_xy - cur_xy).T) > 1e-3
+    arrive = np.where(
+        moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), float(cur.yaw)
+    )
+    t_drive = tm.travel_time(drive) + np.where(moved, tm.turn_times(float(cur.yaw), arrive), 0.0)
+    pan = wrap_angles(c.heading[ci, ti] - arrive)
+    pan0 = np.where(moved, 0.0, float(cur.pan))
+    t_head = tm.head_times(pan0, float(cur.tilt), pan, c.tilt[ci, ti])
+    return t_drive + t_head + tm.image_cost
+
+
+def _gaze(
+    grid: OccupancyGrid, c: _Candidates, c_i: int, t_i: int, cur: RobotPose, spec: RobotSpec
+) -> Gaze:
+    """The gaze of pair (c_i, t_i) reached from ``cur``: the planned path, the heading it
+    arrives with, and the head aimed at the aim point (turning the base beyond the pan limit)."""
+    xy = c.cand[c_i]
+    path = plan_path(grid, np.asarray(cur.xy, float), xy)
+    yaw = float(cur.yaw)
+    if path is not None and len(path) >= 2:
+        seg = path[-1] - path[-2]
+        if np.hypot(*seg) > 1e-9:
+            yaw = math.atan2(seg[1], seg[0])
+    pan, tilt = aim(xy, yaw, spec.camera_height, c.aims[t_i], spec)
+    if abs(wrap_angle(yaw + pan - c.heading[c_i, t_i])) > 1e-3:  # pan limit: turn the base
+        yaw, pan = float(c.heading[c_i, t_i]), 0.0
+    pose = RobotPose(float(xy[0]), float(xy[1]), float(yaw), float(pan), float(tilt))
+    return Gaze(pose, c.aims[t_i].copy(), path=path)
 
 
 def _path_between(path: np.ndarray | None, a: tuple[float, float], b: tuple[float, float]) -> bool:

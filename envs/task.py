@@ -21,7 +21,8 @@ from envs.entities import RoomObjects
 from envs.layout import RoomLayout
 from envs.robot import Robot
 from envs.robot_spec import RobotPose, RobotSpec
-from envs.rooms import door_entry
+from envs.rooms import door_entry, generate_room
+from envs.styles import load_style
 from knowledge.catalog import Catalog, load_catalog
 
 CONTROL_TIMESTEP = 0.05  # s, composer.Environment's agent step (5 physics steps)
@@ -91,9 +92,6 @@ class RoomTask(composer.Task):
     def _next_layout(self) -> RoomLayout:
         if self._fixed_layout is not None:
             return self._fixed_layout
-        from envs.rooms import generate_room
-        from envs.styles import load_style
-
         layout = generate_room(
             load_style(self._style, self._catalog), self._seed + self._episode, self._catalog
         )

@@ -25,6 +25,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from envs.layout import RoomLayout
 from envs.rooms import generate_room
@@ -110,8 +111,6 @@ def ground_truth(
         style = load_style(style, catalog)
     seeds = range(int(seed), int(seed) + int(samples))
     if progress:
-        from tqdm import tqdm
-
         seeds = tqdm(seeds, desc=f"truth {style.name}", unit="room")
     rooms = [room_counts(generate_room(style, s, catalog), catalog) for s in seeds]
     return {

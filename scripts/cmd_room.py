@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     from agent.navigation import OccupancyGrid, nearest_free
     from agent.perception import detect
     from agent.recording import Recorder
-    from agent.viewplan import execute_gaze, plan_gazes
+    from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
     from envs.arena import MAX_IMAGE_SIZE
     from envs.robot_spec import RobotPose
     from envs.rooms import generate_room
@@ -242,12 +242,14 @@ def run(args: argparse.Namespace) -> int:
                 world.pose(),
                 spec,
                 world.time_model,
-                max_distance=3.5,
-                max_gazes=1,
-                min_gain=0.0,
-                cost_weight=0.3,
-                width=args.width,
-                height=args.height,
+                GazePlanOptions(
+                    max_distance=3.5,
+                    max_gazes=1,
+                    min_gain=0.0,
+                    cost_weight=0.3,
+                    width=args.width,
+                    height=args.height,
+                ),
             )
             if not gazes:
                 print(

@@ -544,3 +544,36 @@ def test_resume_replays_an_object_that_could_not_be_examined(tmp_path):
     assert kb_part.n("Lamp") == kb_full.n("Lamp") == 0
     for t in cat.type_names:
         assert kb_full.n(t) == kb_part.n(t) and kb_full.nonzero(t) == kb_part.nonzero(t)
+
+
+@pytest.mark.render
+def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
+    from agent.perception_modes import CameraPerception
+
+    cat = tiny_catalog()
+    room = tiny_room(0)
+    spec = RobotSpec(camera_height=1.0, fovy_deg=70.0)
+    tm = TimeModel(drive_speed=0.2, turn_rate=0.5, pan_rate=0.7, tilt_rate=0.6, image_cost=0.9)
+    cam = CameraPerception(room, cat, spec, tm)
+    try:
+        body = cam.body
+        assert body.spec is spec and body.time_model is tm
+        body.reset_pose(RobotPose(0.0, 0.0, 0.0))
+        frame = body.capture()
+        assert body.sim_time == pytest.approx(0.9)
+        assert frame.camera.fovy_deg == pytest.approx(70.0)
+        assert frame.camera.position[2] == pytest.approx(1.0, abs=0.02)
+        assert body.move_head(0.7, 0.0) == pytest.approx(1.0)  # 0.7 rad at 0.7 rad/s
+    finally:
+        cam.close()
+    # A whole run: halving every rate and doubling the image cost doubles the seconds charged
+    # (the same motions; the camera mode used to charge the default TimeModel whatever it got).
+    base = TimeModel()
+    slow = TimeModel(
+        base.drive_speed / 2, base.turn_rate / 2, base.pan_rate / 2, base.tilt_rate / 2,
+        2 * base.image_cost,
+    )  # fmt: skip
+    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera")
+    s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", time_model=slow)
+    assert s0.examinations == s1.examinations == 4
+    assert s1.sim_s == pytest.approx(2 * s0.sim_s, rel=0.02)
