@@ -240,10 +240,9 @@ def run_episodes(
                         layout,
                         catalog,
                         world,
-                        grid=grid,
+                        maps=S.RoomMaps(grid, seen),
                         probs=probs_for(base, rank),
                         recorder=rec,
-                        seen=seen,
                         policy=name,
                     )
                     res = policy.run(ctx)
@@ -492,10 +491,9 @@ def search_once(
                     layout,
                     catalog,
                     world,
-                    grid=grid,
+                    maps=S.RoomMaps(grid, seen),
                     probs=probs,
                     recorder=rec,
-                    seen=seen,
                     policy=name,
                 )
                 res = S.make_policy(base).run(ctx)

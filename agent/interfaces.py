@@ -60,6 +60,45 @@ class Body(Protocol):
         ...
 
 
+class WrappedBody:
+    """A ``Body`` that forwards everything to another; subclasses change one thing (the replay
+    charges images without taking them, the search meters the path driven)."""
+
+    def __init__(self, body: Body):
+        self._b = body
+        self.spec, self.time_model = body.spec, body.time_model
+        self.width, self.height = body.width, body.height
+
+    @property
+    def sim_time(self) -> float:
+        """The wrapped body's clock."""
+        return self._b.sim_time
+
+    def pose(self) -> RobotPose:
+        """The wrapped body's pose."""
+        return self._b.pose()
+
+    def reset_pose(self, pose: RobotPose) -> None:
+        """Put the wrapped body at ``pose``."""
+        self._b.reset_pose(pose)
+
+    def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
+        """Drive the wrapped body."""
+        return self._b.drive(path, final_yaw)
+
+    def move_head(self, pan: float, tilt: float) -> float:
+        """Move the wrapped body's head."""
+        return self._b.move_head(pan, tilt)
+
+    def capture(self, rgb: bool = False, depth: bool = True) -> Frame | None:
+        """An image from the wrapped body."""
+        return self._b.capture(rgb=rgb, depth=depth)
+
+    def close(self) -> None:
+        """Close the wrapped body."""
+        self._b.close()
+
+
 class Perception(Protocol):
     """What the robot recognizes in an image and which objects an examined object is related
     to, on its ``body``. ``reads_truth``: it needs no image to decide relations (the oracle)."""

@@ -14,13 +14,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from agent.interfaces import Body
+from agent.interfaces import WrappedBody
 from agent.run_state import ROOM_DONE, StoredExam
 from agent.strategies import Strategy
 from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose
 from knowledge.base import KnowledgeBase
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
@@ -110,39 +107,13 @@ def resume_error(layout: RoomLayout, what: str) -> CtxsearchError:
     )
 
 
-class ReplayBody:
+class ReplayBody(WrappedBody):
     """A body whose images are not taken but charged (replayed examinations): it moves the
     wrapped body and charges its time model's ``image_cost`` per capture."""
-
-    def __init__(self, body: Body):
-        self._b = body
-        self.spec, self.time_model = body.spec, body.time_model
-        self.width, self.height = body.width, body.height
-
-    @property
-    def sim_time(self) -> float:
-        """The wrapped body's clock."""
-        return self._b.sim_time
-
-    def pose(self) -> RobotPose:
-        """The wrapped body's pose."""
-        return self._b.pose()
-
-    def reset_pose(self, pose: RobotPose) -> None:
-        """Put the wrapped body at ``pose``."""
-        self._b.reset_pose(pose)
-
-    def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
-        """Drive the wrapped body."""
-        return self._b.drive(path, final_yaw)
-
-    def move_head(self, pan: float, tilt: float) -> float:
-        """Move the wrapped body's head."""
-        return self._b.move_head(pan, tilt)
 
     def capture(self, rgb: bool = False, depth: bool = True) -> None:
         """Charge one image; nothing is rendered."""
         self._b.sim_time += self.time_model.image_cost
 
     def close(self) -> None:
-        """Nothing of its own to release."""
+        """The wrapped body stays open (the room closes it)."""

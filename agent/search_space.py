@@ -123,6 +123,7 @@ class ProbabilitySource:
     """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
 
     name = "none"
+    kb: KnowledgeBase | None = None  # the evidence behind the numbers, where there is one
 
     def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
         """The probability used to rank rel's volume when looking for ``type_name``."""
@@ -595,6 +596,18 @@ class SweepGaze:
     gain: int  # unseen points predicted in the frustum
 
 
+@dataclass(frozen=True)
+class SweepOptions:
+    """How a sweep is laid out: the tilts of each heading, the heading step, and what an image
+    must be predicted to show (``min_gain`` unseen points and ``min_share`` of those unseen
+    around)."""
+
+    tilts: Sequence[float] = SWEEP_TILTS
+    heading_step: float = SWEEP_HEADING_STEP
+    min_gain: int = 8
+    min_share: float = SWEEP_MIN_SHARE
+
+
 def sweep_gazes(
     xy: np.ndarray,
     current_heading: float,
@@ -602,23 +615,21 @@ def sweep_gazes(
     unseen: np.ndarray,
     spec: RobotSpec,
     max_range: float,
-    min_gain: int = 8,
-    tilts: Sequence[float] = SWEEP_TILTS,
-    heading_step: float = SWEEP_HEADING_STEP,
-    min_share: float | None = None,
+    options: SweepOptions | None = None,
 ) -> list[SweepGaze]:
     """The images of a pan/tilt sweep at ``xy`` worth taking, ordered as one turn starting from
     ``current_heading``: each is predicted to show at least ``min_gain`` unseen points within
-    ``max_range`` and ``min_share`` (default ``SWEEP_MIN_SHARE``) of those unseen here, counting
-    the earlier images of the sweep."""
+    ``max_range`` and ``min_share`` of those unseen here, counting the earlier images of the
+    sweep."""
+    opt = options or SweepOptions()
+    min_gain, tilts, heading_step = opt.min_gain, opt.tilts, opt.heading_step
     cam = np.array([xy[0], xy[1], spec.camera_height])
     todo = unseen.copy()
     near = np.linalg.norm(points - cam, axis=1) <= max_range
     todo &= near
     if todo.sum() < min_gain:
         return []
-    share = SWEEP_MIN_SHARE if min_share is None else min_share
-    min_gain = max(min_gain, int(math.ceil(share * todo.sum())))
+    min_gain = max(min_gain, int(math.ceil(opt.min_share * todo.sum())))
     n_h = max(1, int(round(2 * math.pi / heading_step)))
     headings = [current_heading + i * 2 * math.pi / n_h for i in range(n_h)]
     out: list[SweepGaze] = []

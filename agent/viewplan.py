@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
+from agent.interfaces import Body
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from envs.camera import PinholeCamera, frustum_masks, half_fov_tangents
+from envs.camera import Frame, PinholeCamera, frustum_masks, half_fov_tangents
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle, wrap_angles
 from knowledge.catalog import RelationSpec
 from knowledge.geometry import Box, ObjectInstance
@@ -366,8 +366,8 @@ def _path_between(path: np.ndarray | None, a: tuple[float, float], b: tuple[floa
 
 
 def execute_gaze(
-    world: Any, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
-) -> Any:
+    world: Body, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
+) -> Frame | None:
     """Drive to the gaze's base position (a planned path), turn, point the head at its target and
     capture a frame; returns the world's ``Frame``. If the position cannot be reached from where
     the robot stands, the robot looks at the target from where it is.
