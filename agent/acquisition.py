@@ -47,7 +47,6 @@ from agent.exploration import Explorer
 from agent.grid_costs import GridCosts
 from agent.learn_log import RunLog
 from agent.navigation import OccupancyGrid, drive_along, nearest_free
-from agent.perception_modes import make_perception
 from agent.resume import ReplayBody, replayed_related, resume_error
 from agent.run_state import ExamResult, Run, StoredExam, room_rng
 from agent.strategies import Choice
@@ -78,9 +77,7 @@ class RoomLearner:
         self.prior = list(prior)  # stored examinations to replay
         self.grid = OccupancyGrid.from_layout(layout, self.spec)
         self.start_pose = start_pose(layout, self.grid)
-        self.perception = make_perception(
-            run.perception, layout, self.catalog, self.spec, run.time_model, rgb=log.recording
-        )
+        self.perception = run.perception_in(layout, rgb=log.recording)
         self.body = self.perception.body
         self.body.reset_pose(self.start_pose)
         self._t0 = self.body.sim_time

@@ -30,7 +30,14 @@ from agent.acquisition import RoomLearner
 from agent.learn_log import RunLog
 from agent.perception_modes import PERCEPTION_MODES
 from agent.resume import RunHistory
-from agent.run_state import ROOM_DONE, ROOM_STARTED, ChoiceCallback, ExamResult, Run
+from agent.run_state import (
+    ROOM_DONE,
+    ROOM_STARTED,
+    ChoiceCallback,
+    ExamResult,
+    PerceptionFactory,
+    Run,
+)
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from envs.rooms import generate_room
@@ -88,8 +95,9 @@ class LearnConfig:
     spec: RobotSpec = field(default_factory=RobotSpec)
     time_model: TimeModel = field(default_factory=TimeModel)
 
-    def checked(self) -> LearnConfig:
-        """The configuration with the budget as a float; a one-line error for bad values."""
+    def checked(self, own_perception: bool = False) -> LearnConfig:
+        """The configuration with the budget as a float; a one-line error for bad values
+        (``own_perception``: ``perception`` names the caller's own, any name goes)."""
         if self.rooms < 0:
             raise CtxsearchError(f"rooms must be >= 0, got {self.rooms}")
         if self.max_examinations is not None and self.max_examinations < 0:
@@ -106,7 +114,7 @@ class LearnConfig:
                 raise CtxsearchError(
                     f"room budget must be a positive number of seconds, got {budget}"
                 )
-        if self.perception not in PERCEPTION_MODES:
+        if not own_perception and self.perception not in PERCEPTION_MODES:
             raise CtxsearchError(
                 f"unknown perception mode '{self.perception}' "
                 f"(known: {', '.join(PERCEPTION_MODES)})"
@@ -167,12 +175,15 @@ def learn(
     layouts: LayoutFn | None = None,
     on_examination: ExamCallback | None = None,
     on_choice: ChoiceCallback | None = None,
+    perceive: PerceptionFactory | None = None,
 ) -> Summary:
     """Run learn-spatial-contexts (Figure 2) over ``config.rooms`` rooms of ``config.style``.
 
     ``layouts`` replaces the room generator (tests); ``on_examination(result, kb)`` is called
     after every examination, replayed ones included, and ``on_choice(kb, choice)`` after every
-    choice, before the examination (benchmarks). Ctrl-C ends the call at once (the examination
+    choice, before the examination (benchmarks). ``perceive(layout, catalog, spec, time_model,
+    rgb)`` gives the robot's agent.interfaces ``Perception`` in a room, for a perception of one's
+    own (``config.perception`` is then only its name in the run key). Ctrl-C ends the call at once (the examination
     in flight is lost) with ``Summary.interrupted`` set.
 
     The run clock (``sim_time`` in the store) runs on from room to room. A room done in an
@@ -180,7 +191,7 @@ def learn(
     takes its clock from its stored examinations, so a resumed run's clock equals an
     uninterrupted one's (agent.resume).
     """
-    config = config.checked()
+    config = config.checked(own_perception=perceive is not None)
     strategy = strat.make_strategy(config.strategy)
     catalog = catalog or load_catalog()
     style = config.style
@@ -195,7 +206,7 @@ def learn(
         history = RunHistory.load(store, rid, style, kb, strategy)
         run = Run(catalog, kb, store, strategy, config.perception, style, config.seed, rid,
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
-                  on_choice=on_choice)  # fmt: skip
+                  on_choice=on_choice, perceive=perceive)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):

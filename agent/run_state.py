@@ -11,7 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agent.interfaces import Perception
+from agent.perception_modes import make_perception
 from agent.strategies import Choice, Strategy
+from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
@@ -22,6 +25,8 @@ ROOM_DONE = "done"
 ROOM_STARTED = "started"
 
 ChoiceCallback = Callable[[KnowledgeBase, Choice], None]
+# (layout, catalog, spec, time model, render RGB) -> the robot's perception in that room
+PerceptionFactory = Callable[[RoomLayout, Catalog, RobotSpec, TimeModel, bool], Perception]
 
 
 def room_rng(seed: int, index: int) -> np.random.Generator:
@@ -66,7 +71,7 @@ class Run:
     kb: KnowledgeBase
     store: EvidenceStore
     strategy: Strategy
-    perception: str  # the perception mode (agent.perception_modes)
+    perception: str  # the perception mode's name (agent.perception_modes, or the user's)
     style: str
     seed: int
     run: str  # the store's run key
@@ -77,3 +82,11 @@ class Run:
     sim_new: float = 0.0  # simulated seconds of new (not replayed) work in this call
     room_budget_s: float | None = None  # simulated seconds per room (None: each to completion)
     on_choice: ChoiceCallback | None = None  # before each examination
+    perceive: PerceptionFactory | None = None  # None: the mode ``perception`` names
+
+    def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
+        """The robot's perception (and body) in the room ``layout``."""
+        if self.perceive is not None:
+            return self.perceive(layout, self.catalog, self.spec, self.time_model, rgb)
+        return make_perception(self.perception, layout, self.catalog, self.spec,
+                               self.time_model, rgb=rgb)  # fmt: skip

@@ -22,7 +22,8 @@ from knowledge.geometry import ObjectInstance
 
 def learn(*args, **kw):
     """``learning.learn`` with the configuration's fields and the hooks as keywords."""
-    hooks = {k: kw.pop(k) for k in ("catalog", "layouts", "on_examination", "on_choice") if k in kw}
+    names = ("catalog", "layouts", "on_examination", "on_choice", "perceive")
+    hooks = {k: kw.pop(k) for k in names if k in kw}
     return learning.learn(LearnConfig(*args, **kw), **hooks)
 
 
@@ -577,3 +578,35 @@ def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
     s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", time_model=slow)
     assert s0.examinations == s1.examinations == 4
     assert s1.sim_s == pytest.approx(2 * s0.sim_s, rel=0.02)
+
+
+def test_a_perception_of_ones_own_plugs_into_learn(tmp_path):
+    """Any agent.interfaces Perception works: here the oracle's, wrapped to count its calls."""
+
+    class Counting:
+        name, reads_truth, last_detections = "mine", True, ()
+
+        def __init__(self, layout, catalog, spec, time_model, rgb):
+            self._inner = OraclePerception(layout, catalog, spec, time_model)
+            self.body = self._inner.body
+            self.calls = calls
+
+        def see(self, frame):
+            self.calls["see"] += 1
+            return self._inner.see(frame)
+
+        def related(self, obj, seen):
+            self.calls["related"] += 1
+            return self._inner.related(obj, seen)
+
+        def close(self):
+            self._inner.close()
+
+    calls = {"see": 0, "related": 0}
+    mine, _ = _learn(tmp_path, "mine.sqlite", perception="mine", perceive=Counting)
+    oracle, _ = _learn(tmp_path, "oracle.sqlite")
+    assert mine.run == "hif/mine/seed=0" and mine.examinations == oracle.examinations == 4
+    assert calls["related"] == 4 and calls["see"] >= 6  # one look-around at least
+    assert mine.sim_s == oracle.sim_s
+    with pytest.raises(CtxsearchError, match="unknown perception mode 'mine'"):
+        _learn(tmp_path, "no.sqlite", perception="mine")
