@@ -40,9 +40,6 @@ class LoggedRoom(Protocol):
         ...
 
 
-RoomLearner = LoggedRoom  # the name the methods below use
-
-
 class RunLog:
     """What a run writes to rerun (agent.recording.Recorder), one recording per room.
 
@@ -67,7 +64,7 @@ class RunLog:
         """True while a room's recording is open: render RGB and look at every image."""
         return self.rec is not None
 
-    def start_room(self, L: RoomLearner) -> None:
+    def start_room(self, L: LoggedRoom) -> None:
         """Open the room's recording and log the room, its start and the knowledge so far."""
         if self.path is None:
             return
@@ -89,7 +86,7 @@ class RunLog:
         self.robot(L)
         self.knowledge(L)
 
-    def end_room(self, L: RoomLearner, n_exams: int) -> None:
+    def end_room(self, L: LoggedRoom, n_exams: int) -> None:
         """Close the room's recording."""
         if self.rec is None:
             return
@@ -102,7 +99,7 @@ class RunLog:
         self.rec.close()
         self.rec = None
 
-    def robot(self, L: RoomLearner) -> None:
+    def robot(self, L: LoggedRoom) -> None:
         """The robot's base pose and path, and where the head points (camera pose)."""
         if self.rec is None:
             return
@@ -112,7 +109,7 @@ class RunLog:
         self.rec.log_camera(Shot(camera_at(pose, L.spec)))
 
     def frame(
-        self, L: RoomLearner, frame: Frame | None, objs: Sequence[ObjectInstance], purpose: str
+        self, L: LoggedRoom, frame: Frame | None, objs: Sequence[ObjectInstance], purpose: str
     ) -> None:
         """One image: the camera pinhole, RGB and segmentation (camera mode), detections."""
         if self.rec is None:
@@ -130,7 +127,7 @@ class RunLog:
                 level="DEBUG",
             )
 
-    def choice(self, L: RoomLearner, choice: Choice) -> None:
+    def choice(self, L: LoggedRoom, choice: Choice) -> None:
         """The decision of lines 8-13 with every candidate type's score."""
         if self.rec is None:
             return
@@ -144,7 +141,7 @@ class RunLog:
             f"(object #{choice.obj.id}) among {n_unex} unexamined; scores: {scores}"
         )
 
-    def examine_start(self, L: RoomLearner, obj: ObjectInstance, gazes: Sequence[Gaze]) -> None:
+    def examine_start(self, L: LoggedRoom, obj: ObjectInstance, gazes: Sequence[Gaze]) -> None:
         """Highlight the examined object's relation volumes and show its planned gazes."""
         if self.rec is None:
             return
@@ -167,7 +164,7 @@ class RunLog:
             level="DEBUG",
         )
 
-    def examination(self, L: RoomLearner, res: ExamResult) -> None:
+    def examination(self, L: LoggedRoom, res: ExamResult) -> None:
         """The examination's outcome and the knowledge's new state."""
         if self.rec is None:
             return
@@ -176,14 +173,14 @@ class RunLog:
         self.rec.log_text(f"{res.choice.obj.type} #{res.choice.obj.id}: {found}")
         self.knowledge(L)
 
-    def text(self, L: RoomLearner, msg: str) -> None:
+    def text(self, L: LoggedRoom, msg: str) -> None:
         """A line in the text log."""
         if self.rec is None:
             return
         self.rec.set_time(L.clock, self._step)
         self.rec.log_text(msg, level="WARN")
 
-    def knowledge(self, L: RoomLearner) -> None:
+    def knowledge(self, L: LoggedRoom) -> None:
         """Time series: mean interval width and n per type."""
         if self.rec is None:
             return

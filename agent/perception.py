@@ -24,11 +24,10 @@ import functools
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from envs.camera import focal_length
+from envs.camera import Frame, focal_length
 from envs.layout import RoomLayout
 from knowledge.catalog import Catalog
 from knowledge.geometry import ObjectInstance
@@ -142,7 +141,7 @@ def objects_by_id(
 
 
 def detect(
-    frame: Any,
+    frame: Frame,
     layout_or_objects: RoomLayout | Iterable[ObjectInstance] | Mapping[int, ObjectInstance],
     catalog: Catalog,
 ) -> list[Detection]:

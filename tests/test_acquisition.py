@@ -610,3 +610,9 @@ def test_a_perception_of_ones_own_plugs_into_learn(tmp_path):
     assert mine.sim_s == oracle.sim_s
     with pytest.raises(CtxsearchError, match="unknown perception mode 'mine'"):
         _learn(tmp_path, "no.sqlite", perception="mine")
+
+
+def test_a_huge_room_count_builds_nothing_up_front(tmp_path):
+    # Room seeds are made as the run reaches them: asking for 10**12 rooms costs nothing more.
+    s, _ = _learn(tmp_path, rooms=10**12, max_examinations=2)
+    assert s.examinations == 2 and s.rooms == 0 and s.rooms_done_now == 0
