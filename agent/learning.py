@@ -38,10 +38,9 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
-from envs.rooms import generate_room
-from envs.styles import load_style
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
@@ -65,9 +64,9 @@ def run_id(strategy: str, perception: str, seed: int, room_budget_s: float | Non
 
 
 def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
-    """The style's name and its room generator."""
-    st = load_style(style, catalog)
-    return st.name, lambda index, seed: generate_room(st, seed, catalog)
+    """The style's name and its world generator (a room style's rooms or a house style's houses)."""
+    st = resolve_style(style, catalog)
+    return st.name, lambda index, seed: generate_layout(st, seed, catalog)
 
 
 # =========================================================================== configuration

@@ -51,6 +51,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from agent.interfaces import Body
+from envs.floorplan import wall_obstacles
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
 from knowledge.geometry import Box
@@ -294,9 +295,11 @@ class OccupancyGrid:
 
 
 def obstacle_boxes(layout: RoomLayout, spec: RobotSpec | None = None) -> list[Box]:
-    """The bounding boxes that block the robot: every object whose bottom is below the head."""
+    """The bounding boxes that block the robot: every object whose bottom is below the head,
+    and a house's interior walls."""
     spec = spec or RobotSpec()
-    return [o.box() for o in layout.objects if o.bottom < spec.camera_height]
+    walls = wall_obstacles(layout)
+    return walls + [o.box() for o in layout.objects if o.bottom < spec.camera_height]
 
 
 def nearest_free(

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from envs.camera import Frame, PinholeCamera, intrinsics
+from envs.floorplan import wall_boxes as house_wall_boxes
 from envs.layout import RoomLayout
 from envs.parts import world_parts
 from envs.robot_spec import RobotPose, RobotSpec
@@ -66,7 +67,14 @@ class Shot:
 
 
 def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
-    """The room's walls as boxes standing just outside its boundary, the door left open."""
+    """The room's walls as boxes standing just outside its boundary, the door left open (a
+    house: its outer and interior walls, the door openings left open)."""
+    if layout.is_house:
+        return [
+            Box(np.array(c, float), 0.0, np.array(hf, float))
+            for name, c, hf in house_wall_boxes(layout, thickness)
+            if not name.endswith("lintel")
+        ]
     w, d, h = layout.width, layout.depth, layout.height
     t = thickness
     # (wall, centre of the wall line, direction along the wall, length)

@@ -3,6 +3,10 @@
 Room frame as in ``envs/layout.py``: the floor is z = 0 and the room spans x in [-w/2, w/2], y in
 [-d/2, d/2]. Walls stand just outside that boundary (the interior is exactly the layout's room).
 
+A house (``layout.is_house``) gets its walls from ``envs.floorplan.wall_boxes`` (outer and
+interior walls, a gap and a lintel at every door), one floor per room in its style's colour, one
+ceiling and a dim light over each of the largest rooms.
+
 Geom groups: the floor and walls are group ``ROOM_GEOM_GROUP`` (0); the ceiling and the lintel
 over the door are group ``OVERHEAD_GEOM_GROUP`` (3), which the head camera shows and the top-down
 overview hides (so the map shows the door gap). Lights
@@ -17,11 +21,13 @@ step.
 from __future__ import annotations
 
 import os
+import zlib
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
 
 from dm_control import composer, mjcf
 
+from envs.floorplan import wall_boxes as house_wall_boxes
 from envs.layout import RoomLayout
 
 ROOM_GEOM_GROUP = 0
@@ -30,6 +36,9 @@ WALL_THICKNESS = 0.1  # m
 DOOR_HEIGHT = 2.1  # m
 PHYSICS_TIMESTEP = 0.01  # s
 MAX_IMAGE_SIZE = (1280, 960)  # off-screen framebuffer (width, height): the largest image rendered
+# OpenGL's fixed pipeline has 8 lights and MuJoCo's headlight is one of them: the three key
+# lights plus one per room, largest rooms first (an 8th light fails the context with GL error 0x500).
+MAX_LIGHTS = 7
 VIEW_EXTENT = 10.0  # m: fixed model extent, so znear/zfar below are metric and room-independent
 
 _FLOOR_RGB = ((0.62, 0.58, 0.52), (0.56, 0.52, 0.47))
@@ -135,6 +144,10 @@ class RoomArena(composer.Arena):
             el.remove()
         self._shell = []
         self._layout = layout
+        if layout.is_house:
+            self._set_house(layout)
+            return
+        self._floor.pos = None
         hw, hd, h = layout.width / 2, layout.depth / 2, layout.height
         self._floor.size = [hw + WALL_THICKNESS, hd + WALL_THICKNESS, 0.1]
         for light in self._lights:
@@ -165,6 +178,133 @@ class RoomArena(composer.Arena):
                 group=OVERHEAD_GEOM_GROUP,
             )
         )
+
+    def _set_house(self, layout: RoomLayout) -> None:
+        """The shell of a house: the outer and interior walls with their door openings (lintels
+        overhead), one floor per room in its style's colour, one ceiling, a dim light per room.
+
+        Kept cheap: every wall run between two openings is one box, the ceiling is one box,
+        and the per-room lights are few (see ``MAX_LIGHTS``)."""
+        hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, WALL_THICKNESS
+        root = self._mjcf_root
+        wb = root.worldbody
+        # The rooms' floors cover the whole plan (under the walls too); the base floor is not
+        # needed: shrunk out of sight (drawing a plane costs in proportion to its area).
+        self._floor.size = [0.01, 0.01, 0.1]
+        self._floor.pos = [0, 0, -0.01]
+        for light in self._lights:
+            light.pos = [0, 0, h]
+        for name, center, half in house_wall_boxes(layout, t, DOOR_HEIGHT):
+            group = OVERHEAD_GEOM_GROUP if name.endswith("lintel") else ROOM_GEOM_GROUP
+            self._shell.append(
+                wb.add(
+                    "geom",
+                    name=name,
+                    type="box",
+                    pos=center,
+                    size=half,
+                    rgba=_WALL_RGBA,
+                    group=group,
+                )
+            )
+        materials: dict[str, mjcf.Element] = {}
+        for room in layout.rooms:
+            if room.style not in materials:
+                rgb = _room_floor_rgb(room.style)
+                k = len(materials)
+                tex = root.asset.add(
+                    "texture",
+                    name=f"house_floor{k}",
+                    type="2d",
+                    builtin="checker",
+                    width=64,
+                    height=64,
+                    rgb1=rgb,
+                    rgb2=[0.92 * c for c in rgb],
+                    mark="edge",
+                    markrgb=[0.8 * c for c in rgb],
+                )
+                mat = root.asset.add(
+                    "material",
+                    name=f"house_floor{k}",
+                    texture=tex,
+                    texrepeat=[1, 1],
+                    texuniform=True,
+                    reflectance=0.0,
+                    specular=0.1,
+                )
+                self._shell += [tex, mat]
+                materials[room.style] = mat
+            x0, y0, x1, y1 = _floor_rect(room.outline, hw, hd, t)
+            self._shell.append(
+                wb.add(
+                    "geom",
+                    name=f"floor_room{room.index}",
+                    type="plane",
+                    pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0],
+                    size=[(x1 - x0) / 2, (y1 - y0) / 2, 0.1],
+                    material=materials[room.style],
+                    group=ROOM_GEOM_GROUP,
+                )
+            )
+        largest = sorted(layout.rooms, key=lambda r: -r.area)[: MAX_LIGHTS - len(self._lights)]
+        for room in sorted(largest, key=lambda r: r.index):
+            cx, cy = room.center
+            self._shell.append(
+                wb.add(
+                    "light",
+                    name=f"room_light{room.index}",
+                    directional=False,
+                    castshadow=False,
+                    pos=[cx, cy, h - 0.3],
+                    dir=[0, 0, -1],
+                    diffuse=[0.12] * 3,
+                    specular=[0.0] * 3,
+                    attenuation=[1.0, 0.05, 0.0],
+                )
+            )
+        self._shell.append(
+            wb.add(
+                "geom",
+                name="ceiling",
+                type="box",
+                pos=[0, 0, h + t / 2],
+                size=[hw + t, hd + t, t / 2],
+                rgba=_CEILING_RGBA,
+                group=OVERHEAD_GEOM_GROUP,
+            )
+        )
+
+
+def _floor_rect(
+    outline: tuple[float, float, float, float], hw: float, hd: float, t: float
+) -> tuple[float, float, float, float]:
+    """A room's floor: its outline grown to the centre line of each inner wall (so neighbouring
+    floors meet under the wall and fill its door openings) and under the outer walls."""
+    x0, y0, x1, y1 = outline
+    e = 1e-6
+    return (
+        x0 - (t if x0 < -hw + e else t / 2),
+        y0 - (t if y0 < -hd + e else t / 2),
+        x1 + (t if x1 > hw - e else t / 2),
+        y1 + (t if y1 > hd - e else t / 2),
+    )
+
+
+def _room_floor_rgb(style: str) -> list[float]:
+    """A floor colour per room style: the common ones by name, others from the name's hash."""
+    known = {
+        "kitchen": (0.78, 0.78, 0.74),
+        "living_room": (0.62, 0.48, 0.34),
+        "bedroom": (0.70, 0.58, 0.44),
+        "office": (0.50, 0.55, 0.60),
+        "biology_lab": (0.80, 0.84, 0.82),
+        "corridor": (0.58, 0.56, 0.52),
+    }
+    if style in known:
+        return list(known[style])
+    h = zlib.crc32(style.encode("utf-8"))
+    return [0.45 + 0.35 * ((h >> s) & 0xFF) / 255 for s in (0, 8, 16)]
 
 
 def _wall_boxes(layout: RoomLayout) -> list[tuple[str, list[float], list[float]]]:

@@ -1,7 +1,11 @@
-"""RoomLayout: a generated room as pure data (no MuJoCo).
+"""RoomLayout: a generated room or house as pure data (no MuJoCo).
 
 Room frame: the floor is z = 0, the room spans x in [-width/2, width/2] and y in
 [-depth/2, depth/2] (origin at the room's centre). Walls stand on the boundary.
+
+A house (``envs.floorplan.generate_house``) is the same type: ``width`` x ``depth`` is its whole
+footprint (origin at its centre), ``door`` its entrance in the outer wall, and ``rooms``,
+``doors`` and ``room_of`` say which furnished room holds what. A single room has none of them.
 """
 
 from __future__ import annotations
@@ -22,6 +26,41 @@ class Door:
 
 
 @dataclass(frozen=True)
+class Room:
+    """One room of a house: its index, its room style's name (``corridor``: a hall with no
+    furniture) and its interior outline, an axis-aligned rectangle (x0, y0, x1, y1) in house
+    coordinates (interior walls stand around it)."""
+
+    index: int
+    style: str
+    outline: tuple[float, float, float, float]
+
+    @property
+    def center(self) -> tuple[float, float]:
+        """The outline's centre (x, y)."""
+        x0, y0, x1, y1 = self.outline
+        return (x0 + x1) / 2, (y0 + y1) / 2
+
+    @property
+    def area(self) -> float:
+        """Interior floor area (m^2)."""
+        x0, y0, x1, y1 = self.outline
+        return (x1 - x0) * (y1 - y0)
+
+
+@dataclass(frozen=True)
+class Passage:
+    """A door of a house: the two rooms it joins (``rooms[1] == -1``: the entrance, to the
+    outside), the opening's centre (x, y) on its wall's centre line, the direction the wall runs
+    (``axis`` 'x' or 'y') and the opening's width (m)."""
+
+    rooms: tuple[int, int]
+    center: tuple[float, float]
+    axis: str
+    width: float
+
+
+@dataclass(frozen=True)
 class RoomLayout:
     """A furnished room: its size, door and every object instance (furniture and small objects).
 
@@ -29,6 +68,9 @@ class RoomLayout:
     ``placed_by`` maps an object's id to the (reference id, relation) of the placement rule that
     put it there, where one did (clutter has none). Both are ground truth: the robot never reads
     them.
+
+    For a house, ``rooms`` are its rooms, ``doors`` every opening between them (and the entrance)
+    and ``room_of`` maps every object's id to the index of the room it stands in.
     """
 
     style: str
@@ -40,6 +82,14 @@ class RoomLayout:
     objects: tuple[ObjectInstance, ...]
     support: dict[int, int | None] = field(default_factory=dict)
     placed_by: dict[int, tuple[int, str]] = field(default_factory=dict)
+    rooms: tuple[Room, ...] = ()
+    doors: tuple[Passage, ...] = ()
+    room_of: dict[int, int] = field(default_factory=dict)
+
+    @property
+    def is_house(self) -> bool:
+        """True for a multi-room house (``rooms`` given), False for a single room."""
+        return bool(self.rooms)
 
     def by_id(self, obj_id: int) -> ObjectInstance:
         """The object with instance id ``obj_id``."""

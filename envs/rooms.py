@@ -4,7 +4,9 @@ Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32
 so the same (style, seed) always gives the same layout, on any machine.
 
 Order of work:
-1. Room size and door (a gap in one wall; about 1 m in front of it stays free).
+1. Room size and door (a gap in one wall; about 1 m in front of it stays free). A room of a house
+   gets both from a ``RoomShell`` instead (its size in the plan and all its doors: the front of
+   every door stays free and they all lie in the one free region).
 2. Furniture from ``[furniture]``, largest first, on the floor: desks, shelves, cabinets,
    counters, beds and (often) sofas with their back to a wall and their front facing the room;
    tables and chairs free-standing. Furniture bounding boxes never overlap.
@@ -96,16 +98,40 @@ class _Obstacle:
     reach_mask: np.ndarray | None  # cells from which the robot can look at it (furniture only)
 
 
+@dataclass(frozen=True)
+class RoomShell:
+    """A room's given size and doors (a room of a house): the generator then draws neither.
+    Every door's entry is kept free and all of them lie in the one free region."""
+
+    width: float
+    depth: float
+    height: float
+    doors: tuple[Door, ...]
+
+
 class _Builder:
     """Mutable state while one room is being generated."""
 
-    def __init__(self, style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec):
+    def __init__(
+        self,
+        style: Style,
+        catalog: Catalog,
+        rng: np.random.Generator,
+        robot: RobotSpec,
+        shell: RoomShell | None = None,
+    ):
         self.style, self.catalog, self.rng = style, catalog, rng
         self.clear = robot.clearance
-        self.width = float(rng.uniform(*style.width))
-        self.depth = float(rng.uniform(*style.depth))
-        self.height = float(rng.uniform(*style.height))
-        self.door = self._draw_door()
+        if shell is None:
+            self.width = float(rng.uniform(*style.width))
+            self.depth = float(rng.uniform(*style.depth))
+            self.height = float(rng.uniform(*style.height))
+            self.door = self._draw_door()
+            self.doors: tuple[Door, ...] = (self.door,)
+        else:
+            self.width, self.depth, self.height = shell.width, shell.depth, shell.height
+            self.doors = shell.doors
+            self.door = shell.doors[0]
         self.objects: list[ObjectInstance] = []
         self.support: dict[int, int | None] = {}
         self.placed_by: dict[int, tuple[int, str]] = {}
@@ -126,9 +152,14 @@ class _Builder:
         )
         self.dmin = np.full(self.gx.shape, np.inf)
         self.obstacles: list[_Obstacle] = []
-        ex, ey = self._door_entry()
-        self.entry_cell = (int(np.argmin(np.abs(xs - ex))), int(np.argmin(np.abs(ys - ey))))
-        self.door_box = self._door_zone()
+        self.entry_cells = []
+        for door in self.doors:
+            ex, ey = self._door_entry(door)
+            self.entry_cells.append(
+                (int(np.argmin(np.abs(xs - ex))), int(np.argmin(np.abs(ys - ey))))
+            )
+        self.entry_cell = self.entry_cells[0]
+        self.door_boxes = [self._door_zone(door) for door in self.doors]
 
     # -- room shell -------------------------------------------------------------------------
     def _draw_door(self) -> Door:
@@ -156,13 +187,13 @@ class _Builder:
             return along, y0 + ny * inset
         return x0 + nx * inset, along
 
-    def _door_entry(self) -> tuple[float, float]:
-        return self._wall_point(self.door.wall, self.door.center, 0.6)
+    def _door_entry(self, door: Door) -> tuple[float, float]:
+        return self._wall_point(door.wall, door.center, 0.6)
 
-    def _door_zone(self) -> Box:
-        cx, cy = self._wall_point(self.door.wall, self.door.center, DOOR_KEEP / 2)
-        half_along = self.door.width / 2 + 0.15
-        if self.door.wall in ("north", "south"):
+    def _door_zone(self, door: Door) -> Box:
+        cx, cy = self._wall_point(door.wall, door.center, DOOR_KEEP / 2)
+        half_along = door.width / 2 + 0.15
+        if door.wall in ("north", "south"):
             half = (half_along, DOOR_KEEP / 2, 5.0)
         else:
             half = (DOOR_KEEP / 2, half_along, 5.0)
@@ -218,7 +249,7 @@ class _Builder:
         )
 
     def in_door_zone(self, obj: ObjectInstance) -> bool:
-        return box_overlap(obj.box(), self.door_box)
+        return any(box_overlap(obj.box(), zone) for zone in self.door_boxes)
 
     def add(
         self,
@@ -256,13 +287,16 @@ class _Builder:
         return _Obstacle(obj, dist, reach)
 
     def free_space_ok(self, extra: _Obstacle | None = None) -> bool:
-        """Is the robot's free space one region holding the door entry, reaching all furniture?"""
+        """Is the robot's free space one region holding every door's entry, reaching all
+        furniture?"""
         dmin = self.dmin if extra is None else np.minimum(self.dmin, extra.dist)
         free = self.wall_free & (dmin > self.clear + GRID_SLACK)
-        if not free[self.entry_cell]:
+        if not all(free[c] for c in self.entry_cells):
             return False
         labels, n = ndimage.label(free)
         main = labels[self.entry_cell]
+        if any(labels[c] != main for c in self.entry_cells[1:]):
+            return False
         if n > 1:
             sizes = np.bincount(labels.ravel(), minlength=n + 1)
             sizes[0] = 0
@@ -508,9 +542,14 @@ def _furniture_order(style: Style, catalog: Catalog, rng: np.random.Generator) -
 
 
 def _build(
-    style: Style, catalog: Catalog, rng: np.random.Generator, robot: RobotSpec, strict: bool
+    style: Style,
+    catalog: Catalog,
+    rng: np.random.Generator,
+    robot: RobotSpec,
+    strict: bool,
+    shell: RoomShell | None = None,
 ) -> _Builder | None:
-    b = _Builder(style, catalog, rng, robot)
+    b = _Builder(style, catalog, rng, robot, shell)
     placed: dict[str, int] = {}
     for tname in _furniture_order(style, catalog, rng):
         if b.place_furniture(tname):
@@ -547,15 +586,20 @@ def door_entry(layout: RoomLayout, inset: float = 0.6) -> tuple[float, float, fl
 
 
 def generate_room(
-    style: Style, seed: int, catalog: Catalog | None = None, robot: RobotSpec | None = None
+    style: Style,
+    seed: int,
+    catalog: Catalog | None = None,
+    robot: RobotSpec | None = None,
+    shell: RoomShell | None = None,
 ) -> RoomLayout:
-    """A furnished room of ``style``, the same for the same (style, seed)."""
+    """A furnished room of ``style``, the same for the same (style, seed, shell). With ``shell``
+    (a room of a house) its size and doors are given instead of drawn."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name)])
     b = None
     for attempt in range(MAX_ROOM_ATTEMPTS):
-        b = _build(style, catalog, rng, robot, strict=attempt < MAX_ROOM_ATTEMPTS - 1)
+        b = _build(style, catalog, rng, robot, attempt < MAX_ROOM_ATTEMPTS - 1, shell)
         if b is not None:
             break
     assert b is not None

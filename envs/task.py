@@ -18,11 +18,11 @@ from dm_control import composer, mjcf
 
 from envs.arena import PHYSICS_TIMESTEP, RoomArena
 from envs.entities import RoomObjects
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot import Robot
 from envs.robot_spec import RobotPose, RobotSpec
-from envs.rooms import door_entry, generate_room
-from envs.styles import load_style
+from envs.rooms import door_entry
 from knowledge.catalog import Catalog, load_catalog
 
 CONTROL_TIMESTEP = 0.05  # s, composer.Environment's agent step (5 physics steps)
@@ -92,8 +92,8 @@ class RoomTask(composer.Task):
     def _next_layout(self) -> RoomLayout:
         if self._fixed_layout is not None:
             return self._fixed_layout
-        layout = generate_room(
-            load_style(self._style, self._catalog), self._seed + self._episode, self._catalog
+        layout = generate_layout(
+            resolve_style(self._style, self._catalog), self._seed + self._episode, self._catalog
         )
         self._episode += 1
         return layout

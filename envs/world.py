@@ -36,6 +36,7 @@ from dm_control import mjcf
 
 from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
 from envs.camera import Frame, PinholeCamera
+from envs.house_view import RoomCulling
 from envs.layout import RoomLayout
 from envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
@@ -211,6 +212,9 @@ class World:
         self._act = self.physics.bind(robot.actuators).element_id.astype(int)
         self._cam_id = int(self.physics.bind(robot.camera).element_id)
         self._geom_instance = self.task.objects.geom_instance_ids(self.physics)
+        self._culling = (
+            RoomCulling(layout, self._m.geom_rgba, self._geom_instance) if layout.is_house else None
+        )
         self._m.light_castshadow[:] = 1 if shadows else 0
         self._head_option = mujoco.MjvOption()
         self._head_option.geomgroup[ROBOT_GEOM_GROUP] = 0
@@ -318,7 +322,19 @@ class World:
         """An image from the head camera at the robot's actual pose: instance ids always, depth
         and RGB as asked. Charges ``TimeModel.image_cost``."""
         r = self._renderer(self.width, self.height)
-        r.update_scene(self._d, self._cam_id, self._head_option)
+        if self._culling is not None:  # a house: leave out the rooms the camera cannot see
+            self._culling.hide(
+                self._d.cam_xpos[self._cam_id],
+                self._d.cam_xmat[self._cam_id],
+                float(self._m.cam_fovy[self._cam_id]),
+                self.width,
+                self.height,
+            )
+        try:
+            r.update_scene(self._d, self._cam_id, self._head_option)
+        finally:
+            if self._culling is not None:
+                self._culling.restore()
         ids, dep = r.render_ids_depth(self._geom_instance, depth)
         color = r.render_rgb() if rgb else None
         self.sim_time += self.time_model.image_cost

@@ -1,7 +1,8 @@
 """The object-type catalog: types, their sizes, detectability and relation volumes (paper, 2.2).
 
 A catalog is a TOML file (default ``assets/types.toml``) holding an array of ``[[type]]`` tables,
-each with an array of ``[[type.relation]]`` tables.
+each with an array of ``[[type.relation]]`` tables, and optionally ``[[class]]`` tables: abstract
+classes over the types (format and meaning in ``knowledge/hierarchy.py``).
 
 Object frame (ROS REP 103): the origin is the centre of the object's bounding box, local +x is the
 object's FRONT, +y its LEFT (as seen by the object looking out of its front), +z is up. ``size`` is
@@ -30,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from knowledge.errors import CatalogError
+from knowledge.hierarchy import Hierarchy, parse_hierarchy
 
 ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_CATALOG = ASSETS_DIR / "types.toml"
@@ -117,6 +119,8 @@ class Catalog:
 
     types: tuple[ObjectType, ...]
     path: str = "<memory>"
+    # Abstract classes over the types (knowledge/hierarchy.py); not part of the fingerprint.
+    hierarchy: Hierarchy = field(default_factory=Hierarchy, compare=False)
     _by_name: dict[str, ObjectType] = field(init=False, repr=False, compare=False)
     _rel_by_name: dict[str, RelationSpec] = field(init=False, repr=False, compare=False)
 
@@ -287,7 +291,7 @@ def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> Re
 def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
     """Validate a parsed TOML document and build a Catalog; CatalogError on any problem."""
     path = Path(path) if not isinstance(path, Path) else path
-    unknown_top = set(doc) - {"type", "schema"}
+    unknown_top = set(doc) - {"type", "schema", "class"}
     if unknown_top:
         raise CatalogError(path, f"unknown top-level field(s) {sorted(unknown_top)}")
     raw_types = doc.get("type")
@@ -375,7 +379,8 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
                 relations=tuple(rels),
             )
         )
-    return Catalog(types=tuple(types), path=str(path))
+    hierarchy = parse_hierarchy(doc.get("class"), {t.name: t.relation_names for t in types}, path)
+    return Catalog(types=tuple(types), path=str(path), hierarchy=hierarchy)
 
 
 def load_catalog(path: str | Path | None = None) -> Catalog:

@@ -2,7 +2,8 @@
 
 Each sub-command lives in its own thin module ``scripts/cmd_<name>.py`` exposing
 ``register(subparsers)`` (and, for benchmarks, ``register_bench(bench_subparsers)``); handlers
-import heavy modules (MuJoCo, rerun) lazily so ``ctxsearch kb show`` starts fast.
+import heavy modules (MuJoCo, dm_control, rerun, scipy) lazily, so building the parser for
+``ctxsearch --help`` or ``ctxsearch kb show`` does not load them.
 
 Errors a user can fix (bad files, unknown names, incompatible stores) are CtxsearchError: they
 print one line, ``ctxsearch: error: ...``, and exit with code 2. Ctrl-C exits with 130.
@@ -14,6 +15,8 @@ import argparse
 import importlib
 import os
 import sys
+
+from knowledge.errors import CtxsearchError
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
@@ -56,8 +59,6 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ctxsearch`` console script."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
-    from knowledge.errors import CtxsearchError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

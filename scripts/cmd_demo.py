@@ -41,15 +41,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch demo``."""
-    from agent.demo import run_demo
+    # Imported here: the demo pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.demo import DemoConfig, run_demo
 
-    res = run_demo(
-        args.out,
+    config = DemoConfig(
+        out=args.out,
         rooms=args.rooms,
         quick=args.quick,
         perception=args.perception,
         target=args.target,
         progress=not args.no_progress,
     )
+    res = run_demo(config)
     print(f"({res.wall_s:.0f} s wall)")
     return 0

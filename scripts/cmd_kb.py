@@ -10,6 +10,9 @@ import sys
 import textwrap
 from pathlib import Path
 
+from knowledge.catalog import load_catalog
+from knowledge.errors import StoreError
+from knowledge.store import EvidenceStore, merge_stores
 from scripts import argtypes
 
 SHOW_EXAMPLES = """\
@@ -81,6 +84,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     kb_sub = kb.add_subparsers(dest="kb_command", metavar="ACTION", required=True)
 
+    _register_show(kb_sub)
+    _register_stats(kb_sub)
+    _register_merge(kb_sub)
+
+
+def _register_show(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb show``."""
     show = kb_sub.add_parser(
         "show",
         help="print the intervals INT(rel, B) of a store, sorted by lower bound",
@@ -109,6 +119,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_catalog_arg(show)
     show.set_defaults(func=run_show)
 
+
+def _register_stats(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb stats``."""
     stats = kb_sub.add_parser(
         "stats",
         help="summarise a store: examinations, runs, rooms, types examined, mean interval width",
@@ -131,6 +144,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_catalog_arg(stats)
     stats.set_defaults(func=run_stats)
 
+
+def _register_merge(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb merge``."""
     merge = kb_sub.add_parser(
         "merge",
         help="append the evidence of several stores to one (e.g. from several robots)",
@@ -187,10 +203,6 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 # ---- handlers ------------------------------------------------------------------------------
 def _open_kb(args: argparse.Namespace):
     """(facts about the store, its KnowledgeBase) for args.path; StoreError if unusable."""
-    from knowledge.catalog import load_catalog
-    from knowledge.errors import StoreError
-    from knowledge.store import EvidenceStore
-
     catalog = load_catalog(args.catalog)
     try:
         with EvidenceStore.open(args.path, catalog, create=False) as store:
@@ -318,9 +330,6 @@ def run_stats(args: argparse.Namespace) -> int:
 
 def run_merge(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb merge``."""
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore, merge_stores
-
     catalog = load_catalog(args.catalog)
     added = merge_stores(args.out, args.inputs, catalog)
     with EvidenceStore.open(args.out, catalog, create=False) as store:
@@ -334,7 +343,8 @@ def run_merge(args: argparse.Namespace) -> int:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench kb``."""
-    from knowledge import bench
+    # Imported here: the benchmark pulls in matplotlib, which `kb show` must not wait for.
+    from scripts.experiments import bench_kb as bench
 
     sizes = args.sizes or bench.DEFAULT_SIZES
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from agent.strategies import STRATEGIES, make_strategy
+from knowledge.errors import CtxsearchError
 from scripts import argtypes
 
 ROOM_BUDGET_HELP = (
@@ -15,8 +17,6 @@ ROOM_BUDGET_HELP = (
 
 
 def _strategy_names() -> list[str]:
-    from agent.strategies import STRATEGIES
-
     return list(STRATEGIES)
 
 
@@ -32,7 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "examination in flight.",
     )
     p.add_argument(
-        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+        "--style",
+        required=True,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path",
     )
     p.add_argument(
         "--rooms", required=True, type=argtypes.positive_int, help="how many rooms to learn in"
@@ -40,6 +42,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--kb", required=True, type=Path, help="evidence store (SQLite); created or resumed"
     )
+    _add_learning_args(p)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_learn)
+
+
+def _add_learning_args(p: argparse.ArgumentParser) -> None:
+    """How ``learn`` learns: strategy, perception, alpha, seed, recording, limits."""
     p.add_argument(
         "--strategy",
         default="hif",
@@ -82,12 +91,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP,
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_learn)
 
 
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
+    # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from agent.learning import LearnConfig, learn
 
     s = learn(
@@ -107,7 +115,7 @@ def run_learn(args: argparse.Namespace) -> int:
     )
     for line in s.lines():
         print(line)
-    for f in getattr(s, "files", []):
+    for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
     return 130 if s.interrupted else 0
@@ -123,7 +131,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "width, mean |p0 - p_true|, coverage, simulated seconds. Writes DIR/learning.json, "
         "DIR/learning.md and DIR/learning.png.",
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+    )
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=20, help="rooms per run (default: 20)"
     )
@@ -163,9 +175,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench learning``."""
-    from agent.bench_learning import bench_learning
-    from agent.strategies import make_strategy
-    from knowledge.errors import CtxsearchError
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.bench_learning import LearningBenchConfig, bench_learning
 
     names = [s.strip() for s in args.strategies.split(",") if s.strip()]
     if not names:
@@ -174,17 +185,17 @@ def run_bench(args: argparse.Namespace) -> int:
         make_strategy(n)  # one-line error for unknown names
     if len(set(names)) != len(names):
         raise CtxsearchError(f"--strategies: a strategy is listed twice in {args.strategies!r}")
-    result = bench_learning(
-        args.style,
-        args.rooms,
-        args.seeds,
-        names,
-        args.out,
+    config = LearningBenchConfig(
+        style=args.style,
+        rooms=args.rooms,
+        seeds=args.seeds,
+        strategies=tuple(names),
         perception=args.perception,
         truth_samples=args.truth_samples,
         alpha=args.alpha,
         room_budget_s=args.room_budget,
     )
+    result = bench_learning(config, args.out)
     print(result.table)
     for f in result.files:
         print(f"wrote {f}")

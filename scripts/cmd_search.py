@@ -23,10 +23,6 @@ RANK_MODES = ("low", "p0", "high")
 DEFAULT_RANK = "low"
 
 
-def _policy_names() -> list[str]:
-    return list(POLICY_NAMES)
-
-
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--budget-seconds",
@@ -73,13 +69,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
     )
     p.add_argument(
-        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+        "--style",
+        required=True,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path",
     )
     p.add_argument("--target", required=True, help="the object type to find (e.g. Cup)")
     p.add_argument(
         "--policy",
         default="location",
-        choices=_policy_names(),
+        choices=POLICY_NAMES,
         help="search policy (default: location)",
     )
     p.add_argument(
@@ -92,22 +90,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_search)
 
 
+def _config_fields(args: argparse.Namespace) -> dict:
+    """The SearchConfig fields ``search`` and ``bench search`` share, from their flags."""
+    return {
+        "style": args.style,
+        "seed": args.seed,
+        "budget_s": args.budget_seconds,
+        "rank": args.rank,
+        "truth": args.truth,
+        "truth_samples": args.truth_samples,
+    }
+
+
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
-    from agent.bench_search import search_once
+    # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
+    from scripts.experiments.episodes import SearchConfig, search_once
 
-    one = search_once(
-        args.style,
-        args.target,
-        [args.policy],
-        kb_path=args.kb,
-        seed=args.seed,
-        budget_s=args.budget_seconds,
-        rank=args.rank,
-        records=[args.record],
-        truth=args.truth,
-        truth_samples=args.truth_samples,
-    )
+    config = SearchConfig(policies=(args.policy,), **_config_fields(args))
+    one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
     ep, res = one.episode, one.results[0]
     s = ep.start
     print(
@@ -135,7 +136,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+    )
     p.add_argument(
         "--episodes", type=argtypes.positive_int, default=40, help="paired episodes (default: 40)"
     )
@@ -153,23 +158,15 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
-    from agent.bench_search import bench_search
+    # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
     from agent.search import parse_policies
+    from scripts.experiments.bench_search import SearchBenchConfig, bench_search
 
     names = parse_policies(args.policies)
-    res = bench_search(
-        args.kb,
-        args.style,
-        args.episodes,
-        names,
-        args.out,
-        budget_s=args.budget_seconds,
-        seed=args.seed,
-        rank=args.rank,
-        truth=args.truth,
-        truth_samples=args.truth_samples,
-        progress=None if args.quiet else print,
+    config = SearchBenchConfig(
+        policies=tuple(names), kb=args.kb, episodes=args.episodes, **_config_fields(args)
     )
+    res = bench_search(config, args.out, progress=None if args.quiet else print)
     print(res.table)
     for f in res.files:
         print(f"wrote {f}")

@@ -24,7 +24,11 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--gazes", type=argtypes.positive_int, default=100, help="gazes per room (default: 100)"
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+    )
     p.add_argument("--seed", type=int, default=0, help="first room seed (default: 0)")
     p.add_argument(
         "--width", type=argtypes.positive_int, default=320, help="image width (default: 320)"
@@ -37,7 +41,8 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench sim``."""
-    from envs.bench_sim import format_table, run
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.bench_sim import format_table, run
 
     results = run(
         args.out,

@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+from envs.houses import resolve_style
+from knowledge.catalog import load_catalog
 from scripts import argtypes
 
 
@@ -24,7 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "type, p, se, n}]} to --out.",
     )
     p.add_argument(
-        "--style", required=True, help="room style name (see assets/styles/) or TOML path"
+        "--style",
+        required=True,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path; "
+        "a house style samples houses and counts over their rooms",
     )
     p.add_argument(
         "--samples", required=True, type=argtypes.positive_int, help="how many rooms to generate"
@@ -46,12 +51,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
-    from envs.styles import load_style
+    # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
     from envs.truth import ground_truth
-    from knowledge.catalog import load_catalog
 
     catalog = load_catalog(args.catalog)
-    style = load_style(args.style, catalog)
+    style = resolve_style(args.style, catalog)
     t0 = time.perf_counter()
     truth = ground_truth(
         style,
@@ -71,8 +75,11 @@ def run(args: argparse.Namespace) -> int:
         (e for e in truth["entries"] if e["ref"] != e["type"] or e["p"] > 0),
         key=lambda e: (-e["p"], e["relation"], e["type"]),
     )
+    unit = "houses" if "rooms" in truth else "rooms"
+    rooms = f" ({truth['rooms']} rooms)" if "rooms" in truth else ""
     print(
-        f"{style.name}: {args.samples} rooms in {dt:.1f} s ({args.samples / dt:.0f} rooms/s), "
+        f"{style.name}: {args.samples} {unit}{rooms} in {dt:.1f} s "
+        f"({args.samples / dt:.0f} {unit}/s), "
         f"{len(truth['entries'])} entries -> {args.out}"
     )
     print(f"{'relation':<24} {'type':<12} {'p':>6} {'se':>6} {'n':>6}")

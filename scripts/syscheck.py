@@ -13,6 +13,7 @@ APT = "apt-get install -y libegl1 libgl1-mesa-dri libgles2"
 
 
 def main() -> int:
+    """0 if this Python and the Mesa libraries can run ctxsearch; else one line on stderr and 1."""
     if sys.version_info < (3, 11):  # noqa: UP036 - runs with the system Python, before the venv
         print(f"ctxsearch needs Python >= 3.11 (found {sys.version.split()[0]})", file=sys.stderr)
         return 1

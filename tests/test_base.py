@@ -320,7 +320,7 @@ def test_add_count_arrays_sums_repeats_and_validates(cat):
 
 
 def test_more_than_65536_types():
-    from knowledge.bench import synthetic_catalog
+    from scripts.experiments.bench_kb import synthetic_catalog
 
     cat = synthetic_catalog(70_000, relations_per_type=1)
     kb = KnowledgeBase(cat)

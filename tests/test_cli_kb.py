@@ -245,7 +245,7 @@ def test_bench_kb_tiny(capsys, tmp_path):
 
 def test_bench_dense_and_sparse_agree():
     from knowledge.base import KnowledgeBase
-    from knowledge.bench import DenseKB, fill_random, synthetic_catalog
+    from scripts.experiments.bench_kb import DenseKB, fill_random, synthetic_catalog
 
     cat = synthetic_catalog(60)
     kb = KnowledgeBase(cat)

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from scripts import cli, cmd_room
+from scripts import cli, cmd_room, room_views
 
 
 def test_room_is_registered():
@@ -107,6 +107,6 @@ def test_draw_detections_enlarges_and_labels(catalog):
         Detection(1, "Desk", desk, 500, 2.0, (10, 20, 100, 120)),
         Detection(1, "Desk", desk, 400, 2.5, (12, 22, 90, 110)),
     ]
-    img = cmd_room.draw_detections(np.zeros((240, 320, 3), np.uint8), dets, catalog)
+    img = room_views.draw_detections(np.zeros((240, 320, 3), np.uint8), dets, catalog)
     assert img.shape == (480, 640, 3)
     assert img.any()

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import pytest
 
-from agent.demo import run_demo
+from scripts.experiments.demo import DemoConfig, run_demo
 
 
 @pytest.mark.render
 def test_demo_writes_its_files_and_reruns(tmp_path):
     out = tmp_path / "demo"
     lines: list[str] = []
-    res = run_demo(out, rooms=1, quick=True, perception="oracle", progress=False, echo=lines.append)
+    config = DemoConfig(out, rooms=1, quick=True, perception="oracle", progress=False)
+    res = run_demo(config, echo=lines.append)
     for name in ("kb.sqlite", "learn.rrd", "search.rrd", "search_exhaustive.rrd", "report.md"):
         assert (out / name).is_file(), name
     assert res.learned_now
@@ -21,9 +22,7 @@ def test_demo_writes_its_files_and_reruns(tmp_path):
     assert any(line.strip().startswith("rerun ") and "learn.rrd" in line for line in lines)
     # A second run reuses the complete store and redoes the searches.
     lines2: list[str] = []
-    res2 = run_demo(
-        out, rooms=1, quick=True, perception="oracle", progress=False, echo=lines2.append
-    )
+    res2 = run_demo(config, echo=lines2.append)
     assert not res2.learned_now
     assert any("reusing" in line for line in lines2)
     assert (out / "learn.rrd").is_file() and (out / "search.rrd").is_file()

@@ -10,13 +10,14 @@ import pytest
 
 from agent import search as S
 from agent import search_space as ss
-from agent.bench_search import aggregate, bootstrap_ci, make_episodes, run_episodes
 from agent.navigation import OccupancyGrid
 from envs.layout import Door, RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance
+from scripts.experiments.bench_search import aggregate, bootstrap_ci
+from scripts.experiments.episodes import make_episodes, run_episodes
 
 # A hand-made room: a desk against the north wall with a cup on it, a shelf against the west wall.
 DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))

@@ -26,15 +26,44 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent import search_space as ss
-from agent.bench_search import search_once
+from agent.learning import LearnConfig, learn, room_seed, run_id
+from agent.search import SearchResult, check_target, open_knowledge
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
+from knowledge.store import EvidenceStore
+from scripts.experiments.episodes import OneSearch, SearchConfig, search_once
 
 DEMO_STYLE = "office"
 DEMO_TARGET = "Cup"
 DEMO_STRATEGY = "hif"
 DEMO_SEED = 0
 DEMO_BUDGET_S = 300.0
+QUICK_BUDGET_S = 120.0
+QUICK_ROOMS = 2
 CONTEXT_POLICY = "location"
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    """What ``ctxsearch demo`` is asked to do (its flags)."""
+
+    out: Path = Path("demo")
+    rooms: int = 4
+    quick: bool = False  # at most QUICK_ROOMS learning rooms and a QUICK_BUDGET_S search budget
+    perception: str = "camera"
+    target: str = DEMO_TARGET
+    progress: bool = True
+
+    @property
+    def learning_rooms(self) -> int:
+        """The rooms the demo learns in."""
+        return min(self.rooms, QUICK_ROOMS) if self.quick else self.rooms
+
+    @property
+    def budget_s(self) -> float:
+        """The search budget in simulated seconds."""
+        return QUICK_BUDGET_S if self.quick else DEMO_BUDGET_S
 
 
 @dataclass
@@ -48,12 +77,34 @@ class DemoResult:
     wall_s: float = 0.0
 
 
+@dataclass
+class _Learned:
+    """The outcome of the learning step."""
+
+    lines: list[str]
+    files: list[Path]  # its rerun recordings
+    now: bool  # False: a complete store from an earlier run was reused
+
+
+@dataclass
+class _Searched:
+    """The outcome of the search step: the two searches and their recordings."""
+
+    one: OneSearch
+    kb: KnowledgeBase
+    records: tuple[Path, Path]  # with context, without
+
+    @property
+    def ratio(self) -> float:
+        """Time to find with context over time without (NaN if that is 0)."""
+        ctx_res, exh_res = self.one.results
+        if exh_res.time_to_find > 0:
+            return ctx_res.time_to_find / exh_res.time_to_find
+        return math.nan
+
+
 def _learning_complete(kb_path: Path, rooms: int, perception: str) -> bool:
     """True if the store at ``kb_path`` holds the demo's run with ``rooms`` rooms done."""
-    from agent.learning import room_seed, run_id
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore
-
     if not kb_path.is_file():
         return False
     try:
@@ -67,32 +118,46 @@ def _learning_complete(kb_path: Path, rooms: int, perception: str) -> bool:
         return False
 
 
-def run_demo(
-    out: str | Path = "demo",
-    rooms: int = 4,
-    quick: bool = False,
-    perception: str = "camera",
-    target: str = DEMO_TARGET,
-    progress: bool = True,
-    echo=print,
-) -> DemoResult:
+def run_demo(config: DemoConfig, echo=print) -> DemoResult:
     """Learn, search with and without context, write the report (module docstring)."""
-    from agent.learning import LearnConfig, learn
-    from knowledge.catalog import load_catalog
-
     t0 = time.perf_counter()
-    out = Path(out)
+    out = config.out
     out.mkdir(parents=True, exist_ok=True)
-    if quick:
-        rooms = min(rooms, 2)
     catalog = load_catalog()
-    from agent.search import check_target
+    check_target(catalog, config.target)
+    learned = _learn_step(config, echo)
+    searched = _search_step(config, catalog, echo)
+    report = out / "report.md"
+    report.write_text(_report(config, learned, searched))
+    search_rrd, exhaustive_rrd = searched.records
+    ctx_res, exh_res = searched.one.results
+    ratio = searched.ratio
+    files = [out / "kb.sqlite", *learned.files, search_rrd, exhaustive_rrd, report]
+    lines = [
+        f"with context ({CONTEXT_POLICY}): {_outcome(ctx_res)}",
+        f"without context (exhaustive): {_outcome(exh_res)}",
+        f"time with context / without: {ratio:.2f}" if math.isfinite(ratio) else "time ratio: n/a",
+        f"report: {report}",
+        "open the recordings with:",
+        f"  rerun {' '.join(str(f) for f in learned.files)}",
+        f"  rerun {search_rrd} {exhaustive_rrd}",
+    ]
+    echo("[3/3] done")
+    for line in lines:
+        echo(line)
+    return DemoResult(learned.lines, learned.now, lines, files, time.perf_counter() - t0)
 
-    check_target(catalog, target)
+
+def _learn_step(config: DemoConfig, echo) -> _Learned:
+    """1. Learn in the demo's rooms, or reuse a complete store of an earlier run."""
+    out, rooms, perception, progress = (
+        config.out,
+        config.learning_rooms,
+        config.perception,
+        config.progress,
+    )
     kb_path = out / "kb.sqlite"
     learn_rrd = out / "learn.rrd"
-
-    # 1. learning
     learned_now = not (_learning_complete(kb_path, rooms, perception) and learn_rrd.is_file())
     if learned_now:
         for p in [kb_path, *out.glob("kb.sqlite-*"), *out.glob("learn*.rrd")]:
@@ -112,10 +177,10 @@ def run_demo(
                 progress=progress,
             )
         )
-        if getattr(s, "interrupted", False):
+        if s.interrupted:
             raise KeyboardInterrupt
         learn_lines = s.lines()
-        learn_files = [Path(f) for f in getattr(s, "files", [learn_rrd])]
+        learn_files = [Path(f) for f in s.files]
     else:
         echo(
             f"[1/3] reusing {kb_path}: its {rooms} learning rooms are done (delete {out}/ to learn again)"
@@ -124,87 +189,62 @@ def run_demo(
         learn_files = sorted(out.glob("learn*.rrd"), key=lambda p: (len(p.name), p.name))
     for line in learn_lines:
         echo(f"      {line}")
+    return _Learned(learn_lines, learn_files, learned_now)
 
-    # 2. two searches, same held-out room, start and target
-    from agent.search import open_knowledge
 
-    kb, learned_seeds = open_knowledge(kb_path, catalog)
+def _search_step(config: DemoConfig, catalog: Catalog, echo) -> _Searched:
+    """2. Two searches, same held-out room, start and target: with context and without."""
+    out, target = config.out, config.target
+    kb, learned_seeds = open_knowledge(out / "kb.sqlite", catalog)
     search_rrd, exhaustive_rrd = out / "search.rrd", out / "search_exhaustive.rrd"
     echo(
         f"[2/3] searching for a {target} in a held-out {DEMO_STYLE} room: with context ({CONTEXT_POLICY}) "
         f"and without (exhaustive)"
     )
-    budget = 120.0 if quick else DEMO_BUDGET_S
+    search = SearchConfig(
+        DEMO_STYLE, (CONTEXT_POLICY, "exhaustive"), seed=DEMO_SEED, budget_s=config.budget_s
+    )
     one = search_once(
-        DEMO_STYLE,
+        search,
         target,
-        [CONTEXT_POLICY, "exhaustive"],
         kb=kb,
-        seed=DEMO_SEED,
-        budget_s=budget,
         records=[search_rrd, exhaustive_rrd],
         exclude_seeds=learned_seeds,
         catalog=catalog,
     )
-    ctx_res, exh_res = one.results
     for r in one.results:
         echo(f"      {r.summary()}")
-    ratio = ctx_res.time_to_find / exh_res.time_to_find if exh_res.time_to_find > 0 else math.nan
-
-    # 3. report
-    report = out / "report.md"
-    report.write_text(
-        _report(
-            one,
-            kb,
-            learn_lines,
-            perception,
-            rooms,
-            ratio,
-            learn_files,
-            search_rrd,
-            exhaustive_rrd,
-            target,
-            learned_now,
-        )
-    )
-    files = [kb_path, *learn_files, search_rrd, exhaustive_rrd, report]
-    lines = [
-        f"with context ({CONTEXT_POLICY}): {_outcome(ctx_res)}",
-        f"without context (exhaustive): {_outcome(exh_res)}",
-        f"time with context / without: {ratio:.2f}" if math.isfinite(ratio) else "time ratio: n/a",
-        f"report: {report}",
-        "open the recordings with:",
-        f"  rerun {' '.join(str(f) for f in learn_files)}",
-        f"  rerun {search_rrd} {exhaustive_rrd}",
-    ]
-    echo("[3/3] done")
-    for line in lines:
-        echo(line)
-    return DemoResult(learn_lines, learned_now, lines, files, time.perf_counter() - t0)
+    return _Searched(one, kb, (search_rrd, exhaustive_rrd))
 
 
-def _outcome(r) -> str:
+def _outcome(r: SearchResult) -> str:
     if r.success:
         return f"found {r.target} #{r.found_id} in {r.sim_time:.1f} simulated s, {r.gazes} gazes, {r.path_m:.1f} m"
     return f"no {r.target} within {r.budget_s:.0f} simulated s ({r.gazes} gazes, {r.path_m:.1f} m)"
 
 
-def _report(
-    one,
-    kb,
-    learn_lines,
-    perception,
-    rooms,
-    ratio,
-    learn_files,
-    search_rrd,
-    exhaustive_rrd,
-    target,
-    learned_now,
-) -> str:
-    ep = one.episode
-    ctx_res, exh_res = one.results
+def _report(config: DemoConfig, learned: _Learned, searched: _Searched) -> str:
+    """report.md: what was learned, the two searches side by side, how to open the recordings."""
+    lines = [
+        "# ctxsearch demo",
+        "",
+        *_report_learning(config, learned, searched.kb),
+        *_report_search(config, searched),
+        "## 3. Recordings",
+        "",
+        "```",
+        f"rerun {' '.join(str(f) for f in learned.files)}",
+        f"rerun {searched.records[0]}            # with context: ranked candidate regions, path, every camera view",
+        f"rerun {searched.records[1]} # without context",
+        "```",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _report_learning(config: DemoConfig, learned: _Learned, kb: KnowledgeBase) -> list[str]:
+    """Section 1 of report.md: the learning run and what it learned about the target."""
+    target, perception = config.target, config.perception
     rows = sorted(
         (r for r in kb.rows() if r.type == target and r.n > 0), key=lambda r: (-r.p0, r.relation)
     )[:8]
@@ -213,15 +253,13 @@ def _report(
         if perception == "camera"
         else "relations read from the layout (no rendering; faster, for large runs)"
     )
-    out = [
-        "# ctxsearch demo",
-        "",
+    return [
         "## 1. Learning (Highest Impact First)",
         "",
-        f"{rooms} {DEMO_STYLE} rooms, strategy `{DEMO_STRATEGY}`, perception `{perception}`: {why}."
-        + ("" if learned_now else " (Store reused from an earlier run of the demo.)"),
+        f"{config.learning_rooms} {DEMO_STYLE} rooms, strategy `{DEMO_STRATEGY}`, perception `{perception}`: {why}."
+        + ("" if learned.now else " (Store reused from an earlier run of the demo.)"),
         "",
-        *[f"- {line}" for line in learn_lines],
+        *[f"- {line}" for line in learned.lines],
         "",
         f"What it learned about where a {target} is (the 8 most likely relations with evidence; 90% Wilson "
         "intervals):",
@@ -233,10 +271,18 @@ def _report(
             for r in rows
         ],
         "",
+    ]
+
+
+def _report_search(config: DemoConfig, searched: _Searched) -> list[str]:
+    """Section 2 of report.md: the room, the two searches, how the one with context went."""
+    ep, ratio = searched.one.episode, searched.ratio
+    ctx_res, exh_res = searched.one.results
+    return [
         "## 2. Search in a room it never learned in",
         "",
         f"Room: {ep.style} seed {ep.room_seed} (held out); start ({ep.start.x:.2f}, {ep.start.y:.2f}), heading "
-        f"{ep.start.yaw:.2f} rad; target: {target}; budget {ep.budget_s:.0f} simulated s.",
+        f"{ep.start.yaw:.2f} rad; target: {config.target}; budget {ep.budget_s:.0f} simulated s.",
         "",
         "| search | found | simulated s | gazes | metres driven |",
         "|---|---|---|---|---|",
@@ -260,13 +306,4 @@ def _report(
         *ctx_res.log[:30],
         "```",
         "",
-        "## 3. Recordings",
-        "",
-        "```",
-        f"rerun {' '.join(str(f) for f in learn_files)}",
-        f"rerun {search_rrd}            # with context: ranked candidate regions, path, every camera view",
-        f"rerun {exhaustive_rrd} # without context",
-        "```",
-        "",
     ]
-    return "\n".join(out)

@@ -22,15 +22,17 @@ import platform
 import statistics
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
 import numpy as np
 from dm_control import mjcf
+from matplotlib.figure import Figure
 
+from agent.perception import detect
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
-from envs.rooms import generate_room
-from envs.styles import load_style
 from envs.task import RoomTask, start_pose
 from envs.world import World, gl_renderer
 from knowledge.catalog import Catalog, load_catalog
@@ -78,6 +80,23 @@ def _bare_gaze_ms(world: World, targets: np.ndarray) -> list[float]:
     return times
 
 
+@dataclass
+class _Times:
+    """Per-sample milliseconds and sizes, gathered over the rooms."""
+
+    compile: list[float] = field(default_factory=list)
+    episode: list[float] = field(default_factory=list)
+    world: list[float] = field(default_factory=list)
+    renderer: list[float] = field(default_factory=list)
+    move: list[float] = field(default_factory=list)
+    capture: list[float] = field(default_factory=list)
+    detect: list[float] = field(default_factory=list)
+    gaze: list[float] = field(default_factory=list)
+    bare: list[float] = field(default_factory=list)
+    geoms: list[int] = field(default_factory=list)
+    objects: list[int] = field(default_factory=list)
+
+
 def run(
     out_dir: Path,
     *,
@@ -88,112 +107,128 @@ def run(
     width: int = 320,
     height: int = 240,
 ) -> dict:
-    """Run the benchmark, write ``bench_sim.json`` and ``bench_sim.md`` to ``out_dir``, and return
-    the results."""
-    from agent.perception import detect
-
+    """Run the benchmark, write ``bench_sim.json``, ``bench_sim.md`` and ``bench_sim.png`` to
+    ``out_dir``, and return the results."""
     load_before = os.getloadavg()[0]
     catalog = load_catalog()
-    style_obj = load_style(style, catalog)
+    style_obj = resolve_style(style, catalog)
     n_layouts = max(20, rooms)
     gen_ms, layouts = [], []
     for s in range(seed, seed + n_layouts):
-        ms, lay = _ms(lambda s=s: generate_room(style_obj, s, catalog))
+        ms, lay = _ms(lambda s=s: generate_layout(style_obj, s, catalog))
         gen_ms.append(ms)
         layouts.append(lay)
     layouts = layouts[:rooms]
-
-    compile_ms, episode_ms, world_ms, renderer_ms = [], [], [], []
-    move_ms, capture_ms, detect_ms, gaze_ms, bare_ms = [], [], [], [], []
-    n_geoms, n_objects = [], []
+    times = _Times()
     episode_task = RoomTask(catalog, layout=layouts[0])
     rng = np.random.default_rng(seed)
     for lay in layouts:
-        compile_ms.append(_ms(lambda lay=lay: _build_and_compile(lay, catalog))[0])
-        episode_task.set_layout(lay)  # the per-episode path: same task, a new room
-        episode_ms.append(
-            _ms(
-                lambda: (
-                    episode_task.initialize_episode_mjcf(None),
-                    mjcf.Physics.from_mjcf_model(episode_task.root_entity.mjcf_model),
-                )
-            )[0]
-        )
+        _time_builds(times, lay, catalog, episode_task)
         ms, world = _ms(lambda lay=lay: World(lay, catalog, width=width, height=height))
-        world_ms.append(ms)
+        times.world.append(ms)
         with world:
-            n_geoms.append(world.physics.model.ngeom)
-            n_objects.append(len(lay.objects))
-            world.reset_pose(start_pose(lay))
-            renderer_ms.append(_ms(lambda world=world: world._renderer(width, height))[0])
-            targets = _gaze_targets(rng, gazes, world)
-            for k, (pan, tilt) in enumerate(np.vstack([targets[:WARMUP_GAZES], targets])):
-                t0 = time.perf_counter()
-                world.move_head(pan, tilt)
-                t1 = time.perf_counter()
-                frame = world.capture(depth=True)
-                t2 = time.perf_counter()
-                detect(frame, lay, catalog)
-                t3 = time.perf_counter()
-                if k >= WARMUP_GAZES:
-                    move_ms.append((t1 - t0) * 1e3)
-                    capture_ms.append((t2 - t1) * 1e3)
-                    detect_ms.append((t3 - t2) * 1e3)
-                    gaze_ms.append((t3 - t0) * 1e3)
-            bare_ms.extend(_bare_gaze_ms(world, targets))
+            _time_gazes(times, world, lay, catalog, _gaze_targets(rng, gazes, world))
+    results = _results(times, gen_ms)
+    results.update(
+        {
+            "style": style,
+            "rooms": len(layouts),
+            "layouts_timed": n_layouts,
+            "gazes_per_room": gazes,
+            "width": width,
+            "height": height,
+            "median_geoms": statistics.median(times.geoms),
+            "median_objects": statistics.median(times.objects),
+            "gl_renderer": gl_renderer(),
+            "cpu_count": os.cpu_count(),
+            "load_avg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],  # before, after
+            "machine": platform.machine(),
+            "targets": TARGETS,
+        }
+    )
+    _write(results, out_dir)
+    return results
 
+
+def _time_builds(times: _Times, lay: RoomLayout, catalog: Catalog, episode_task: RoomTask) -> None:
+    """A fresh build + compile of room ``lay``, and the per-episode path (same task, new room)."""
+    times.compile.append(_ms(lambda: _build_and_compile(lay, catalog))[0])
+    episode_task.set_layout(lay)
+    times.episode.append(
+        _ms(
+            lambda: (
+                episode_task.initialize_episode_mjcf(None),
+                mjcf.Physics.from_mjcf_model(episode_task.root_entity.mjcf_model),
+            )
+        )[0]
+    )
+
+
+def _time_gazes(
+    times: _Times, world: World, lay: RoomLayout, catalog: Catalog, targets: np.ndarray
+) -> None:
+    """Gazes at ``targets`` (move, capture, detect) in ``world``, then the bare renderer's."""
+    times.geoms.append(world.physics.model.ngeom)
+    times.objects.append(len(lay.objects))
+    world.reset_pose(start_pose(lay))
+    times.renderer.append(_ms(lambda: world._renderer(world.width, world.height))[0])
+    for k, (pan, tilt) in enumerate(np.vstack([targets[:WARMUP_GAZES], targets])):
+        t0 = time.perf_counter()
+        world.move_head(pan, tilt)
+        t1 = time.perf_counter()
+        frame = world.capture(depth=True)
+        t2 = time.perf_counter()
+        detect(frame, lay, catalog)
+        t3 = time.perf_counter()
+        if k >= WARMUP_GAZES:
+            times.move.append((t1 - t0) * 1e3)
+            times.capture.append((t2 - t1) * 1e3)
+            times.detect.append((t3 - t2) * 1e3)
+            times.gaze.append((t3 - t0) * 1e3)
+    times.bare.extend(_bare_gaze_ms(world, targets))
+
+
+def _results(times: _Times, gen_ms: list[float]) -> dict:
+    """The medians (and the rates and ratio derived from them)."""
     med = statistics.median
-    results = {
+    return {
         "layouts_per_s": 1e3 / med(gen_ms),
-        "compile_ms": med(compile_ms),
-        "gazes_per_s": 1e3 / med(gaze_ms),
-        "overhead_ratio": med(gaze_ms) / med(bare_ms),
-        "episode_compile_ms": med(episode_ms),
-        "world_ms": med(world_ms),
-        "renderer_init_ms": med(renderer_ms),
-        "gaze_ms": med(gaze_ms),
-        "move_head_ms": med(move_ms),
-        "capture_ms": med(capture_ms),
-        "detect_ms": med(detect_ms),
-        "bare_render_ms": med(bare_ms),
+        "compile_ms": med(times.compile),
+        "gazes_per_s": 1e3 / med(times.gaze),
+        "overhead_ratio": med(times.gaze) / med(times.bare),
+        "episode_compile_ms": med(times.episode),
+        "world_ms": med(times.world),
+        "renderer_init_ms": med(times.renderer),
+        "gaze_ms": med(times.gaze),
+        "move_head_ms": med(times.move),
+        "capture_ms": med(times.capture),
+        "detect_ms": med(times.detect),
+        "bare_render_ms": med(times.bare),
         "detector": "agent.perception.detect",
-        "style": style,
-        "rooms": len(layouts),
-        "layouts_timed": n_layouts,
-        "gazes_per_room": gazes,
-        "width": width,
-        "height": height,
-        "median_geoms": med(n_geoms),
-        "median_objects": med(n_objects),
-        "gl_renderer": gl_renderer(),
-        "cpu_count": os.cpu_count(),
-        "load_avg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],  # before, after
-        "machine": platform.machine(),
-        "targets": TARGETS,
     }
+
+
+def _write(results: dict, out_dir: Path) -> None:
+    """bench_sim.json, bench_sim.md and bench_sim.png."""
+    r = results
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "bench_sim.json").write_text(json.dumps(results, indent=2) + "\n")
-    table = format_table(results)
+    (out_dir / "bench_sim.json").write_text(json.dumps(r, indent=2) + "\n")
+    table = format_table(r)
     (out_dir / "bench_sim.md").write_text(
-        f"# bench sim\n\n{len(layouts)} '{style}' rooms, {gazes} gazes each at {width}x{height}; "
-        f"renderer: {results['gl_renderer']}; {results['cpu_count']} CPUs, 1-minute load average "
-        f"{results['load_avg_1min'][0]} before and {results['load_avg_1min'][1]} after. Medians. "
+        f"# bench sim\n\n{r['rooms']} '{r['style']}' rooms, {r['gazes_per_room']} gazes each at "
+        f"{r['width']}x{r['height']}; renderer: {r['gl_renderer']}; {r['cpu_count']} CPUs, 1-minute "
+        f"load average {r['load_avg_1min'][0]} before and {r['load_avg_1min'][1]} after. Medians. "
         "A gaze is move_head (servos stepped in MuJoCo) + capture (one draw for segmentation and "
         "depth) + detect; the bare renderer needs two draws for the same images, so the ratio "
         f"can fall below 1.\n\n{table}\n\n![time per gaze](bench_sim.png)\n"
     )
-    write_plot(results, out_dir / "bench_sim.png")
-    return results
+    write_plot(r, out_dir / "bench_sim.png")
 
 
 def write_plot(r: dict, path: Path) -> None:
     """A bar plot of one gaze's time, by part, against the bare renderer's, and the build time."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [3, 2]})
+    fig = Figure(figsize=(9, 3.6))
+    ax, bx = fig.subplots(1, 2, gridspec_kw={"width_ratios": [3, 2]})
     parts = [
         ("move_head", r["move_head_ms"]),
         ("capture", r["capture_ms"]),
@@ -226,7 +261,6 @@ def write_plot(r: dict, path: Path) -> None:
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def format_table(r: dict) -> str:

@@ -32,6 +32,7 @@ import tracemalloc
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from knowledge import intervals
 from knowledge.base import KnowledgeBase
@@ -140,47 +141,16 @@ def bench_size(
     """One row of the benchmark (see the module docstring for what each key means)."""
     rng = np.random.default_rng([seed, n_types])
     cand_idx = np.sort(rng.choice(n_types, size=min(candidates, n_types), replace=False))
-
-    # Memory: catalog + filled knowledge base + one choice and one record, traced.
-    gc.collect()
-    tracemalloc.start()
-    tracemalloc.reset_peak()
-    t0 = time.perf_counter()
-    catalog = synthetic_catalog(n_types, relations_per_type)
-    kb = KnowledgeBase(catalog)
-    fill_random(kb, density, rng)
-    build_s = time.perf_counter() - t0
-    nonzero = kb.nnz()  # the synthetic 1%, before the timed records add more
-    names = catalog.type_names
-    cand_names = [names[a] for a in cand_idx]
-    kb.choose(cand_names)
-    rels0 = catalog.types[int(cand_idx[0])].relation_names
-    kb.record_examination(cand_names[0], [(rels0[0], names[0])])
-    peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
-    tracemalloc.stop()
-    gc.collect()
-
+    kb, nonzero, peak_mb, build_s = _build_traced(
+        n_types, relations_per_type, density, cand_idx, rng
+    )
     # Pre-drawn examinations: for each rep and candidate, pairs_per_record distinct (r, b).
     m = relations_per_type * n_types
     draws = [
         [np.sort(rng.choice(m, size=min(pairs_per_record, m), replace=False)) for _ in cand_idx]
         for _ in range(reps)
     ]
-    record_s, cold_s, cached_s = [], [], []
-    for rep in range(reps):
-        for j, a in enumerate(cand_idx):
-            rels = catalog.types[int(a)].relation_names
-            pairs = [(rels[c // n_types], names[c % n_types]) for c in draws[rep][j]]
-            t = time.perf_counter()
-            kb.record_examination(names[a], pairs)
-            record_s.append(time.perf_counter() - t)
-        t = time.perf_counter()
-        choice = kb.choose(cand_names)  # cold: every candidate's score was invalidated above
-        cold_s.append(time.perf_counter() - t)
-        t = time.perf_counter()
-        kb.choose(cand_names)
-        cached_s.append(time.perf_counter() - t)
-
+    record_s, cold_s, cached_s, choice = _time_ours(kb, cand_idx, draws)
     row = {
         "types": n_types,
         "choose_ms": _median_ms(cold_s),
@@ -199,35 +169,96 @@ def bench_size(
         "build_s": build_s,
         "rss_mb": _rss_mb(),
     }
-
     if n_types <= DENSE_MAX_TYPES:
-        # The same counts as ``kb`` now holds (after the timed records), so both choose alike.
-        dense = DenseKB.from_kb(kb)
-        d_choice = dense.choose([int(a) for a in cand_idx])
-        if names[d_choice] != choice:
-            ours = kb.type_impact(choice)
-            theirs = dense.type_impact(d_choice)
-            if abs(ours - theirs) > 1e-9:
-                raise AssertionError(f"dense and sparse disagree: {names[d_choice]} vs {choice}")
-        dense_s, dense_rec_s = [], []
-        for rep in range(reps):
-            t = time.perf_counter()
-            dense.choose([int(a) for a in cand_idx])
-            dense_s.append(time.perf_counter() - t)
-            for j, a in enumerate(cand_idx):
-                c = draws[rep][j]
-                pairs = np.column_stack([c // n_types, c % n_types])
-                t = time.perf_counter()
-                dense.record_examination(int(a), pairs)
-                dense_rec_s.append(time.perf_counter() - t)
-        row["dense_choose_ms"] = _median_ms(dense_s)
-        row["dense_record_ms"] = _median_ms(dense_rec_s)
+        row.update(_time_dense(kb, cand_idx, draws, choice))
         row["dense_ratio"] = row["dense_choose_ms"] / row["choose_ms"]
-        row["dense_mb"] = dense.y.nbytes / 2**20
-        del dense
-    del kb, catalog
+    del kb
     gc.collect()
     return row
+
+
+def _build_traced(
+    n_types: int,
+    relations_per_type: int,
+    density: float,
+    cand_idx: np.ndarray,
+    rng: np.random.Generator,
+) -> tuple[KnowledgeBase, int, float, float]:
+    """The filled knowledge base, its nonzero counts, the peak traced MiB of building it and
+    running one choice and one record, and the seconds the build took."""
+    gc.collect()
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    t0 = time.perf_counter()
+    catalog = synthetic_catalog(n_types, relations_per_type)
+    kb = KnowledgeBase(catalog)
+    fill_random(kb, density, rng)
+    build_s = time.perf_counter() - t0
+    nonzero = kb.nnz()  # the synthetic 1%, before the records add more
+    names = catalog.type_names
+    cand_names = [names[a] for a in cand_idx]
+    kb.choose(cand_names)
+    rels0 = catalog.types[int(cand_idx[0])].relation_names
+    kb.record_examination(cand_names[0], [(rels0[0], names[0])])
+    peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    gc.collect()
+    return kb, nonzero, peak_mb, build_s
+
+
+def _time_ours(kb: KnowledgeBase, cand_idx: np.ndarray, draws: list) -> tuple:
+    """Per rep: a record_examination per candidate, then a cold and a cached choice. The
+    seconds of each (record, cold, cached) and the last choice."""
+    catalog = kb.catalog
+    n_types = len(catalog)
+    names = catalog.type_names
+    cand_names = [names[a] for a in cand_idx]
+    record_s, cold_s, cached_s = [], [], []
+    choice = None
+    for rep_draws in draws:
+        for j, a in enumerate(cand_idx):
+            rels = catalog.types[int(a)].relation_names
+            pairs = [(rels[c // n_types], names[c % n_types]) for c in rep_draws[j]]
+            t = time.perf_counter()
+            kb.record_examination(names[a], pairs)
+            record_s.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        choice = kb.choose(cand_names)  # cold: every candidate's score was invalidated above
+        cold_s.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        kb.choose(cand_names)
+        cached_s.append(time.perf_counter() - t)
+    return record_s, cold_s, cached_s, choice
+
+
+def _time_dense(kb: KnowledgeBase, cand_idx: np.ndarray, draws: list, choice: str) -> dict:
+    """The dense implementation on the same counts as ``kb`` now holds (after the timed records,
+    so both choose alike): its choose and record times and its size."""
+    names = kb.catalog.type_names
+    n_types = len(names)
+    dense = DenseKB.from_kb(kb)
+    d_choice = dense.choose([int(a) for a in cand_idx])
+    if names[d_choice] != choice:
+        ours = kb.type_impact(choice)
+        theirs = dense.type_impact(d_choice)
+        if abs(ours - theirs) > 1e-9:
+            raise AssertionError(f"dense and sparse disagree: {names[d_choice]} vs {choice}")
+    dense_s, dense_rec_s = [], []
+    for rep_draws in draws:
+        t = time.perf_counter()
+        dense.choose([int(a) for a in cand_idx])
+        dense_s.append(time.perf_counter() - t)
+        for j, a in enumerate(cand_idx):
+            c = rep_draws[j]
+            pairs = np.column_stack([c // n_types, c % n_types])
+            t = time.perf_counter()
+            dense.record_examination(int(a), pairs)
+            dense_rec_s.append(time.perf_counter() - t)
+    return {
+        "dense_choose_ms": _median_ms(dense_s),
+        "dense_record_ms": _median_ms(dense_rec_s),
+        "dense_mb": dense.y.nbytes / 2**20,
+    }
 
 
 def run(
@@ -328,13 +359,9 @@ def write_results(
 
 
 def _plot(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     T = [r["types"] for r in rows]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig = Figure(figsize=(10, 4))
+    ax1, ax2 = fig.subplots(1, 2)
     ax1.plot(T, [r["choose_ms"] for r in rows], "o-", label="choose, cold (ours)")
     ax1.plot(T, [r["choose_cached_ms"] for r in rows], "o:", label="choose, cached (ours)")
     ax1.plot(T, [r["record_ms"] for r in rows], "s-", label="record_examination (ours)")
@@ -353,4 +380,3 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax2.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -1,0 +1,370 @@
+"""Detector models as data: how the simulated detector errs (``assets/detectors/*.toml``).
+
+The sensor model of the simulation. The renderer says which instance every pixel shows; what a
+real detector makes of that is a model with four parts, each a section of the preset file:
+
+``[recall]``  P(detected) as a smooth function of visible pixels and distance, per type::
+
+    recall = max_recall / (1 + (p50 / pixels)^slope) / (1 + exp((d - r50) / (range_width R)))
+    p50 = half_pixels * min_pixels(T)      r50 = range_fraction * R      R = max_range(T)
+
+  a logistic in log-pixels (the usual shape of recall against object size) times a logistic
+  fall-off near the type's range. ``min_pixels`` and ``max_range`` are the catalog's (at 320x240;
+  other resolutions scale the pixel figures by their pixel count).
+``[[confusion]]``  pairs of similar types reported as each other with probability p (both ways).
+``[false_positives]``  detections on clutter: a Poisson number per image (``per_image``), each
+  of a type drawn from ``types``, standing on a surface point the image shows.
+``[pose]``  position and yaw noise, Gaussian, with sigmas growing linearly with distance.
+
+``kind = "perfect"`` is the threshold detector the project started with: an instance is detected
+iff it has at least min_pixels visible pixels within max_range, its pose exact, no confusion, no
+false positive, and it draws no random numbers (so runs with it are identical to runs before
+detector models existed). A preset file holds ``kind`` and, for ``kind = "model"``, the four
+sections; every number must be finite and in its range, and a bad file gets a one-line
+DetectorError naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import ObjectInstance
+
+DETECTORS_DIR = ASSETS_DIR / "detectors"
+REFERENCE_PIXELS = 320 * 240  # the resolution the catalog's min_pixels refers to
+KINDS = ("perfect", "model")
+SECTIONS = {"recall", "confusion", "false_positives", "pose"}
+TOP_FIELDS = {"name", "description", "kind"} | SECTIONS
+# field -> (lower bound, upper bound, lower bound inclusive?)
+RECALL_FIELDS = {
+    "max_recall": (0.0, 1.0, False),
+    "half_pixels": (0.0, 1e4, False),
+    "slope": (0.0, 100.0, False),
+    "range_fraction": (0.0, 10.0, False),
+    "range_width": (0.0, 10.0, False),
+}
+POSE_FIELDS = {
+    "position_sigma": (0.0, 10.0, True),
+    "position_sigma_per_m": (0.0, 10.0, True),
+    "yaw_sigma_deg": (0.0, 180.0, True),
+    "yaw_sigma_deg_per_m": (0.0, 180.0, True),
+}
+FP_FIELDS = {"per_image": (0.0, 100.0, True)}
+CONFUSION_FIELDS = {"a", "b", "p"}
+
+
+class DetectorError(CtxsearchError):
+    """A detector preset file is malformed or inconsistent with the catalog."""
+
+    def __init__(self, path: object, message: str, *, field: str | None = None):
+        where = str(path) + (f": field '{field}'" if field else "")
+        super().__init__(f"{where}: {message}")
+        self.path, self.field = path, field
+
+
+def min_pixels_at(min_pixels: float, width: int, height: int) -> int:
+    """A type's pixel threshold at ``width`` x ``height`` (the catalog's is for 320x240)."""
+    return max(1, int(math.ceil(min_pixels * (width * height) / REFERENCE_PIXELS)))
+
+
+@dataclass(frozen=True)
+class Recall:
+    """The recall curve's parameters (see the module docstring)."""
+
+    max_recall: float
+    half_pixels: float
+    slope: float
+    range_fraction: float
+    range_width: float
+
+
+@dataclass(frozen=True)
+class PoseNoise:
+    """Gaussian pose noise: sigma = a + b * distance, for position (m) and yaw (degrees)."""
+
+    position_sigma: float
+    position_sigma_per_m: float
+    yaw_sigma_deg: float
+    yaw_sigma_deg_per_m: float
+
+
+@dataclass(frozen=True)
+class DetectorModel:
+    """A validated detector preset. ``kind == 'perfect'`` ignores every other field."""
+
+    name: str
+    path: str
+    kind: str
+    description: str = ""
+    recall: Recall | None = None
+    confusion: tuple[tuple[str, str, float], ...] = ()
+    fp_per_image: float = 0.0
+    fp_types: tuple[str, ...] = ()
+    pose: PoseNoise | None = None
+
+    @property
+    def perfect(self) -> bool:
+        """True for the exact threshold detector (no randomness)."""
+        return self.kind == "perfect"
+
+    def check_catalog(self, catalog: Catalog) -> DetectorModel:
+        """Every type the preset names must be in ``catalog`` (DetectorError); returns self."""
+        for a, b, _ in self.confusion:
+            for t in (a, b):
+                if t not in catalog:
+                    raise DetectorError(self.path, f"unknown type '{t}'", field="confusion")
+        for t in self.fp_types:
+            if t not in catalog:
+                raise DetectorError(self.path, f"unknown type '{t}'", field="false_positives.types")
+        return self
+
+    # ---- the model --------------------------------------------------------------------------
+    def recall_prob(
+        self, typ: ObjectType, pixels: np.ndarray, distance: np.ndarray, width: int, height: int
+    ) -> np.ndarray:
+        """P(detected) for instances of ``typ`` with ``pixels`` visible pixels in a ``width`` x
+        ``height`` image at ``distance`` m. The perfect detector: 1 iff pixels >= the type's
+        threshold at that resolution and distance <= max_range, else 0."""
+        px = np.asarray(pixels, float)
+        dist = np.asarray(distance, float)
+        if self.perfect or self.recall is None:
+            ok = (px >= min_pixels_at(typ.min_pixels, width, height)) & (dist <= typ.max_range)
+            return ok.astype(float)
+        r = self.recall
+        p50 = r.half_pixels * typ.min_pixels * (width * height) / REFERENCE_PIXELS
+        r50, spread = r.range_fraction * typ.max_range, r.range_width * typ.max_range
+        with np.errstate(divide="ignore", over="ignore"):
+            by_size = 1.0 / (1.0 + (p50 / np.maximum(px, 1e-9)) ** r.slope)
+            by_range = 1.0 / (1.0 + np.exp((dist - r50) / spread))
+        return r.max_recall * by_size * by_range
+
+    def confusions(self, type_name: str) -> list[tuple[str, float]]:
+        """The types ``type_name`` may be reported as, with their probabilities."""
+        out = []
+        for a, b, p in self.confusion:
+            if a == type_name:
+                out.append((b, p))
+            elif b == type_name:
+                out.append((a, p))
+        return out
+
+    def reported_type(self, type_name: str, rng: np.random.Generator) -> str:
+        """The type the detector reports for an instance of ``type_name`` (one uniform draw)."""
+        options = self.confusions(type_name)
+        if not options:
+            return type_name
+        u = rng.random()
+        acc = 0.0
+        for other, p in options:
+            acc += p
+            if u < acc:
+                return other
+        return type_name
+
+    def noisy_pose(
+        self, obj: ObjectInstance, distance: float, rng: np.random.Generator
+    ) -> ObjectInstance:
+        """``obj`` with its estimated pose: position and yaw perturbed by the distance's sigmas
+        (z kept: objects rest on surfaces the robot's depth shows)."""
+        if self.pose is None:
+            return obj
+        n = self.pose
+        sp = n.position_sigma + n.position_sigma_per_m * distance
+        sy = math.radians(n.yaw_sigma_deg + n.yaw_sigma_deg_per_m * distance)
+        dx, dy, dyaw = rng.normal(0.0, 1.0, 3) * (sp, sp, sy)
+        x, y, z = obj.position
+        return replace(obj, position=(x + float(dx), y + float(dy), z), yaw=obj.yaw + float(dyaw))
+
+    def false_positives(
+        self,
+        rng: np.random.Generator,
+        sample_point: Callable[[np.random.Generator], tuple[np.ndarray, float] | None],
+        catalog: Catalog,
+        first_id: int,
+    ) -> list[tuple[ObjectInstance, float]]:
+        """This image's false detections as (pose, distance): a Poisson number, each of a type
+        from ``fp_types`` standing on a surface point drawn by ``sample_point`` (a visible
+        point and its distance, or None if the image shows none). Ids count down from
+        ``first_id`` (negative ids never collide with the layout's)."""
+        if self.perfect or self.fp_per_image <= 0 or not self.fp_types:
+            return []
+        out = []
+        for k in range(int(rng.poisson(self.fp_per_image))):
+            hit = sample_point(rng)
+            t = self.fp_types[int(rng.integers(len(self.fp_types)))]
+            if hit is None:
+                continue
+            point, dist = hit
+            typ = catalog.type(t)
+            size = tuple(
+                float(v) for v in (np.asarray(typ.size_min) + np.asarray(typ.size_max)) / 2
+            )
+            pos = (float(point[0]), float(point[1]), float(point[2]) + size[2] / 2)
+            yaw = float(rng.uniform(-math.pi, math.pi))
+            out.append((ObjectInstance(t, first_id - k, pos, yaw, size), float(dist)))
+        return out
+
+
+# ============================================================================= loading
+def available_detectors() -> list[str]:
+    """Names of the presets shipped in ``assets/detectors``."""
+    return sorted(p.stem for p in DETECTORS_DIR.glob("*.toml"))
+
+
+def detector_path(path_or_name: str | Path) -> Path:
+    """The file of a preset given by path or bare name (``realistic`` -> assets/detectors/...)."""
+    p = Path(path_or_name)
+    if p.suffix == ".toml" or p.parent != Path(".") or p.exists():
+        return p
+    return DETECTORS_DIR / f"{p.name}.toml"
+
+
+def _number(path, field: str, value, lo: float, hi: float, lo_inclusive: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise DetectorError(path, f"expected a number, got {value!r}", field=field)
+    v = float(value)
+    below = v < lo if lo_inclusive else v <= lo
+    if not math.isfinite(v) or below or v > hi:
+        bracket = "[" if lo_inclusive else "("
+        raise DetectorError(
+            path, f"must be a finite number in {bracket}{lo}, {hi}], got {value!r}", field=field
+        )
+    return v
+
+
+def _table(path, doc: dict, name: str, spec: dict) -> dict[str, float]:
+    raw = doc.get(name)
+    if not isinstance(raw, dict):
+        raise DetectorError(path, "missing or not a table", field=name)
+    unknown = set(raw) - set(spec) - ({"types"} if name == "false_positives" else set())
+    if unknown:
+        raise DetectorError(path, f"unknown field(s) {sorted(unknown)}", field=name)
+    out = {}
+    for f, (lo, hi, inc) in spec.items():
+        if f not in raw:
+            raise DetectorError(path, "missing", field=f"{name}.{f}")
+        out[f] = _number(path, f"{name}.{f}", raw[f], lo, hi, inc)
+    return out
+
+
+def _confusion(path, raw) -> tuple[tuple[str, str, float], ...]:
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise DetectorError(path, "must be an array of tables [[confusion]]", field="confusion")
+    out = []
+    total: dict[str, float] = {}
+    for i, item in enumerate(raw):
+        where = f"confusion[{i}]"
+        if not isinstance(item, dict) or set(item) != CONFUSION_FIELDS:
+            raise DetectorError(
+                path, f"needs exactly the fields {sorted(CONFUSION_FIELDS)}", field=where
+            )
+        a, b = item["a"], item["b"]
+        if not (isinstance(a, str) and isinstance(b, str)) or a == b:
+            raise DetectorError(path, "a and b must be two different type names", field=where)
+        p = _number(path, f"{where}.p", item["p"], 0.0, 1.0, True)
+        for t in (a, b):
+            total[t] = total.get(t, 0.0) + p
+            if total[t] > 1.0:
+                raise DetectorError(
+                    path, f"confusion probabilities of {t} add up to more than 1", field=where
+                )
+        out.append((a, b, p))
+    return tuple(out)
+
+
+def parse_detector(doc: dict, path: str | Path = "<memory>") -> DetectorModel:
+    """Validate a parsed preset document; DetectorError on any problem."""
+    unknown = set(doc) - TOP_FIELDS
+    if unknown:
+        raise DetectorError(path, f"unknown top-level field(s) {sorted(unknown)}")
+    name = doc.get("name", Path(str(path)).stem)
+    kind = doc.get("kind")
+    if not isinstance(name, str) or not name:
+        raise DetectorError(path, "must be a non-empty string", field="name")
+    if kind not in KINDS:
+        raise DetectorError(path, f"must be one of {list(KINDS)}, got {kind!r}", field="kind")
+    description = doc.get("description", "")
+    if not isinstance(description, str):
+        raise DetectorError(path, "must be a string", field="description")
+    if kind == "perfect":
+        extra = set(doc) & SECTIONS
+        if extra:
+            raise DetectorError(path, f"a perfect detector takes no {sorted(extra)}", field="kind")
+        return DetectorModel(name, str(path), kind, description)
+    recall = Recall(**_table(path, doc, "recall", RECALL_FIELDS))
+    pose = PoseNoise(**_table(path, doc, "pose", POSE_FIELDS))
+    fp = _table(path, doc, "false_positives", FP_FIELDS)
+    types = doc["false_positives"].get("types", [])
+    if not isinstance(types, list) or not all(isinstance(t, str) for t in types):
+        raise DetectorError(path, "must be a list of type names", field="false_positives.types")
+    return DetectorModel(
+        name,
+        str(path),
+        kind,
+        description,
+        recall,
+        _confusion(path, doc.get("confusion")),
+        fp["per_image"],
+        tuple(types),
+        pose,
+    )
+
+
+def load_detector(path_or_name: str | Path, catalog: Catalog | None = None) -> DetectorModel:
+    """Load and validate a preset (a name in assets/detectors or a path); with ``catalog``, its
+    type names are checked too. DetectorError (one line) on any problem."""
+    path = detector_path(path_or_name)
+    if not path.is_file():
+        known = ", ".join(available_detectors())
+        raise DetectorError(path, f"no such detector preset (shipped: {known})")
+    try:
+        doc = tomllib.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise DetectorError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DetectorError(path, f"not valid TOML: {' '.join(str(exc).split())}") from None
+    except OSError as exc:
+        raise DetectorError(path, f"cannot read: {exc.strerror or exc}") from None
+    model = parse_detector(doc, path)
+    return model.check_catalog(catalog) if catalog is not None else model
+
+
+def detection_rng(seed: int, image_index: int) -> np.random.Generator:
+    """The detector's own random stream for one image: the same seed and image, the same draws,
+    independent of every other stream of the run."""
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7EC7, int(image_index)])
+
+
+def keep(
+    model: DetectorModel,
+    types: Sequence[ObjectType],
+    pixels: np.ndarray,
+    distances: np.ndarray,
+    size: tuple[int, int],
+    rng: np.random.Generator | None,
+) -> np.ndarray:
+    """Which candidate instances the detector reports (bool mask over the candidates): each kept
+    with its recall probability, one uniform draw per candidate in order (none at all for the
+    perfect detector, which needs no ``rng``). ``size``: the image's (width, height)."""
+    w, h = size
+    probs = np.array(
+        [
+            float(model.recall_prob(t, px, d, w, h))
+            for t, px, d in zip(types, pixels, distances, strict=True)
+        ]
+    )
+    if model.perfect:
+        return probs >= 1.0
+    if rng is None:
+        raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
+    return rng.random(len(probs)) < probs

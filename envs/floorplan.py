@@ -1,0 +1,584 @@
+"""Floor plans: ``generate_house(house_style, seed) -> RoomLayout`` (pure data, no MuJoCo).
+
+Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(name)])``.
+
+Order of work:
+1. The rooms: a count per room style from the house style's ranges (redrawn until the total is in
+   ``house.rooms``), each with a target floor area drawn from its room style's size ranges; the
+   areas are scaled so the whole plan (corridor included) is within ``house.footprint``.
+2. The plan, a rectangle cut into rooms:
+   - ``corridor``: one corridor runs the plan's length; the rooms are split between the two bands
+     beside it (largest first, to the lighter band) and each band is cut across into its rooms.
+     Every room has a door onto the corridor; the entrance is at one end of the corridor.
+   - ``open``: recursive subdivision (cut the longer side at the area ratio of two groups of
+     rooms). Doors join neighbouring rooms along a breadth-first spanning tree from the entrance
+     room (``house.entrance``, else the largest), so the entrance room is the hub.
+   Many candidate plans are drawn; the first whose rooms all fit their style (each side at least
+   ``MIN_SIDE_FRACTION`` of the style's smallest side, aspect at most ``MAX_ASPECT``) is kept,
+   else the one that misses least.
+3. Every room is furnished by its room style's rules with ``envs.rooms.generate_room`` on a
+   ``RoomShell`` (the plan's size, all its doors: their fronts are kept clear and lie in one free
+   region), then moved into house coordinates; ids are renumbered so they are unique in the house.
+
+Walls: interior walls (``WALL`` thick) stand centred on the cuts, so a room's interior outline is
+its cell shrunk by ``WALL / 2`` on every inner side; the outer walls stand just outside the
+footprint, as a single room's do. ``wall_boxes`` gives them with the door gaps (and lintels),
+``wall_obstacles`` the part the robot cannot cross.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from envs.houses import CORRIDOR, HouseError, HouseStyle
+from envs.layout import Door, Passage, Room, RoomLayout
+from envs.robot_spec import RobotSpec
+from envs.rooms import RoomShell, generate_room
+from envs.styles import Style
+from knowledge.catalog import Catalog, load_catalog
+from knowledge.geometry import Box, ObjectInstance
+
+WALL = 0.1  # m, wall thickness (the arena's WALL_THICKNESS)
+DOOR_MARGIN = 0.35  # m kept between a door's edge and the corner of either room it joins
+MIN_SIDE_FRACTION = 0.8  # a room's sides: at least this much of its style's smallest side
+MAX_ASPECT = 2.2
+PLAN_TRIES = 60
+COUNT_TRIES = 100
+_E = 1e-6
+
+
+@dataclass
+class _Cell:
+    """A room of the plan before furnishing: its style (None: the corridor) and cell rectangle."""
+
+    style: Style | None
+    area: float
+    rect: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    doors: list[int] = field(default_factory=list)  # indices into the plan's passages
+
+
+def house_hash(name: str) -> int:
+    """A stable (cross-process, cross-platform) hash of a house style name for seeding."""
+    return zlib.crc32(("house:" + name).encode("utf-8"))
+
+
+# -- 1. which rooms -------------------------------------------------------------------------------
+def _draw_rooms(house: HouseStyle, rng: np.random.Generator) -> list[_Cell]:
+    counts: list[int] = []
+    for _ in range(COUNT_TRIES):
+        counts = [int(rng.integers(lo, hi + 1)) for _, (lo, hi) in house.rooms]
+        if house.total[0] <= sum(counts) <= house.total[1]:
+            break
+    else:  # clip: drop optional rooms from the end, or add required ones
+        while sum(counts) > house.total[1]:
+            i = max(i for i, c in enumerate(counts) if c > house.rooms[i][1][0])
+            counts[i] -= 1
+        while sum(counts) < house.total[0]:
+            i = min(i for i, c in enumerate(counts) if c < house.rooms[i][1][1])
+            counts[i] += 1
+    cells = []
+    for (style, _), k in zip(house.rooms, counts, strict=True):
+        for _ in range(k):
+            w, d = rng.uniform(*style.width), rng.uniform(*style.depth)
+            cells.append(_Cell(style, float(w * d)))
+    return cells
+
+
+def _min_side(style: Style) -> float:
+    return MIN_SIDE_FRACTION * min(style.width[0], style.depth[0])
+
+
+def _misfit(cells: list[_Cell]) -> float:
+    """How far the plan's rooms are from fitting their styles (0: all fit)."""
+    bad = 0.0
+    for c in cells:
+        x0, y0, x1, y1 = c.rect
+        w, d = x1 - x0 - WALL, y1 - y0 - WALL
+        if c.style is None:
+            continue
+        lim = _min_side(c.style)
+        bad += max(0.0, lim - w) + max(0.0, lim - d)
+        bad += max(0.0, max(w, d) / max(min(w, d), 1e-3) - MAX_ASPECT)
+    return bad
+
+
+# -- 2. the plan ------------------------------------------------------------------------------------
+def _corridor_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
+    """Cells (corridor last) and passages (room, corridor) + the entrance, in plan coordinates
+    [0, W] x [0, D]. Returns (cells, passages, W, D)."""
+    c = float(rng.uniform(*house.corridor_width))
+    bands: list[list[_Cell]] = [[], []]
+    area = [0.0, 0.0]
+    for cell in sorted(rooms, key=lambda r: -r.area):
+        k = int(np.argmin(area)) if area[0] != area[1] else int(rng.integers(2))
+        bands[k].append(cell)
+        area[k] += cell.area
+    for band in bands:
+        rng.shuffle(band)  # type: ignore[arg-type]
+    lengths = [math.sqrt(a * len(b)) for a, b in zip(area, bands, strict=True) if b]
+    W = float(np.mean(lengths)) * float(rng.uniform(0.9, 1.15))
+    total = sum(area) + c * W
+    lo, hi = house.footprint
+    scale = 1.0
+    if total > hi:
+        scale = (hi - c * W) / sum(area)
+    elif total < lo:
+        scale = (lo - c * W) / sum(area)
+    scale = max(scale, 0.3)
+    W *= math.sqrt(scale)
+    depths = [a * scale / W for a in area]
+    D = depths[0] + c + depths[1]
+    y_band = [(0.0, depths[0]), (depths[0] + c, D)]
+    corridor = _Cell(None, c * W, (0.0, depths[0], W, depths[0] + c))
+    cells: list[_Cell] = []
+    for k, band in enumerate(bands):
+        x = 0.0
+        for cell in band:
+            w = cell.area * scale / depths[k]
+            cell.rect = (x, y_band[k][0], x + w, y_band[k][1])
+            x += w
+        if band:  # round-off: the last room ends exactly at W
+            r = band[-1].rect
+            band[-1].rect = (r[0], r[1], W, r[3])
+        cells.extend(band)
+    cells.append(corridor)
+    ci = len(cells) - 1
+    passages: list[tuple[int, int, float, float, str, float]] = []  # (a, b, x, y, axis, width)
+    for i, cell in enumerate(cells[:-1]):
+        x0, _, x1, _ = cell.rect
+        y_wall = depths[0] if cell.rect[1] < depths[0] else depths[0] + c
+        width = float(rng.uniform(*house.door_width))
+        span = (x0 + WALL / 2 + width / 2 + DOOR_MARGIN, x1 - WALL / 2 - width / 2 - DOOR_MARGIN)
+        if span[0] > span[1]:
+            x = (x0 + x1) / 2
+        else:
+            x = float(rng.uniform(*span))
+        passages.append((i, ci, x, y_wall, "x", width))
+    width = float(rng.uniform(*house.door_width))
+    x_end = 0.0 if rng.random() < 0.5 else W
+    passages.append((ci, -1, x_end, depths[0] + c / 2, "y", min(width, c - 0.3)))
+    return cells, passages, W, D
+
+
+def _split(cells: list[_Cell], rect, rng: np.random.Generator) -> None:
+    """Cut ``rect`` into the cells' rectangles (areas in proportion), recursively."""
+    if len(cells) == 1:
+        cells[0].rect = rect
+        return
+    order = list(cells)
+    rng.shuffle(order)  # type: ignore[arg-type]
+    areas = np.array([c.area for c in order])
+    cum = np.cumsum(areas)[:-1]
+    k = int(np.argmin(np.abs(cum - areas.sum() / 2))) + 1
+    if len(order) > 2 and rng.random() < 0.3:
+        k = int(rng.integers(1, len(order)))
+    a, b = order[:k], order[k:]
+    frac = sum(c.area for c in a) / areas.sum()
+    x0, y0, x1, y1 = rect
+    if (x1 - x0) >= (y1 - y0):
+        xm = x0 + frac * (x1 - x0)
+        _split(a, (x0, y0, xm, y1), rng)
+        _split(b, (xm, y0, x1, y1), rng)
+    else:
+        ym = y0 + frac * (y1 - y0)
+        _split(a, (x0, y0, x1, ym), rng)
+        _split(b, (x0, ym, x1, y1), rng)
+
+
+def _shared_edge(a, b) -> tuple[str, float, float, float] | None:
+    """The wall two cells share: (axis it runs along, its fixed coordinate, lo, hi), or None."""
+    ax0, ay0, ax1, ay1 = a
+    bx0, by0, bx1, by1 = b
+    for xa, xb in ((ax1, bx0), (bx1, ax0)):
+        if abs(xa - xb) < _E:
+            lo, hi = max(ay0, by0), min(ay1, by1)
+            if hi > lo:
+                return "y", xa, lo, hi
+    for ya, yb in ((ay1, by0), (by1, ay0)):
+        if abs(ya - yb) < _E:
+            lo, hi = max(ax0, bx0), min(ax1, bx1)
+            if hi > lo:
+                return "x", ya, lo, hi
+    return None
+
+
+def _open_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
+    """Recursive subdivision with a spanning tree of doors from the entrance room; None if the
+    entrance room has no outside wall long enough or the rooms are not all joined."""
+    total = sum(r.area for r in rooms)
+    lo, hi = house.footprint
+    scale = min(max(total, lo), hi) / total
+    for r in rooms:
+        r.area *= scale
+    total *= scale
+    aspect = float(rng.uniform(1.0, 1.6))
+    W, D = math.sqrt(total * aspect), math.sqrt(total / aspect)
+    if rng.random() < 0.5:
+        W, D = D, W
+    _split(rooms, (0.0, 0.0, W, D), rng)
+    names = [r.style.name if r.style else CORRIDOR for r in rooms]
+    if house.entrance in names:
+        hub = names.index(house.entrance)
+    else:
+        hub = int(np.argmax([r.area for r in rooms]))
+    width = float(rng.uniform(*house.door_width))
+    need = width + 2 * DOOR_MARGIN + WALL
+    passages: list[tuple[int, int, float, float, str, float]] = []
+    # The entrance: the hub's longest outside wall.
+    x0, y0, x1, y1 = rooms[hub].rect
+    outside = [
+        (x1 - x0, "x", y, x0, x1) for y in (0.0, D) if abs(y0 - y) < _E or abs(y1 - y) < _E
+    ] + [(y1 - y0, "y", x, y0, y1) for x in (0.0, W) if abs(x0 - x) < _E or abs(x1 - x) < _E]
+    outside = [o for o in outside if o[0] >= need]
+    if not outside:
+        return None
+    _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
+    along = float(rng.uniform(a + need / 2, b - need / 2))
+    xy = (along, fixed) if axis == "x" else (fixed, along)
+    entrance = (hub, -1, xy[0], xy[1], axis, width)
+    # Doors: breadth-first from the hub over walls long enough for one.
+    joined, queue = {hub}, [hub]
+    while queue:
+        i = queue.pop(0)
+        nbrs = [j for j in range(len(rooms)) if j not in joined]
+        rng.shuffle(nbrs)  # type: ignore[arg-type]
+        for j in nbrs:
+            edge = _shared_edge(rooms[i].rect, rooms[j].rect)
+            width = float(rng.uniform(*house.door_width))
+            need = width + 2 * DOOR_MARGIN + WALL
+            if edge is None or edge[3] - edge[2] < need:
+                continue
+            axis, fixed, a, b = edge
+            along = float(rng.uniform(a + need / 2, b - need / 2))
+            xy = (along, fixed) if axis == "x" else (fixed, along)
+            passages.append((i, j, xy[0], xy[1], axis, width))
+            joined.add(j)
+            queue.append(j)
+    if len(joined) < len(rooms):
+        return None
+    passages.append(entrance)
+    return rooms, passages, W, D
+
+
+def _plan(house: HouseStyle, rng: np.random.Generator):
+    best, best_bad = None, math.inf
+    for _ in range(PLAN_TRIES):
+        rooms = _draw_rooms(house, rng)
+        if house.plan == "corridor":
+            plan = _corridor_plan(house, rooms, rng)
+        else:
+            plan = _open_plan(house, rooms, rng)
+        if plan is None:
+            continue
+        bad = _misfit(plan[0])
+        if bad < best_bad:
+            best, best_bad = plan, bad
+        if bad == 0.0:
+            break
+    if best is None:
+        raise HouseError(
+            house.path,
+            f"no plan of {PLAN_TRIES} tried gives every room a door (rooms too small or "
+            "too many for the footprint?)",
+            field="rooms",
+        )
+    return best
+
+
+# -- 3. furnishing ----------------------------------------------------------------------------------
+def _interior(rect, W: float, D: float) -> tuple[float, float, float, float]:
+    """A cell's interior: shrunk by half a wall on each side that is not the footprint's edge."""
+    x0, y0, x1, y1 = rect
+    h = WALL / 2
+    return (
+        x0 if x0 < _E else x0 + h,
+        y0 if y0 < _E else y0 + h,
+        x1 if x1 > W - _E else x1 - h,
+        y1 if y1 > D - _E else y1 - h,
+    )
+
+
+def _room_door(outline, p: Passage) -> Door:
+    """A passage as a door of the room with interior ``outline`` (room-centred coordinates)."""
+    x0, y0, x1, y1 = outline
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    if p.axis == "x":
+        return Door("north" if p.center[1] > cy else "south", p.center[0] - cx, p.width)
+    return Door("east" if p.center[0] > cx else "west", p.center[1] - cy, p.width)
+
+
+def _entrance_door(p: Passage, W: float, D: float) -> Door:
+    """The entrance passage as the layout's ``door`` (a gap in the outer wall)."""
+    if p.axis == "x":
+        return Door("north" if p.center[1] > 0 else "south", p.center[0], p.width)
+    return Door("east" if p.center[0] > 0 else "west", p.center[1], p.width)
+
+
+def generate_house(
+    house: HouseStyle, seed: int, catalog: Catalog | None = None, robot: RobotSpec | None = None
+) -> RoomLayout:
+    """A furnished house of ``house`` style, the same for the same (house, seed)."""
+    catalog = catalog or load_catalog()
+    robot = robot or RobotSpec()
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
+    cells, raw, W, D = _plan(house, rng)
+    height = float(rng.uniform(*house.height))
+    ox, oy = W / 2, D / 2  # plan -> house coordinates (origin at the centre)
+    passages = tuple(
+        Passage((a, b), (float(x - ox), float(y - oy)), axis, float(w))
+        for a, b, x, y, axis, w in raw
+    )
+    rooms, objects = [], []
+    support: dict[int, int | None] = {}
+    placed_by: dict[int, tuple[int, str]] = {}
+    room_of: dict[int, int] = {}
+    for i, cell in enumerate(cells):
+        ix0, iy0, ix1, iy1 = _interior(cell.rect, W, D)
+        outline = (float(ix0 - ox), float(iy0 - oy), float(ix1 - ox), float(iy1 - oy))
+        room_seed = int(rng.integers(2**31))
+        rooms.append(Room(i, cell.style.name if cell.style else CORRIDOR, outline))
+        if cell.style is None:
+            continue
+        doors = tuple(_room_door(outline, p) for p in passages if i in p.rooms)
+        shell = RoomShell(outline[2] - outline[0], outline[3] - outline[1], height, doors)
+        room = generate_room(cell.style, room_seed, catalog, robot, shell)
+        cx, cy = (outline[0] + outline[2]) / 2, (outline[1] + outline[3]) / 2
+        base = len(objects)
+        for o in room.objects:
+            x, y, z = o.position
+            obj = ObjectInstance(o.type, o.id + base, (x + cx, y + cy, z), o.yaw, o.size)
+            objects.append(obj)
+            room_of[obj.id] = i
+            sup = room.support.get(o.id)
+            support[obj.id] = None if sup is None else sup + base
+        for oid, (ref, rel) in room.placed_by.items():
+            placed_by[oid + base] = (ref + base, rel)
+    entrance = next(p for p in passages if p.rooms[1] == -1)
+    return RoomLayout(
+        style=house.name,
+        seed=int(seed),
+        width=float(W),
+        depth=float(D),
+        height=height,
+        door=_entrance_door(entrance, W, D),
+        objects=tuple(objects),
+        support=support,
+        placed_by=placed_by,
+        rooms=tuple(rooms),
+        doors=passages,
+        room_of=room_of,
+    )
+
+
+# -- walls and free space -------------------------------------------------------------------------
+def _merge(intervals: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(intervals):
+        if out and a <= out[-1][1] + _E:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+def _cut(intervals, gaps) -> list[tuple[float, float]]:
+    out = list(intervals)
+    for g0, g1 in gaps:
+        nxt = []
+        for a, b in out:
+            if g1 <= a or g0 >= b:
+                nxt.append((a, b))
+                continue
+            if g0 > a:
+                nxt.append((a, g0))
+            if g1 < b:
+                nxt.append((g1, b))
+        out = nxt
+    return [(a, b) for a, b in out if b - a > 1e-3]
+
+
+def wall_boxes(
+    layout: RoomLayout, thickness: float = WALL, door_height: float = 2.1
+) -> list[tuple[str, list[float], list[float]]]:
+    """(name, centre, half extents) of every wall box of a house: the outer walls (entrance gap
+    included) just outside the footprint, the interior walls on the cuts with their door gaps,
+    and a lintel over every opening (name ending in ``lintel``). Empty for a single room."""
+    if not layout.is_house:
+        return []
+    hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, thickness
+    lines: dict[tuple[str, float], list[tuple[float, float]]] = {}
+    outer = {("x", hd + t / 2), ("x", -hd - t / 2), ("y", hw + t / 2), ("y", -hw - t / 2)}
+    for axis, fixed in outer:
+        span = hw + t if axis == "x" else hd + t
+        lines[(axis, round(fixed, 6))] = [(-span, span)]
+    for room in layout.rooms:
+        x0, y0, x1, y1 = room.outline
+        h2 = WALL / 2
+        edges = []
+        if y0 > -hd + _E:
+            edges.append(("x", y0 - h2, x0 - h2, x1 + h2))
+        if y1 < hd - _E:
+            edges.append(("x", y1 + h2, x0 - h2, x1 + h2))
+        if x0 > -hw + _E:
+            edges.append(("y", x0 - h2, y0 - h2, y1 + h2))
+        if x1 < hw - _E:
+            edges.append(("y", x1 + h2, y0 - h2, y1 + h2))
+        for axis, fixed, a, b in edges:
+            lines.setdefault((axis, round(fixed, 6)), []).append((a, b))
+    gaps: dict[tuple[str, float], list[tuple[float, float]]] = {}
+    for p in layout.doors:
+        if p.rooms[1] == -1:  # the entrance: on the outer wall's centre line
+            if p.axis == "x":
+                key = ("x", round((hd + t / 2) * (1 if p.center[1] > 0 else -1), 6))
+            else:
+                key = ("y", round((hw + t / 2) * (1 if p.center[0] > 0 else -1), 6))
+        else:
+            key = (p.axis, round(p.center[1] if p.axis == "x" else p.center[0], 6))
+        along = p.center[0] if p.axis == "x" else p.center[1]
+        gaps.setdefault(key, []).append((along - p.width / 2, along + p.width / 2))
+    out = []
+    for k, ((axis, fixed), ivs) in enumerate(sorted(lines.items())):
+        pieces = [(a, b, 0.0, h, "") for a, b in _cut(_merge(ivs), gaps.get((axis, fixed), []))]
+        if h > door_height:
+            pieces += [(a, b, door_height, h, "_lintel") for a, b in gaps.get((axis, fixed), [])]
+        for j, (a, b, z0, z1, suffix) in enumerate(pieces):
+            mid, half_len = (a + b) / 2, (b - a) / 2
+            if axis == "x":
+                center, half = [mid, fixed, (z0 + z1) / 2], [half_len, t / 2, (z1 - z0) / 2]
+            else:
+                center, half = [fixed, mid, (z0 + z1) / 2], [t / 2, half_len, (z1 - z0) / 2]
+            out.append((f"hwall{k}_{j}{suffix}", center, half))
+    return out
+
+
+def wall_obstacles(layout: RoomLayout) -> list[Box]:
+    """The interior walls of a house as boxes the robot cannot cross (lintels excluded; the
+    outer walls are the footprint's edge). Empty for a single room."""
+    return [
+        Box(np.array(c, float), 0.0, np.array(h, float))
+        for name, c, h in wall_boxes(layout)
+        if not name.endswith("lintel")
+        and abs(c[0]) < layout.width / 2
+        and abs(c[1]) < layout.depth / 2
+    ]
+
+
+def room_at(layout: RoomLayout, x: float, y: float) -> int | None:
+    """The index of the room whose interior holds (x, y), or None (a wall, outside)."""
+    for room in layout.rooms:
+        x0, y0, x1, y1 = room.outline
+        if x0 - _E <= x <= x1 + _E and y0 - _E <= y <= y1 + _E:
+            return room.index
+    return None
+
+
+def layout_dict(layout: RoomLayout) -> dict:
+    """The layout as JSON-ready data: style, seed, size, rooms (style, outline), doors, and every
+    object (type, id, position, yaw, size, room). A single room is one room of index 0."""
+    if layout.is_house:
+        rooms = [
+            {"index": r.index, "style": r.style, "outline": list(r.outline)} for r in layout.rooms
+        ]
+        doors = [
+            {"rooms": list(p.rooms), "center": list(p.center), "axis": p.axis, "width": p.width}
+            for p in layout.doors
+        ]
+    else:
+        hw, hd = layout.width / 2, layout.depth / 2
+        rooms = [{"index": 0, "style": layout.style, "outline": [-hw, -hd, hw, hd]}]
+        d = layout.door
+        axis = "x" if d.wall in ("north", "south") else "y"
+        center = {
+            "north": (d.center, hd),
+            "south": (d.center, -hd),
+            "east": (hw, d.center),
+            "west": (-hw, d.center),
+        }[d.wall]
+        doors = [{"rooms": [0, -1], "center": list(center), "axis": axis, "width": d.width}]
+    return {
+        "style": layout.style,
+        "seed": layout.seed,
+        "kind": "house" if layout.is_house else "room",
+        "width": layout.width,
+        "depth": layout.depth,
+        "height": layout.height,
+        "entrance": {
+            "wall": layout.door.wall,
+            "center": layout.door.center,
+            "width": layout.door.width,
+        },
+        "rooms": rooms,
+        "doors": doors,
+        "objects": [
+            {
+                "type": o.type,
+                "id": o.id,
+                "position": list(o.position),
+                "yaw": o.yaw,
+                "size": list(o.size),
+                "room": layout.room_of.get(o.id, 0),
+                "support": layout.support.get(o.id),
+            }
+            for o in layout.objects
+        ],
+    }
+
+
+def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | None:
+    """The rooms a camera at (x, y) can see into, by 2-D portal visibility: its own room, and
+    every room seen through a chain of door openings (each opening narrowed to the angular
+    wedge of the openings before it). Exact in plan for rectangular rooms and conservative in
+    height (an opening counts as full height). None where it cannot tell (not inside a room:
+    in a doorway or a wall), meaning every room."""
+    start = room_at(layout, x, y)
+    if start is None:
+        return None
+    doors: dict[int, list[tuple[int, Passage]]] = {r.index: [] for r in layout.rooms}
+    for k, p in enumerate(layout.doors):
+        a, b = p.rooms
+        if b >= 0:
+            doors[a].append((k, p))
+            doors[b].append((k, p))
+    seen = {start}
+
+    def ends(p: Passage) -> tuple[np.ndarray, np.ndarray]:
+        c = np.asarray(p.center, float)
+        d = np.array([p.width / 2, 0.0]) if p.axis == "x" else np.array([0.0, p.width / 2])
+        return c - d, c + d
+
+    def angle(q: np.ndarray, ref: float) -> float:
+        a = math.atan2(q[1] - y, q[0] - x) - ref
+        return math.atan2(math.sin(a), math.cos(a))
+
+    def walk(room: int, lo: float, hi: float, ref: float, used: frozenset[int]) -> None:
+        for k, p in doors[room]:
+            if k in used:
+                continue
+            q0, q1 = ends(p)
+            a0, a1 = sorted((angle(q0, ref), angle(q1, ref)))
+            if a1 - a0 > math.pi:  # the opening straddles the back: keep it (conservative)
+                a0, a1 = -math.pi, math.pi
+            l2, h2 = max(lo, a0), min(hi, a1)
+            if l2 < h2:
+                other = p.rooms[1] if p.rooms[0] == room else p.rooms[0]
+                seen.add(other)
+                walk(other, l2, h2, ref, used | {k})
+
+    for k, p in doors[start]:
+        q0, q1 = ends(p)
+        mid = (q0 + q1) / 2
+        # Too close to the opening's line to bound a wedge: everything beyond may show.
+        line_dist = abs(mid[1] - y) if p.axis == "x" else abs(mid[0] - x)
+        ref = math.atan2(mid[1] - y, mid[0] - x)
+        if line_dist < 0.05:
+            walk(start, -math.pi, math.pi, ref, frozenset())
+            continue
+        a0, a1 = sorted((angle(q0, ref), angle(q1, ref)))
+        other = p.rooms[1] if p.rooms[0] == start else p.rooms[0]
+        seen.add(other)
+        walk(other, a0, a1, ref, frozenset({k}))
+    return frozenset(seen)

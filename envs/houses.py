@@ -1,0 +1,305 @@
+"""House styles: what a kind of home or floor holds (which room styles and how many of each, the
+footprint, the plan type, corridor and door widths), loaded from ``assets/houses/<name>.toml``.
+
+The format is documented at the top of ``assets/houses/apartment.toml``. Like room styles, house
+styles are data: a user adds one without code, and a bad one gets a one-line error naming file and
+field. ``resolve_style`` turns any ``--style`` value (a room style or a house style, by name or
+path) into a ``Style`` or a ``HouseStyle``; ``generate_layout`` makes the layout of either.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from envs.layout import RoomLayout
+from envs.styles import STYLES_DIR, Style, StyleError, available_styles, load_style
+from knowledge.catalog import ASSETS_DIR, Catalog, load_catalog
+
+HOUSES_DIR = ASSETS_DIR / "houses"
+TOP_FIELDS = {"name", "description", "house", "rooms"}
+HOUSE_FIELDS = {"rooms", "footprint", "height", "plan", "corridor_width", "door_width", "entrance"}
+PLANS = ("corridor", "open")
+FOOTPRINT_LIMITS = (20.0, 400.0)  # m^2: what the plan generator is built for
+MAX_ROOMS = 12
+CORRIDOR = "corridor"  # the style name of a plan's corridor (a room with no furniture)
+
+
+class HouseError(StyleError):
+    """A house-style file is malformed or inconsistent with its room styles."""
+
+
+@dataclass(frozen=True)
+class HouseStyle:
+    """A validated house style: ``rooms`` is (room style, [min, max] count) in file order."""
+
+    name: str
+    path: str
+    description: str
+    rooms: tuple[tuple[Style, tuple[int, int]], ...]
+    total: tuple[int, int]  # how many rooms (the corridor not counted)
+    footprint: tuple[float, float]  # m^2, the whole plan (corridor included)
+    height: tuple[float, float]
+    plan: str  # 'corridor' (rooms on both sides of one corridor) or 'open' (rooms open into rooms)
+    corridor_width: tuple[float, float]
+    door_width: tuple[float, float]
+    entrance: str | None  # the room style whose room has the entrance ('open' plans)
+
+    @property
+    def types(self) -> tuple[str, ...]:
+        """Every object type that can occur in houses of this style, in first-mention order."""
+        seen: dict[str, None] = {}
+        for style, _ in self.rooms:
+            for t in style.types:
+                seen[t] = None
+        return tuple(seen)
+
+
+# What a --style names: a room style or a house style.
+WorldStyle = Style | HouseStyle
+
+
+def available_houses() -> list[str]:
+    """Names of the house styles shipped in ``assets/houses``."""
+    return sorted(p.stem for p in HOUSES_DIR.glob("*.toml"))
+
+
+def _is_name(value: str | Path) -> bool:
+    p = Path(value)
+    return not (p.suffix == ".toml" or p.parent != Path(".") or p.exists())
+
+
+def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: float) -> tuple:
+    kind = "integers" if integer else "numbers"
+
+    def ok(v) -> bool:
+        if isinstance(v, bool):
+            return False
+        if integer:
+            return isinstance(v, int)
+        return isinstance(v, int | float) and math.isfinite(v)
+
+    if ok(value):
+        value = [value, value]
+    if not isinstance(value, list) or len(value) != 2 or not all(ok(v) for v in value):
+        raise HouseError(
+            path, f"expected a number or a [min, max] pair of {kind}, got {value!r}", field=field
+        )
+    a, b = value
+    if a > b:
+        raise HouseError(path, f"min {a} is larger than max {b}", field=field)
+    if a < lo_min or b > hi_max:
+        raise HouseError(path, f"must be within [{lo_min}, {hi_max}], got {value}", field=field)
+    return (int(a), int(b)) if integer else (float(a), float(b))
+
+
+def _room_style(path, key: str, catalog: Catalog) -> Style:
+    field = f"rooms.{key}"
+    if _is_name(key):
+        if not (STYLES_DIR / f"{key}.toml").exists():
+            raise HouseError(
+                path,
+                f"unknown room style '{key}' (available: {', '.join(available_styles())})",
+                field=field,
+            )
+        return load_style(key, catalog)
+    p = Path(key)
+    if not p.is_absolute():
+        p = Path(path).parent / p
+    if not p.exists():
+        raise HouseError(path, f"no such room style file {str(p)!r}", field=field)
+    return load_style(p, catalog)
+
+
+def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
+    """Validate a parsed house document; HouseError naming file and field on any problem."""
+    unknown = set(doc) - TOP_FIELDS
+    if unknown:
+        raise HouseError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TOP_FIELDS)})",
+            field=sorted(unknown)[0],
+        )
+    name = doc.get("name", Path(path).stem)
+    if not isinstance(name, str) or not name:
+        raise HouseError(path, "must be a non-empty string", field="name")
+    if name in available_styles():
+        raise HouseError(path, f"'{name}' is already a room style's name", field="name")
+    desc = doc.get("description", "")
+    if not isinstance(desc, str):
+        raise HouseError(path, "must be a string", field="description")
+    house = doc.get("house")
+    if not isinstance(house, dict):
+        raise HouseError(path, "missing [house] table (rooms, footprint, plan...)", field="house")
+    unknown = set(house) - HOUSE_FIELDS
+    if unknown:
+        raise HouseError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(HOUSE_FIELDS)})",
+            field=f"house.{sorted(unknown)[0]}",
+        )
+    for req in ("rooms", "footprint"):
+        if req not in house:
+            raise HouseError(path, "missing", field=f"house.{req}")
+    total = _range(path, "house.rooms", house["rooms"], integer=True, lo_min=1, hi_max=MAX_ROOMS)
+    footprint = _range(
+        path,
+        "house.footprint",
+        house["footprint"],
+        integer=False,
+        lo_min=FOOTPRINT_LIMITS[0],
+        hi_max=FOOTPRINT_LIMITS[1],
+    )
+    height = _range(
+        path, "house.height", house.get("height", [2.6, 2.9]), integer=False, lo_min=2.3, hi_max=5
+    )
+    plan = house.get("plan", "corridor")
+    if plan not in PLANS:
+        raise HouseError(path, f"must be one of {PLANS}, got {plan!r}", field="house.plan")
+    corridor = _range(
+        path,
+        "house.corridor_width",
+        house.get("corridor_width", [1.3, 1.6]),
+        integer=False,
+        lo_min=1.2,
+        hi_max=4.0,
+    )
+    door = _range(
+        path,
+        "house.door_width",
+        house.get("door_width", [0.85, 1.0]),
+        integer=False,
+        lo_min=0.75,
+        hi_max=1.6,
+    )
+    if plan == "corridor" and door[1] > corridor[0] - 0.3:
+        raise HouseError(
+            path,
+            f"a {door[1]} m entrance does not fit the end of a {corridor[0]} m corridor",
+            field="house.door_width",
+        )
+    raw = doc.get("rooms")
+    if not isinstance(raw, dict) or not raw:
+        raise HouseError(path, "must be a table of room_style = [min, max]", field="rooms")
+    rooms = []
+    for key, val in raw.items():
+        count = _range(path, f"rooms.{key}", val, integer=True, lo_min=0, hi_max=MAX_ROOMS)
+        rooms.append((_room_style(path, key, catalog), count))
+    lo = sum(c[0] for _, c in rooms)
+    hi = sum(c[1] for _, c in rooms)
+    if lo > total[1] or hi < total[0]:
+        raise HouseError(
+            path,
+            f"the room counts give {lo}..{hi} rooms, outside house.rooms {list(total)}",
+            field="rooms",
+        )
+    if plan == "open" and total[0] < 1:
+        raise HouseError(path, "an open plan needs at least one room", field="house.rooms")
+    entrance = house.get("entrance")
+    names = [s.name for s, _ in rooms]
+    if entrance is not None:
+        if entrance not in names:
+            raise HouseError(
+                path, f"must be one of the house's room styles {names}", field="house.entrance"
+            )
+        if next(c for s, c in rooms if s.name == entrance)[0] < 1:
+            raise HouseError(
+                path,
+                f"every house needs its entrance room: rooms.{entrance} min >= 1",
+                field="house.entrance",
+            )
+    smallest = sum(c[0] * s.width[0] * s.depth[0] for s, c in rooms)
+    if smallest * 0.7 > footprint[1]:
+        raise HouseError(
+            path,
+            f"the fewest rooms need about {smallest:.0f} m^2, the footprint allows "
+            f"{footprint[1]:.0f} m^2",
+            field="house.footprint",
+        )
+    return HouseStyle(
+        name=name,
+        path=str(path),
+        description=desc,
+        rooms=tuple(rooms),
+        total=total,
+        footprint=footprint,
+        height=height,
+        plan=plan,
+        corridor_width=corridor,
+        door_width=door,
+        entrance=entrance,
+    )
+
+
+def _read(path: Path, cls: type[StyleError]) -> dict:
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise cls(path, "no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise cls(path, f"TOML syntax error: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise cls(path, f"not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise cls(path, f"cannot read: {exc.strerror}") from None
+
+
+def load_house(path_or_name: str | Path, catalog: Catalog | None = None) -> HouseStyle:
+    """Load and validate a house style by path or bare name (see ``available_houses()``)."""
+    catalog = catalog or load_catalog()
+    if _is_name(path_or_name):
+        path = HOUSES_DIR / f"{Path(path_or_name).name}.toml"
+        if not path.exists():
+            raise HouseError(
+                path, f"no such house style (available: {', '.join(available_houses())})"
+            )
+    else:
+        path = Path(path_or_name)
+    return parse_house(_read(path, HouseError), path, catalog)
+
+
+def resolve_style(path_or_name: str | Path, catalog: Catalog | None = None) -> WorldStyle:
+    """The room style or house style a ``--style`` value names: a bare name is looked up in
+    ``assets/styles`` and ``assets/houses`` (names never collide), a path is a house style if
+    it has a ``[house]`` table, else a room style."""
+    catalog = catalog or load_catalog()
+    if _is_name(path_or_name):
+        name = Path(path_or_name).name
+        room, house = (STYLES_DIR / f"{name}.toml").exists(), (HOUSES_DIR / f"{name}.toml").exists()
+        if room and house:
+            raise HouseError(
+                HOUSES_DIR / f"{name}.toml", f"'{name}' is both a room style and a house style"
+            )
+        if house:
+            return load_house(name, catalog)
+        if room:
+            return load_style(name, catalog)
+        raise StyleError(
+            name,
+            f"no such style (room styles: {', '.join(available_styles())}; "
+            f"house styles: {', '.join(available_houses())})",
+        )
+    path = Path(path_or_name)
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except (OSError, ValueError):
+        doc = None  # load_style reports the problem in its words
+    if isinstance(doc, dict) and "house" in doc:
+        return parse_house(doc, path, catalog)
+    return load_style(path, catalog)
+
+
+def generate_layout(style: WorldStyle, seed: int, catalog: Catalog | None = None) -> RoomLayout:
+    """The world of a room style (``generate_room``) or a house style (``generate_house``), the
+    same for the same (style, seed)."""
+    if isinstance(style, HouseStyle):
+        from envs.floorplan import generate_house
+
+        return generate_house(style, seed, catalog)
+    from envs.rooms import generate_room
+
+    return generate_room(style, seed, catalog)

@@ -1,0 +1,145 @@
+"""Where to look for a target: P(rel(T)) from the learned intervals, and the relation volumes of
+known objects ranked by it (location constraint, paper section 3).
+
+This is the robot-independent half of object search. Given the objects a robot knows (its own
+detections, as ``ObjectInstance``), every known object b and every rel in RELATIONS(type(b))
+give one candidate volume v_rel(b) with probability P(rel(T)), read from a ``ProbabilitySource``:
+the knowledge base's interval (its lower bound, the Wilson centre p0, or the upper bound, by
+``rank``), or a fixed table (ground truth, or a test's). ``candidate_volumes`` returns them best
+first. The simulated robot's search (``agent/search_space.py``) builds its regions from exactly
+these candidates and then adds what only a robot with a map knows: which part of each volume it
+has already seen and how many seconds it costs to look there.
+
+Pure numpy: usable by any robot (see ``scripts/examples/real_robot_api.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from knowledge import intervals
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import Box, ObjectInstance, relation_volume
+
+RANK_MODES = ("low", "p0", "high")
+# The lower bound was best or tied on three stores of different sizes (measured; README, Search).
+DEFAULT_RANK = "low"
+
+
+class ProbabilitySource:
+    """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
+
+    name = "none"
+
+    def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
+        """The probability used to rank rel's volume when looking for ``type_name``."""
+        raise NotImplementedError
+
+    def instances(self, type_name: str) -> float | None:
+        """Expected instances of ``type_name`` per room, or None if unknown."""
+        return None
+
+
+class KBProbabilities(ProbabilitySource):
+    """The learned intervals: lower bound, p0 (the Wilson centre) or upper bound, by ``rank``."""
+
+    def __init__(self, kb: KnowledgeBase, rank: str = DEFAULT_RANK, rooms: int | None = None):
+        if rank not in RANK_MODES:
+            raise CtxsearchError(f"unknown rank '{rank}' (known: {', '.join(RANK_MODES)})")
+        self.kb, self.rank, self.rooms = kb, rank, rooms
+        self.name = f"kb-{rank}"
+        self._cache: dict[tuple[str, str], float] = {}
+
+    def instances(self, type_name: str) -> float | None:
+        """n_T / rooms learned in: examined instances per room (None without a room count)."""
+        if not self.rooms:
+            return None
+        return self.kb.n(type_name) / self.rooms
+
+    def p(self, relation: str, type_name: str) -> float:
+        key = (relation, type_name)
+        v = self._cache.get(key)
+        if v is None:
+            if self.rank == "p0":
+                rel = self.kb.catalog.relation(relation)
+                v = float(
+                    intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
+                )
+            else:
+                lo, hi = self.kb.interval(relation, type_name)
+                v = lo if self.rank == "low" else hi
+            self._cache[key] = v
+        return v
+
+
+class TableProbabilities(ProbabilitySource):
+    """Fixed probabilities from a table {(relation, type): p} (ground truth, or a test's)."""
+
+    def __init__(
+        self,
+        table: Mapping[tuple[str, str], float],
+        name: str = "table",
+        per_room: Mapping[str, float] | None = None,
+    ):
+        self.table = {k: float(v) for k, v in table.items()}
+        self.name = name
+        self.per_room = dict(per_room) if per_room is not None else None
+
+    @classmethod
+    def from_truth(cls, doc: Mapping) -> TableProbabilities:
+        """From ``ctxsearch truth``'s JSON document ({"samples", "entries": [{"ref", "relation",
+        "type", "p", "n"}, ...]}); instances per room are n_ref / samples."""
+        entries = doc.get("entries", [])
+        per_room = None
+        if doc.get("samples"):
+            per_room = {
+                e["ref"]: float(e["n"]) / float(doc["samples"])
+                for e in entries
+                if "n" in e and "ref" in e
+            }
+        return cls(
+            {(e["relation"], e["type"]): float(e["p"]) for e in entries},
+            name="truth",
+            per_room=per_room,
+        )
+
+    def p(self, relation: str, type_name: str) -> float:
+        return self.table.get((relation, type_name), 0.0)
+
+    def instances(self, type_name: str) -> float | None:
+        if self.per_room is None:
+            return None
+        return self.per_room.get(type_name, 0.0)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One place to look for the target: v_rel(b) of a known object b, with P(rel(T))."""
+
+    relation: str
+    ref_id: int  # the known object's instance id
+    box: Box  # v_rel(b), world frame
+    p: float  # P(rel(T)) from the probability source
+
+
+def candidate_volumes(
+    known: Iterable[ObjectInstance],
+    target: str,
+    catalog: Catalog,
+    probs: ProbabilitySource,
+    min_p: float = 1e-6,
+) -> list[Candidate]:
+    """Every (known object b, rel in RELATIONS(type(b))) with P(rel(target)) > ``min_p``, best
+    first (ties: relation name, then instance id). Instances of the target type give none."""
+    out = []
+    for b in sorted(known, key=lambda o: o.id):
+        if b.type == target:
+            continue
+        for rel in catalog.type(b.type).relations:
+            p = float(probs.p(rel.name, target))
+            if p > min_p:
+                out.append(Candidate(rel.name, b.id, relation_volume(rel, b), p))
+    return sorted(out, key=lambda c: (-c.p, c.relation, c.ref_id))

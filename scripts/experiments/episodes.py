@@ -1,0 +1,280 @@
+"""Search episodes, shared by ``ctxsearch search``, ``ctxsearch bench search`` and the demo.
+
+``make_episodes`` draws paired episodes: held-out rooms (``search.held_out_seed(seed, i)``,
+skipping any seed the knowledge store learned in and rooms without a small object), a start pose
+(a uniformly drawn free cell, random heading) and a target type drawn uniformly among the small
+(kind=object) types present in the room, or a given target. ``run_episodes`` runs every policy
+on every episode (the room built once per episode, the robot put back at the same start pose for
+each policy, with a fresh seen map and nothing known); ``search_once`` runs policies on the first
+held-out room that holds a given target, with a recording per policy.
+
+A policy name may carry a rank, ``location@low``, ``location@p0``, ``location@high``: which part
+of the interval ranks the candidate regions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent import search as S
+from agent import search_space as ss
+from agent.navigation import OccupancyGrid
+from agent.recording import Recorder
+from envs.houses import WorldStyle, generate_layout, resolve_style
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec
+from envs.world import World
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
+
+ProbsFor = Callable[[str, str | None], ss.ProbabilitySource | None]
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The policies to run and how: the settings ``search``, ``bench search`` and the demo share."""
+
+    style: str
+    policies: tuple[str, ...]
+    seed: int = 0
+    budget_s: float = S.DEFAULT_BUDGET_S
+    rank: str = ss.DEFAULT_RANK
+    truth: Path | None = (
+        None  # ground-truth JSON of `ctxsearch truth` for the oracle-prior policies
+    )
+    truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
+
+
+def split_name(name: str) -> tuple[str, str | None]:
+    """``location@low`` -> ("location", "low"); ``location`` -> ("location", None)."""
+    base, _, rank = name.partition("@")
+    if rank and rank not in ss.RANK_MODES:
+        raise CtxsearchError(
+            f"unknown rank '{rank}' in '{name}' (known: {', '.join(ss.RANK_MODES)})"
+        )
+    S.make_policy(base)
+    return base, rank or None
+
+
+def make_episodes(
+    style: WorldStyle,
+    n: int,
+    seed: int,
+    catalog: Catalog,
+    budget_s: float = S.DEFAULT_BUDGET_S,
+    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    target: str | None = None,
+) -> list[S.Episode]:
+    """``n`` episodes in held-out rooms of ``style``, deterministic in ``seed``.
+
+    ``target``: only rooms holding that type, always looking for it (``ctxsearch search``);
+    otherwise the target is drawn among the room's small types."""
+    spec = RobotSpec()
+    out: list[S.Episode] = []
+    i = 0
+    limit = 50 * n + 100
+    while len(out) < n:
+        if i >= limit:
+            what = f"a {target}" if target else "a small object"
+            raise CtxsearchError(
+                f"no held-out room of style '{style.name}' holds {what} (tried {limit} rooms)"
+            )
+        room_seed = S.held_out_seed(seed, i)
+        rng = np.random.default_rng([int(seed), i, 0xE915])
+        i += 1
+        if room_seed in exclude_seeds:
+            continue
+        layout = generate_layout(style, room_seed, catalog)
+        tgt = _episode_target(layout, catalog, target, rng)
+        if tgt is None:
+            continue
+        grid = OccupancyGrid.from_layout(layout, spec)
+        start = S.random_start(layout, grid, rng)
+        out.append(S.Episode(len(out), style.name, room_seed, tgt, start, float(budget_s)))
+    return out
+
+
+def _episode_target(
+    layout: RoomLayout, catalog: Catalog, target: str | None, rng: np.random.Generator
+) -> str | None:
+    """The episode's target in ``layout``: ``target`` if the room holds one, else a small type
+    drawn from ``rng``; None: the room does not serve."""
+    if target is not None:
+        return target if target in {o.type for o in layout.objects} else None
+    small = S.small_types_present(layout, catalog)
+    return small[int(rng.integers(len(small)))] if small else None
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Where each policy's probabilities come from: the learned knowledge or the ground truth."""
+
+    kb: KnowledgeBase | None
+    learned: frozenset[int]  # room seeds the knowledge was learned in (never searched)
+    rank: str  # the rank of policies named without one
+    truth: ss.ProbabilitySource | None
+
+    def check(self, names: Sequence[str]) -> None:
+        """A one-line error if a policy needs a knowledge store and none was given."""
+        for name in names:
+            base, _ = split_name(name)
+            if S.POLICIES[base].needs == "kb" and self.kb is None:
+                raise CtxsearchError(f"policy '{base}' needs a knowledge store (--kb)")
+
+    def for_policy(self, base: str, r: str | None) -> ss.ProbabilitySource | None:
+        """The probabilities policy ``base`` ranks by (rank ``r`` or the default), if any."""
+        needs = S.POLICIES[base].needs
+        if needs == "kb":
+            return ss.KBProbabilities(self.kb, r or self.rank, rooms=len(self.learned) or None)
+        if needs == "truth":
+            return self.truth
+        return None
+
+
+def load_priors(
+    config: SearchConfig,
+    style: WorldStyle,
+    catalog: Catalog,
+    kb: KnowledgeBase | None = None,
+    kb_path: Path | str | None = None,
+    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+) -> Priors:
+    """The priors of ``config.policies``: ``kb`` or the store at ``kb_path`` (whose learning rooms
+    join ``exclude_seeds``), and the ground truth if an oracle-prior policy runs."""
+    learned = set(exclude_seeds)
+    if kb is None and kb_path is not None:
+        kb, seeds = S.open_knowledge(kb_path, catalog)
+        learned |= seeds
+    truth = None
+    if any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in config.policies):
+        truth = S.truth_probabilities(style, catalog, config.truth_samples, path=config.truth)
+    priors = Priors(kb, frozenset(learned), config.rank, truth)
+    priors.check(config.policies)
+    return priors
+
+
+@dataclass
+class EpisodeRoom:
+    """An episode's room, built once and shared by the policies that search it."""
+
+    layout: RoomLayout
+    catalog: Catalog
+    world: World
+    grid: OccupancyGrid
+    seen: ss.SeenMap
+
+
+def run_policy(
+    ep: S.Episode,
+    name: str,
+    room: EpisodeRoom,
+    probs: ss.ProbabilitySource | None,
+    rec_path: Path | None = None,
+) -> S.SearchResult:
+    """Policy ``name`` searches episode ``ep`` in ``room`` (a rerun recording to ``rec_path``)."""
+    layout, catalog, world, grid, seen = room.layout, room.catalog, room.world, room.grid, room.seen
+    base, _ = split_name(name)
+    with Recorder(rec_path) as rec:
+        rec.log_room(layout, catalog)
+        rec.log_text(f"episode: room {ep.style}/{ep.room_seed}, target {ep.target}, policy {name}")
+        ctx = S.SearchContext(
+            ep,
+            layout,
+            catalog,
+            world,
+            maps=S.RoomMaps(grid, seen),
+            probs=probs,
+            recorder=rec,
+            policy=name,
+        )
+        res = S.make_policy(base).run(ctx)
+    res.policy = name
+    return res
+
+
+def _search_room(
+    ep: S.Episode,
+    style: WorldStyle,
+    catalog: Catalog,
+    runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
+    progress: Callable[[str], None] | None = None,
+) -> list[S.SearchResult]:
+    """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``."""
+    layout = generate_layout(style, ep.room_seed, catalog)
+    with World(layout, catalog) as world:
+        grid = OccupancyGrid.from_layout(layout, world.spec)
+        seen = ss.SeenMap.for_room(layout, catalog)
+        room = EpisodeRoom(layout, catalog, world, grid, seen)
+        out = []
+        for name, probs, rec_path in runs:
+            res = run_policy(ep, name, room, probs, rec_path)
+            out.append(res)
+            if progress is not None:
+                progress(f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {res.summary()}")
+    return out
+
+
+def run_episodes(
+    episodes: Sequence[S.Episode],
+    policies: Sequence[str],
+    catalog: Catalog,
+    style: WorldStyle,
+    probs_for: ProbsFor,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, list[S.SearchResult]]:
+    """Run every policy on every episode (one World per episode, shared by the policies)."""
+    results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
+    for ep in episodes:
+        runs = [(name, probs_for(*split_name(name)), None) for name in policies]
+        for name, res in zip(
+            policies, _search_room(ep, style, catalog, runs, progress), strict=True
+        ):
+            results[name].append(res)
+    return results
+
+
+@dataclass
+class OneSearch:
+    """One episode of ``ctxsearch search``: the episode and each policy's result."""
+
+    episode: S.Episode
+    results: list[S.SearchResult]
+    files: list[Path] = field(default_factory=list)
+
+
+def search_once(
+    config: SearchConfig,
+    target: str,
+    *,
+    kb: KnowledgeBase | None = None,
+    kb_path: Path | str | None = None,
+    records: Sequence[Path | None] | None = None,
+    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    catalog: Catalog | None = None,
+) -> OneSearch:
+    """Search for ``target`` in the first held-out room (for ``config.seed``) of ``config.style``
+    that holds one, with each of ``config.policies`` in turn from the same start pose
+    (``records[i]``: policy i's rerun recording, or None). ``kb`` (a KnowledgeBase) or ``kb_path``
+    (a store) gives the learned probabilities."""
+    catalog = catalog or load_catalog()
+    S.check_target(catalog, target)
+    names = list(config.policies)
+    for n in names:
+        split_name(n)
+    style = resolve_style(config.style, catalog)
+    priors = load_priors(config, style, catalog, kb, kb_path, exclude_seeds)
+    ep = make_episodes(
+        style, 1, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned, target=target
+    )[0]
+    records = list(records) if records is not None else [None] * len(names)
+    runs = [
+        (name, priors.for_policy(*split_name(name)), rec)
+        for name, rec in zip(names, records, strict=True)
+    ]
+    out = _search_room(ep, style, catalog, runs)
+    return OneSearch(ep, out, [Path(p) for p in records if p is not None])

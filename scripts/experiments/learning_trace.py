@@ -1,0 +1,238 @@
+"""One learning run measured against the ground truth after every examination.
+
+``TruthTracker`` keeps the counts of the (A, rel, B) entries that have ground truth and the
+metrics of their intervals against p_true; ``run_trace`` runs ``agent.learning.learn`` in a
+fresh store and records, per examination, the metrics, the simulated second, and how the
+strategy's pick relates to what hif, expected-hif and fewest would have picked.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent.learning import LearnConfig, learn, style_layouts
+from knowledge import intervals
+from knowledge.catalog import Catalog
+from knowledge.errors import CtxsearchError
+
+METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage")
+EXAM_MARKS = (10, 25, 50, 100, 200, 400)
+TIME_FRACTIONS = (0.25, 0.5, 1.0)  # of the shortest run's simulated time
+WIDTH_GOALS = (0.6, 0.5, 0.4, 0.3)  # mean widths whose first simulated second is tabulated
+TIME_GRID = 400  # points of the simulated-time grid for time averages
+
+
+class TruthTracker:
+    """Counts for the (A, rel, B) entries that have ground truth, updated per examination, and the
+    metrics of their intervals against p_true (vectorised over the entries)."""
+
+    def __init__(self, truth: dict, catalog: Catalog, alpha: float):
+        entries = [
+            e
+            for e in truth["entries"]
+            if e["ref"] in catalog and e["type"] in catalog and catalog.has_relation(e["relation"])
+        ]
+        if not entries:
+            raise CtxsearchError("the ground truth has no entries for this catalog")
+        self.alpha = alpha
+        self.p = np.array([float(e["p"]) for e in entries])
+        self.key = {(e["relation"], e["type"]): i for i, e in enumerate(entries)}
+        refs = sorted({e["ref"] for e in entries})
+        self.by_ref = {
+            r: np.array([i for i, e in enumerate(entries) if e["ref"] == r]) for r in refs
+        }
+        self.n = np.zeros(len(entries))
+        self.y = np.zeros(len(entries))
+
+    def record(self, ref_type: str, pairs) -> None:
+        """One examination of a ``ref_type`` object that saw ``pairs`` (relation, type)."""
+        idx = self.by_ref.get(ref_type)
+        if idx is not None:
+            self.n[idx] += 1
+        for pair in set(pairs):
+            i = self.key.get(pair)
+            if i is not None:
+                self.y[i] += 1
+
+    def metrics(self) -> dict[str, float]:
+        """mean/max width, mean |p0 - p_true| and coverage over the entries."""
+        lo, hi = intervals.interval(self.y, self.n, self.alpha)
+        c = intervals.p0(self.y, self.n, self.alpha)
+        w = hi - lo
+        return {
+            "mean_width": float(w.mean()),
+            "max_width": float(w.max()),
+            "mean_abs_error": float(np.abs(c - self.p).mean()),
+            "coverage": float(((lo <= self.p + 1e-12) & (self.p <= hi + 1e-12)).mean()),
+        }
+
+
+@dataclass
+class Trace:
+    """One (strategy, seed) run: metrics after every examination."""
+
+    sim_s: list[float] = field(default_factory=list)
+    metrics: dict[str, list[float]] = field(default_factory=lambda: {m: [] for m in METRICS})
+    wall_s: float = 0.0
+    initial: dict[str, float] = field(default_factory=dict)  # before any examination
+    room_objects: list[int] = field(default_factory=list)  # objects in room i
+    room_exams: list[int] = field(default_factory=list)  # examinations made in room i
+    rooms_left_early: int = 0  # rooms the time budget ended
+    # One row per choice among at least two candidate types: does the pick agree with what
+    # hif, expected-hif and fewest would pick from the same knowledge; was a less-examined type
+    # on offer; and was it a quirk pick: the pick's n is larger than the least-examined
+    # candidate's, yet impact(0, n) - the term that dominates the average, most y being 0 -
+    # is larger for it (eq. 3 is not monotonic in n).
+    decisions: list[tuple[bool, bool, bool, bool, bool]] = field(default_factory=list)
+
+    def at_exam(self, k: int, metric: str) -> float:
+        """The metric after examination k (1-based), or NaN past the end."""
+        vals = self.metrics[metric]
+        return vals[k - 1] if 0 < k <= len(vals) else float("nan")
+
+    def at_time(self, t: float, metric: str) -> float:
+        """The metric after the last examination finished by simulated second t (before the
+        first one: its value for the empty knowledge, NaN if that was not recorded)."""
+        k = int(np.searchsorted(np.asarray(self.sim_s), t, side="right"))
+        return self.at_exam(k, metric) if k > 0 else self.initial.get(metric, float("nan"))
+
+    def time_mean(self, t_end: float, metric: str) -> float:
+        """The metric averaged over simulated time 0..t_end (a uniform grid)."""
+        return float(np.mean([self.at_time(t, metric) for t in np.linspace(0, t_end, TIME_GRID)]))
+
+    def time_to(self, goal: float, metric: str = "mean_width") -> float:
+        """The simulated second the metric first reaches ``goal`` or below (NaN: never)."""
+        vals = np.asarray(self.metrics[metric])
+        hit = np.flatnonzero(vals <= goal)
+        return float(self.sim_s[hit[0]]) if len(hit) else float("nan")
+
+    def examined_shares(self) -> list[float]:
+        """Per room: examinations over the objects in the room."""
+        return [e / o for e, o in zip(self.room_exams, self.room_objects, strict=False) if o]
+
+    def exams_by(self, t: float) -> int:
+        """Examinations finished by simulated second t."""
+        return int(np.searchsorted(np.asarray(self.sim_s), t, side="right"))
+
+    def run_mean(self, metric: str, k: int) -> float:
+        """The metric averaged over examinations 1..k (the area under its curve, per exam)."""
+        return float(np.mean(self.metrics[metric][:k])) if k else float("nan")
+
+
+@dataclass(frozen=True)
+class LearningBenchConfig:
+    """What ``bench learning`` runs: every strategy on the same rooms for every seed."""
+
+    style: str
+    rooms: int
+    seeds: int
+    strategies: tuple[str, ...]
+    perception: str = "oracle"
+    truth_samples: int = 300
+    alpha: float = 0.10
+    room_budget_s: float | None = (
+        None  # simulated seconds per room (None: every room to completion)
+    )
+
+    @property
+    def budget_note(self) -> str:
+        """', room budget B s' when rooms have a budget, else ''."""
+        return "" if self.room_budget_s is None else f", room budget {self.room_budget_s:g} s"
+
+
+class _Hooks:
+    """``learn``'s callbacks of one traced run: they fill ``trace``."""
+
+    def __init__(self, trace: Trace, tracker: TruthTracker, generate, catalog: Catalog):
+        self.trace, self.tracker, self.generate = trace, tracker, generate
+        self.order = {t: i for i, t in enumerate(catalog.type_names)}
+
+    def layouts(self, index, seed):
+        """The room ``index`` (seed ``seed``), its object count noted."""
+        tr = self.trace
+        layout = self.generate(index, seed)
+        while len(tr.room_objects) <= index:
+            tr.room_objects.append(0)
+            tr.room_exams.append(0)
+        tr.room_objects[index] = len(layout.objects)
+        return layout
+
+    def on_choice(self, kb, choice) -> None:
+        """Note how the pick relates to hif's, expected-hif's and fewest's (2+ candidates)."""
+        order = self.order
+        types = sorted(choice.scores, key=order.__getitem__)
+        if len(types) < 2:
+            return
+        hif = kb.choose(types)
+        exp = kb.choose(types, fn=intervals.expected_width_change)
+        few = min(types, key=lambda t: (kb.n(t), order[t]))
+        c = choice.type
+        n_min = min(kb.n(t) for t in types)
+        n_c = kb.n(c)
+        better_known = n_c > n_min
+        quirk = better_known and float(intervals.impact(0, n_c, kb.alpha)) > float(
+            intervals.impact(0, n_min, kb.alpha)
+        )
+        self.trace.decisions.append((c == hif, c == exp, c == few, better_known, quirk))
+
+    def on_exam(self, res, kb) -> None:
+        """Record one examination and the metrics after it."""
+        tr = self.trace
+        tr.room_exams[res.room_index] += 1
+        self.tracker.record(res.choice.obj.type, res.pairs)
+        tr.sim_s.append(res.sim_time)
+        for k, v in self.tracker.metrics().items():
+            tr.metrics[k].append(v)
+
+
+def run_trace(
+    config: LearningBenchConfig,
+    seed: int,
+    strategy: str,
+    truth: dict,
+    catalog: Catalog,
+    workdir: Path,
+) -> Trace:
+    """One learn run of ``strategy`` in a fresh store, measured after every examination."""
+    rooms, perception, alpha = config.rooms, config.perception, config.alpha
+    room_budget_s = config.room_budget_s
+    tracker = TruthTracker(truth, catalog, alpha)
+    tr = Trace(initial=tracker.metrics())
+    style, generate = style_layouts(config.style, catalog)
+    hooks = _Hooks(tr, tracker, generate, catalog)
+    layouts, on_exam, on_choice = hooks.layouts, hooks.on_exam, hooks.on_choice
+    t0 = time.perf_counter()
+    summary = learn(
+        LearnConfig(
+            style,
+            rooms,
+            workdir / f"{strategy}-{seed}.sqlite",
+            strategy=strategy,
+            perception=perception,
+            alpha=alpha,
+            seed=seed,
+            progress=False,
+            room_budget_s=room_budget_s,
+        ),
+        catalog=catalog,
+        layouts=layouts,
+        on_examination=on_exam,
+        on_choice=on_choice,
+    )
+    tr.wall_s = time.perf_counter() - t0
+    tr.rooms_left_early = summary.rooms_left_early
+    return tr
+
+
+def median_curve(traces: list[Trace], metric: str) -> list[float]:
+    """The median over ``traces`` of ``metric`` (or "sim_s") at every examination all reached."""
+    k = min(len(t.sim_s) for t in traces)
+    if metric == "sim_s":
+        arr = np.array([t.sim_s[:k] for t in traces])
+    else:
+        arr = np.array([t.metrics[metric][:k] for t in traces])
+    return [float(v) for v in np.median(arr, axis=0)] if k else []
