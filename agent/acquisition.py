@@ -130,21 +130,11 @@ class RoomLearner:
             choice = self._choose()  # lines 8-13
             del self.unexamined[choice.obj.id]  # line 14
             self.examined.add(choice.obj.id)
-            stored = self.prior[self.n_room] if self.n_room < len(self.prior) else None
             gazes = self.plan_examination(choice.obj, self.body.pose())
             if not gazes:  # not a trial, no evidence (nor in the store: a replay skips it too)
-                self.log.text(
-                    self,
-                    f"{choice.obj.type} #{choice.obj.id} cannot be examined: "
-                    "no reachable viewpoint sees its relation volumes",
-                )
+                self._unexaminable(choice.obj)
                 continue
-            if stored is not None and stored.object_id != choice.obj.id:
-                raise resume_error(
-                    self.layout,
-                    f"the store says object {stored.object_id} was "
-                    f"examined next, the replay chose {choice.obj.id}",
-                )
+            stored = self._stored_next(choice.obj)  # a replay: the store's examination
             related = self.examine(choice.obj, stored, gazes)  # lines 15-16
             self._record(choice, related, stored)  # lines 17-20
             for _, o in related:  # line 21
@@ -157,6 +147,27 @@ class RoomLearner:
                 f"the store holds {len(self.prior)} examinations "
                 f"of it, the replay left it after {self.n_room}",
             )
+
+    def _unexaminable(self, obj: ObjectInstance) -> None:
+        self.log.text(
+            self,
+            f"{obj.type} #{obj.id} cannot be examined: "
+            "no reachable viewpoint sees its relation volumes",
+        )
+
+    def _stored_next(self, obj: ObjectInstance) -> StoredExam | None:
+        """The stored examination a replay makes next (None past the replay), checked to be of
+        ``obj``."""
+        if self.n_room >= len(self.prior):
+            return None
+        stored = self.prior[self.n_room]
+        if stored.object_id != obj.id:
+            raise resume_error(
+                self.layout,
+                f"the store says object {stored.object_id} was examined next, the replay chose "
+                f"{obj.id}",
+            )
+        return stored
 
     def _out_of_time(self) -> bool:
         if self.budget_spent():
