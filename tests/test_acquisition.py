@@ -616,3 +616,31 @@ def test_a_huge_room_count_builds_nothing_up_front(tmp_path):
     # Room seeds are made as the run reaches them: asking for 10**12 rooms costs nothing more.
     s, _ = _learn(tmp_path, rooms=10**12, max_examinations=2)
     assert s.examinations == 2 and s.rooms == 0 and s.rooms_done_now == 0
+
+
+def test_each_rooms_perception_is_closed_and_released_when_the_room_is_done(tmp_path):
+    import gc
+    import weakref
+
+    made: list[weakref.ref] = []
+    closed: list[bool] = []
+
+    class Tracked(OraclePerception):
+        def __init__(self, layout, catalog, spec, time_model, rgb):
+            super().__init__(layout, catalog, spec, time_model)
+            made.append(weakref.ref(self))
+            closed.append(False)
+            self._k = len(closed) - 1
+
+        def close(self):
+            closed[self._k] = True
+
+    alive_before: list[int] = []
+
+    def on_exam(res, kb):
+        gc.collect()
+        alive_before.append(sum(r() is not None for r in made[:-1]))
+
+    s, _ = _learn(tmp_path, rooms=3, perception="tracked", perceive=Tracked, on_examination=on_exam)
+    assert s.rooms == 3 and len(made) == 3 and all(closed)
+    assert alive_before and max(alive_before) == 0  # no earlier room's perception kept alive
