@@ -15,6 +15,7 @@ the one in flight. With ``record``, agent.learn_log's ``RunLog`` writes the run 
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from collections.abc import Callable
@@ -276,6 +277,10 @@ class _Rooms:
             self.log.end_room(L, L.n_room)
         finally:
             L.close()
+            # The room's MuJoCo model, data and renderer sit in reference cycles (dm_control's
+            # MJCF objects): collect them now, or their native memory piles up until Python's
+            # next full collection (measured: camera mode grew 4.3 MB a room over 40 rooms).
+            gc.collect()
         run.sim_new += L.clock - L.new_since
         summary.sim_s = run.sim_new
         if stopped:
