@@ -15,6 +15,7 @@ the one in flight. With ``record``, agent.learn_log's ``RunLog`` writes the run 
 
 from __future__ import annotations
 
+import ctypes
 import gc
 import math
 import time
@@ -68,6 +69,30 @@ def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
     """The style's name and its world generator (a room style's rooms or a house style's houses)."""
     st = resolve_style(style, catalog)
     return st.name, lambda index, seed: generate_layout(st, seed, catalog)
+
+
+def release_memory() -> None:
+    """Free what a finished room leaves behind. Its MuJoCo model, data and renderer sit in
+    reference cycles (dm_control's MJCF objects), so they are collected now rather than at
+    Python's next full collection; then glibc is asked to return the freed heap to the system
+    (``malloc_trim``; without it the heap of a camera-mode run grew about 1 MB a room through
+    fragmentation: 40 Worlds built, rendered and closed in a loop held 205 -> 252 MB without it,
+    205 -> 205 MB with it). Elsewhere than glibc only the collection is done."""
+    gc.collect()
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
+
+
+def _load_libc() -> ctypes.CDLL | None:
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.malloc_trim.argtypes = [ctypes.c_size_t]
+        return libc
+    except (OSError, AttributeError):
+        return None
+
+
+_LIBC = _load_libc()
 
 
 # =========================================================================== configuration
@@ -277,10 +302,7 @@ class _Rooms:
             self.log.end_room(L, L.n_room)
         finally:
             L.close()
-            # The room's MuJoCo model, data and renderer sit in reference cycles (dm_control's
-            # MJCF objects): collect them now, or their native memory piles up until Python's
-            # next full collection (measured: camera mode grew 4.3 MB a room over 40 rooms).
-            gc.collect()
+            release_memory()
         run.sim_new += L.clock - L.new_since
         summary.sim_s = run.sim_new
         if stopped:
