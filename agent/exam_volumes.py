@@ -74,22 +74,3 @@ def group_volume_members(boxes: Sequence[Box], slack: float = 2.0) -> list[tuple
         center = np.array([*(origin[:2] + rot @ lc[:2]), origin[2] + lc[2]])
         out.append((Box(center, yaw, (hi - lo) / 2), members))
     return out
-
-
-def group_facing(directions: Sequence[np.ndarray | None], max_angle_deg: float = 60.0):
-    """The open side of a group of relation volumes (agent.viewplan.facing_for of each member):
-    None when no member has one (any side will do) or when the members' sides disagree (more than
-    ``max_angle_deg`` from their mean); otherwise the unit mean of the members that have one
-    (members open on every side do not constrain it)."""
-    dirs = [np.asarray(d, float)[:2] for d in directions if d is not None]
-    if not dirs:
-        return None
-    mean = np.sum(dirs, axis=0)
-    norm = float(np.linalg.norm(mean))
-    if norm < 1e-9:
-        return None
-    mean = mean / norm
-    cos_max = math.cos(math.radians(max_angle_deg))
-    if any(float(d @ mean) / max(float(np.linalg.norm(d)), 1e-12) < cos_max for d in dirs):
-        return None
-    return mean

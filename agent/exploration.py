@@ -1,22 +1,42 @@
 """Figure 2, lines 4-7: find a nearby recognizable object not yet examined, by looking around and
-touring the room's free space (``Explorer``, driven by agent.acquisition's ``RoomLearner``)."""
+touring the room's free space (``Explorer``, driven by agent.acquisition's ``RoomLearner``, which
+is an ``ExploringRoom``)."""
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from agent import strategies as strat
-from agent.navigation import nearest_free
+from agent.grid_costs import GridCosts
+from agent.interfaces import Body
+from agent.navigation import OccupancyGrid, nearest_free
 from knowledge.geometry import ObjectInstance
-
-if TYPE_CHECKING:
-    from agent.acquisition import RoomLearner
 
 LOOK_TILT = -0.35  # rad: the look-around tilt (sees the floor from about 1 m out and desk tops)
 LOOK_PANS_DEG = (-150.0, -90.0, -30.0, 30.0, 90.0, 150.0)  # a 360 degree sweep in six images
+
+
+class ExploringRoom(Protocol):
+    """What the explorer needs of the room it explores."""
+
+    body: Body
+    grid: OccupancyGrid
+    costs: GridCosts
+
+    def budget_spent(self) -> bool:
+        """True once the room's time budget is used up."""
+        ...
+
+    def drive_to(self, xy: np.ndarray) -> None:
+        """Drive along a planned path to ``xy``."""
+        ...
+
+    def look(self, purpose: str) -> list[ObjectInstance]:
+        """Take an image where the head points and return what it recognizes."""
+        ...
 
 
 class Explorer:
@@ -26,16 +46,18 @@ class Explorer:
     nearest remembered one not in EXAMINED; failing that it looks around at the current spot
     (unless it already looked within ``spacing / 2``), then drives to the nearest unvisited
     viewpoint of a tour (a ``spacing`` lattice over the reachable free space) and looks there,
-    until it has one or the tour is over (None: the room is done).
+    until it has one or the tour is over (None: the room is done; ``out_of_time`` says whether
+    the room's time budget ended it).
     """
 
-    def __init__(self, learner: RoomLearner, spacing: float = 1.5):
-        self.L = learner
+    def __init__(self, room: ExploringRoom, start_xy: np.ndarray, spacing: float = 1.5):
+        self.L = room
         self.spacing = spacing
         self.seen: dict[int, ObjectInstance] = {}
         self.looks: list[np.ndarray] = []
-        grid = learner.grid
-        reach = grid.reachable_mask(learner.start_pose.xy)
+        self.out_of_time = False
+        grid = room.grid
+        reach = grid.reachable_mask(start_xy)
         xs, ys = grid.cell_centers()
         pts = []
         for y in np.arange(ys[0] + spacing / 2, ys[-1] + 1e-9, spacing):
@@ -58,7 +80,7 @@ class Explorer:
             if cands:
                 return strat.nearest_object(cands, L.costs.at(L.body.pose()))
             if L.budget_spent():  # no new exploration step once the room's time is spent
-                L.left_early = True
+                self.out_of_time = True
                 return None
             here = L.body.pose().xy
             if not any(np.hypot(*(here - q)) <= self.spacing / 2 for q in self.looks):
@@ -75,7 +97,7 @@ class Explorer:
             goal = self.todo.pop(k)
             L.drive_to(goal)
             if L.budget_spent():
-                L.left_early = True
+                self.out_of_time = True
                 return None
             self.look_around()
 
@@ -90,8 +112,5 @@ class Explorer:
             pans = pans[::-1]
         for pan in pans:
             L.body.move_head(pan, LOOK_TILT)
-            frame = L.body.capture(rgb=L.log.wants_rgb, depth=True)
-            objs = L.perception.see(frame)
-            for o in objs:
+            for o in L.look("look"):
                 self.seen.setdefault(o.id, o)
-            L.log.frame(L, frame, objs, purpose="look")

@@ -77,7 +77,7 @@ class GridCosts:
         dist = float(self._field[cells].min()) if len(cells) else math.inf
         if not math.isfinite(dist):  # unreachable: the straight line, as a fallback
             dist = math.hypot(obj.position[0] - self._pose.x, obj.position[1] - self._pose.y)
-        return dist / self.tm.drive_speed
+        return self.tm.travel_time(dist)
 
     def examine_s(self, obj: ObjectInstance) -> float:
         """travel_s plus the planned gazes' head moves and images."""

@@ -2,17 +2,42 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Protocol
 
 from agent.exam_volumes import relation_boxes
+from agent.interfaces import Body, Perception
+from agent.recording import Recorder, Shot
+from agent.run_state import ExamResult, Run
+from agent.strategies import Choice
+from agent.viewplan import Gaze
+from envs.camera import Frame, camera_at
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog
 from knowledge.geometry import ObjectInstance
 
-if TYPE_CHECKING:
-    from agent.acquisition import ExamResult, RoomLearner
-    from agent.strategies import Choice
+
+class LoggedRoom(Protocol):
+    """What the recording reads of a room being learned (agent.acquisition's RoomLearner)."""
+
+    run: Run
+    layout: RoomLayout
+    room_index: int
+    catalog: Catalog
+    kb: KnowledgeBase
+    spec: RobotSpec
+    body: Body
+    perception: Perception
+    unexamined: Mapping[int, ObjectInstance]
+    left_early: bool
+
+    @property
+    def clock(self) -> float:
+        """The run clock."""
+        ...
 
 
 class RunLog:
@@ -35,26 +60,14 @@ class RunLog:
         self._step = 0
 
     @property
-    def enabled(self) -> bool:
-        """True while a recording is open."""
+    def recording(self) -> bool:
+        """True while a room's recording is open: render RGB and look at every image."""
         return self.rec is not None
 
-    @property
-    def wants_rgb(self) -> bool:
-        """Render RGB only when it is recorded."""
-        return self.rec is not None
-
-    @property
-    def wants_frames(self) -> bool:
-        """Look at every examination frame (oracle mode skips it unless recording)."""
-        return self.rec is not None
-
-    def start_room(self, L: RoomLearner) -> None:
+    def start_room(self, L: LoggedRoom) -> None:
         """Open the room's recording and log the room, its start and the knowledge so far."""
         if self.path is None:
             return
-        from agent.recording import Recorder
-
         path = (
             self.path
             if not self.files
@@ -73,7 +86,7 @@ class RunLog:
         self.robot(L)
         self.knowledge(L)
 
-    def end_room(self, L: RoomLearner, n_exams: int) -> None:
+    def end_room(self, L: LoggedRoom, n_exams: int) -> None:
         """Close the room's recording."""
         if self.rec is None:
             return
@@ -86,19 +99,17 @@ class RunLog:
         self.rec.close()
         self.rec = None
 
-    def robot(self, L: RoomLearner) -> None:
+    def robot(self, L: LoggedRoom) -> None:
         """The robot's base pose and path, and where the head points (camera pose)."""
         if self.rec is None:
             return
-        from agent.viewplan import camera_at
-
         pose = L.body.pose()
         self.rec.set_time(L.clock, self._step)
         self.rec.log_robot(pose, L.spec)
-        self.rec.log_camera(_Shot(camera_at(pose, L.spec)))
+        self.rec.log_camera(Shot(camera_at(pose, L.spec)))
 
     def frame(
-        self, L: RoomLearner, frame: Any, objs: Sequence[ObjectInstance], purpose: str
+        self, L: LoggedRoom, frame: Frame | None, objs: Sequence[ObjectInstance], purpose: str
     ) -> None:
         """One image: the camera pinhole, RGB and segmentation (camera mode), detections."""
         if self.rec is None:
@@ -106,19 +117,17 @@ class RunLog:
         self.rec.set_time(L.clock, self._step)
         self.rec.log_robot(L.body.pose(), L.spec)
         if frame is None:  # oracle: the pose of the camera, no pixels
-            from agent.viewplan import camera_at
-
-            self.rec.log_camera(_Shot(camera_at(L.body.pose(), L.spec)))
+            self.rec.log_camera(Shot(camera_at(L.body.pose(), L.spec)))
         else:  # RGB and segmentation; depth is left out (it would double the file's size)
-            shot = _Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)
-            self.rec.log_camera(shot, getattr(L.perception, "last_detections", ()))
+            shot = Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)
+            self.rec.log_camera(shot, L.perception.last_detections)
         if purpose == "look" and objs:
             self.rec.log_text(
                 "look-around recognizes " + ", ".join(f"{o.type} #{o.id}" for o in objs),
                 level="DEBUG",
             )
 
-    def choice(self, L: RoomLearner, choice: Choice) -> None:
+    def choice(self, L: LoggedRoom, choice: Choice) -> None:
         """The decision of lines 8-13 with every candidate type's score."""
         if self.rec is None:
             return
@@ -132,7 +141,7 @@ class RunLog:
             f"(object #{choice.obj.id}) among {n_unex} unexamined; scores: {scores}"
         )
 
-    def examine_start(self, L: RoomLearner, obj: ObjectInstance, gazes: Sequence[Any]) -> None:
+    def examine_start(self, L: LoggedRoom, obj: ObjectInstance, gazes: Sequence[Gaze]) -> None:
         """Highlight the examined object's relation volumes and show its planned gazes."""
         if self.rec is None:
             return
@@ -155,7 +164,7 @@ class RunLog:
             level="DEBUG",
         )
 
-    def examination(self, L: RoomLearner, res: ExamResult) -> None:
+    def examination(self, L: LoggedRoom, res: ExamResult) -> None:
         """The examination's outcome and the knowledge's new state."""
         if self.rec is None:
             return
@@ -164,14 +173,14 @@ class RunLog:
         self.rec.log_text(f"{res.choice.obj.type} #{res.choice.obj.id}: {found}")
         self.knowledge(L)
 
-    def text(self, L: RoomLearner, msg: str) -> None:
+    def text(self, L: LoggedRoom, msg: str) -> None:
         """A line in the text log."""
         if self.rec is None:
             return
         self.rec.set_time(L.clock, self._step)
         self.rec.log_text(msg, level="WARN")
 
-    def knowledge(self, L: RoomLearner) -> None:
+    def knowledge(self, L: LoggedRoom) -> None:
         """Time series: mean interval width and n per type."""
         if self.rec is None:
             return
@@ -179,18 +188,14 @@ class RunLog:
         for t in L.catalog.type_names:
             self.rec.log_scalar(f"knowledge/n/{t}", L.kb.n(t))
 
+    def __enter__(self) -> RunLog:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def close(self) -> None:
         """Close an open recording (interrupted runs keep what was logged)."""
         if self.rec is not None:
             self.rec.close()
             self.rec = None
-
-
-@dataclass(frozen=True)
-class _Shot:
-    """A frame without pixels: only the camera (the oracle's gazes, head moves)."""
-
-    camera: Any
-    rgb: Any = None
-    depth: Any = None
-    instance_ids: Any = None

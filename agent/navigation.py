@@ -50,6 +50,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from agent.interfaces import Body
 from envs.floorplan import wall_obstacles
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
@@ -384,3 +385,15 @@ def plan_path(grid: OccupancyGrid, start_xy: np.ndarray, goal_xy: np.ndarray) ->
     pts[0], pts[-1] = start, goal
     pts = _shortcut(grid, pts)
     return np.vstack([np.array(prefix[:-1]).reshape(-1, 2), pts]) if len(prefix) > 1 else pts
+
+
+def drive_along(body: Body, grid: OccupancyGrid, goal_xy: np.ndarray) -> bool:
+    """Drive ``body`` along a planned path to ``goal_xy``, facing along its last segment; False
+    (and no motion) when there is no path or the body is already there."""
+    p = body.pose()
+    path = plan_path(grid, p.xy, goal_xy)
+    if path is None or len(path) < 2:
+        return False
+    seg = path[-1] - path[-2]
+    body.drive(path, math.atan2(seg[1], seg[0]))
+    return True

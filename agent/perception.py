@@ -24,10 +24,10 @@ import functools
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from envs.camera import Frame, focal_length
 from envs.layout import RoomLayout
 from knowledge.catalog import Catalog
 from knowledge.geometry import ObjectInstance
@@ -57,7 +57,7 @@ def min_pixels_at(min_pixels: int, width: int, height: int) -> int:
 def ray_scale(width: int, height: int, fovy_deg: float) -> np.ndarray:
     """(H, W) factor turning optical-axis depth into ray length for a centred pinhole camera
     (cached; read-only)."""
-    f = (height / 2) / math.tan(math.radians(fovy_deg) / 2)
+    f = focal_length(fovy_deg, height)
     u = (np.arange(width) + 0.5 - width / 2) / f
     v = (np.arange(height) + 0.5 - height / 2) / f
     out = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2)
@@ -141,7 +141,7 @@ def objects_by_id(
 
 
 def detect(
-    frame: Any,
+    frame: Frame,
     layout_or_objects: RoomLayout | Iterable[ObjectInstance] | Mapping[int, ObjectInstance],
     catalog: Catalog,
 ) -> list[Detection]:

@@ -22,19 +22,26 @@ Everything that changes is logged on the ``sim_time`` timeline (simulated second
 Cameras: MuJoCo's look along their -z with +y up; rerun's pinhole is RDF (x right, y down, z
 forward), so the camera's world rotation is ``xmat @ diag(1, -1, -1)``. Segmentation images hold
 instance id + 1 (0: nothing), with an annotation context naming every instance by its type.
+
+rerun is imported inside the methods that log: importing it costs about 0.6 s (measured with
+``python -X importtime -c "import rerun"``), and ``Recorder(None)`` (every run without a
+recording) never needs it.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from envs.camera import Frame, PinholeCamera, intrinsics
 from envs.floorplan import wall_boxes as house_wall_boxes
 from envs.layout import RoomLayout
+from envs.parts import world_parts
 from envs.robot_spec import RobotPose, RobotSpec
 from knowledge.catalog import Catalog
 from knowledge.geometry import Box
@@ -48,10 +55,15 @@ def rgb255(color: Sequence[float]) -> list[int]:
     return [int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in color[:3]]
 
 
-def intrinsics(width: int, height: int, fovy_deg: float) -> np.ndarray:
-    """The pinhole matrix K of a MuJoCo camera (square pixels, principal point at the centre)."""
-    f = (height / 2) / math.tan(math.radians(fovy_deg) / 2)
-    return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+@dataclass(frozen=True)
+class Shot:
+    """What ``Recorder.log_camera`` shows of an image: the camera and whichever pixels there are
+    (a ``Frame`` is one; the oracle's gazes have a camera and no pixels)."""
+
+    camera: PinholeCamera
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    instance_ids: np.ndarray | None = None
 
 
 def wall_boxes(layout: RoomLayout, thickness: float = WALL_THICKNESS) -> list[Box]:
@@ -142,8 +154,6 @@ class Recorder:
         if self._rec is None:
             return
         import rerun as rr
-
-        from envs.parts import world_parts
 
         rec = self._rec
         w, d = layout.width, layout.depth
@@ -291,7 +301,7 @@ class Recorder:
         self._rec.log(entity, rr.LineStrips3D([pts], colors=[[40, 120, 230]], radii=[0.01]))
 
     # ----------------------------------------------------------------- the camera
-    def log_camera(self, frame: Any, detections: Sequence[Any] = ()) -> None:
+    def log_camera(self, frame: Frame | Shot, detections: Sequence[Any] = ()) -> None:
         """The camera's pose and pinhole, the frame's images and the detections as 2-D boxes."""
         if self._rec is None:
             return
@@ -307,22 +317,22 @@ class Recorder:
         rec.log(
             "world/camera/image",
             rr.Pinhole(
-                image_from_camera=intrinsics(width, height, float(cam.fovy_deg)),
+                image_from_camera=intrinsics(float(cam.fovy_deg), width, height),
                 resolution=[width, height],
                 camera_xyz=rr.ViewCoordinates.RDF,
                 image_plane_distance=0.4,
             ),
         )
-        if getattr(frame, "rgb", None) is not None:
+        if frame.rgb is not None:
             rec.log("world/camera/image/rgb", rr.Image(frame.rgb))
-        if getattr(frame, "instance_ids", None) is not None:
+        if frame.instance_ids is not None:
             seg = (
                 (np.asarray(frame.instance_ids).astype(np.int64) + 1)
                 .clip(0, 65535)
                 .astype(np.uint16)
             )
             rec.log("world/camera/image/segmentation", rr.SegmentationImage(seg, opacity=0.35))
-        if getattr(frame, "depth", None) is not None:
+        if frame.depth is not None:
             rec.log(
                 "world/camera/image/depth",
                 rr.DepthImage(np.asarray(frame.depth, np.float32), meter=1.0),

@@ -7,7 +7,7 @@ drives, moves the head and takes images through the same World, so the seconds a
 TimeModel's (envs.robot_spec) and comparable across policies.
 
 Held-out rooms. Search rooms are never rooms the robot learned in: ``ctxsearch learn`` derives
-its room seeds from (seed, index) with ``agent.acquisition.room_seed``; search episodes use
+its room seeds from (seed, index) with ``agent.learning.room_seed``; search episodes use
 ``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the benchmark
 skips any seed the store lists among its learned rooms.
 
@@ -53,18 +53,26 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from agent import search_space as ss
+from agent.interfaces import Body, WrappedBody
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
+from agent.perception import Detection, detect, objects_by_id
 from agent.recording import Recorder
+from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
+from envs.camera import Frame, frustum_mask
+from envs.houses import WorldStyle
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.truth import ground_truth, load_truth
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
-from knowledge.geometry import Box, ObjectInstance
+from knowledge.geometry import Box, ObjectInstance, relation_volume
+from knowledge.store import EvidenceStore
 
 DEFAULT_BUDGET_S = 300.0
 HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
@@ -74,7 +82,7 @@ MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a lo
 # =========================================================================== episodes and results
 def held_out_seed(seed: int, index: int) -> int:
     """The room seed of search episode ``index`` for benchmark seed ``seed`` (31-bit, spread out,
-    never produced for the same (seed, index) by ``agent.acquisition.room_seed``)."""
+    never produced for the same (seed, index) by ``agent.learning.room_seed``)."""
     return int(
         np.random.SeedSequence([int(seed), int(index), HELD_OUT_TAG]).generate_state(1)[0]
         & 0x7FFFFFFF
@@ -179,63 +187,62 @@ class _Stop(Exception):
     """Raised inside a policy when the target is found or the budget is spent."""
 
 
-class _PathMeter:
-    """Wraps a World (or KinematicBody) to add up the metres driven."""
+class _PathMeter(WrappedBody):
+    """A body that adds up the metres driven."""
 
-    def __init__(self, body: Any):
-        self._body = body
+    def __init__(self, body: Body):
+        super().__init__(body)
         self.metres = 0.0
 
     def drive(self, path: np.ndarray, final_yaw: float | None = None) -> float:
-        p = self._body.pose()
+        """Drive the wrapped body, counting the path's length."""
+        p = self._b.pose()
         pts = np.vstack([p.xy[None, :], np.asarray(path, float).reshape(-1, 2)])
         self.metres += TimeModel.path_length(pts)
-        return self._body.drive(path, final_yaw)
+        return self._b.drive(path, final_yaw)
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._body, name)
+
+@dataclass(frozen=True)
+class RoomMaps:
+    """Maps of a room built once and shared by the policies run in it: the occupancy grid and
+    the seen map's lattice (each policy gets a copy of the seen map)."""
+
+    grid: OccupancyGrid
+    seen: ss.SeenMap
 
 
 class SearchContext:
-    """One policy's run of one episode on a built world: the body, the map, what has been seen,
-    what is known, the clock, the trace and the recording.
-
-    ``body`` is an envs.world.World (or anything with its interface: ``sim_time``, ``pose``,
-    ``reset_pose``, ``drive``, ``move_head``, ``capture``, ``spec``). ``detector(frame)`` returns
-    agent.perception Detections; the default runs the detector on the frame against the layout.
-    """
+    """One policy's run of one episode on a built world: the body (an agent.interfaces ``Body``,
+    e.g. an envs.world.World), the map, what has been seen, what is known, the clock, the trace
+    and the recording. ``maps`` defaults to the maps of ``layout``; images are read by the
+    simulated detector (agent.perception) against the layout's poses."""
 
     def __init__(
         self,
         episode: Episode,
         layout: RoomLayout,
         catalog: Catalog,
-        body: Any,
+        body: Body,
         *,
-        grid: OccupancyGrid | None = None,
+        maps: RoomMaps | None = None,
         probs: ss.ProbabilitySource | None = None,
         recorder: Recorder | None = None,
-        detector: Callable[[Any], list] | None = None,
-        seen: ss.SeenMap | None = None,
         policy: str = "?",
     ):
         self.episode, self.layout, self.catalog = episode, layout, catalog
         self.spec: RobotSpec = body.spec
-        self.time_model: TimeModel = getattr(body, "time_model", TimeModel())
+        self.time_model: TimeModel = body.time_model
         self.body = _PathMeter(body)
-        self.grid = grid or OccupancyGrid.from_layout(layout, self.spec)
+        self.grid = maps.grid if maps else OccupancyGrid.from_layout(layout, self.spec)
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = policy
-        self.width = int(getattr(body, "width", 320))
-        self.height = int(getattr(body, "height", 240))
-        if detector is None:
-            from agent.perception import detect, objects_by_id
-
-            objs = objects_by_id(layout)
-            detector = lambda frame: detect(frame, objs, catalog)  # noqa: E731
-        self.detector = detector
-        self.seen = seen.copy() if seen is not None else ss.SeenMap.for_room(layout, catalog)
+        self.width, self.height = int(body.width), int(body.height)
+        objs = objects_by_id(layout)
+        self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: detect(
+            frame, objs, catalog
+        )
+        self.seen = maps.seen.copy() if maps else ss.SeenMap.for_room(layout, catalog)
         self.target = episode.target
         catalog.type(self.target)
         self.target_range = ss.effective_range(
@@ -282,11 +289,10 @@ class SearchContext:
         self.recorder.log_text(f"{self.policy}: {msg}")
 
     # ----------------------------------------------------------------- acting
-    def _after_image(self, frame: Any, purpose: str) -> list:
+    def _after_image(self, frame: Frame, purpose: str) -> list[Detection]:
         dets = self.detector(frame)
-        depth = getattr(frame, "depth", None)
-        if depth is not None:
-            self.seen.update(frame.camera, depth)
+        if frame.depth is not None:
+            self.seen.update(frame.camera, frame.depth)
         else:
             self.seen.mark_frustum(frame.camera, self.target_range)
         for d in dets:
@@ -320,7 +326,7 @@ class SearchContext:
                 )
         return dets
 
-    def capture(self, purpose: str) -> list:
+    def capture(self, purpose: str) -> list[Detection]:
         """Take an image where the head points now; detections. Stops when found or out of time."""
         self.check()
         frame = self.body.capture(rgb=self.recorder.enabled, depth=True)
@@ -344,7 +350,7 @@ class SearchContext:
             self.body.drive(path, yaw)
         return True
 
-    def look_heading(self, heading: float, tilt: float, purpose: str) -> list:
+    def look_heading(self, heading: float, tilt: float, purpose: str) -> list[Detection]:
         """Point the camera along world ``heading`` with ``tilt`` (turning the base when the pan
         limit requires it) and take an image."""
         self.check()
@@ -357,11 +363,9 @@ class SearchContext:
         self.body.move_head(pan, tilt)
         return self.capture(purpose)
 
-    def look_gaze(self, gaze: Any, purpose: str) -> list:
+    def look_gaze(self, gaze: Gaze, purpose: str) -> list[Detection]:
         """Execute a view planner Gaze (drive, turn, aim) and take an image."""
         self.check()
-        from agent.viewplan import execute_gaze
-
         if gaze.path is not None and len(gaze.path) >= 2:
             self.recorder.log_path(gaze.path)
         frame = execute_gaze(self.body, self.grid, gaze, rgb=self.recorder.enabled, depth=True)
@@ -435,15 +439,14 @@ class SearchContext:
             unseen,
             self.spec,
             rng,
-            tilts=tilts,
-            min_share=share,
+            ss.SweepOptions(tilts=tuple(tilts), min_share=share),
         )
         near = np.linalg.norm(self.seen.points - cam, axis=1) <= rng
         need = max(8, int(math.ceil(share * np.count_nonzero(unseen & near))))
         n = 0
         for g in plan:
             # Re-check against what the images so far really showed.
-            m = ss.frustum_mask(
+            m = frustum_mask(
                 cam, g.heading, g.tilt, self.seen.points, self.spec, rng
             ) & self.seen.unseen(rng)
             if m.sum() < need:
@@ -459,8 +462,6 @@ class SearchContext:
     ) -> None:
         """The location constraint: look into the best candidate region (probability per second)
         until none has probability left (see agent.search_space)."""
-        from agent.viewplan import plan_gazes
-
         visited = self._visited
         costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target)
@@ -485,7 +486,7 @@ class SearchContext:
                 self.body.pose(),
                 self.spec,
                 self.time_model,
-                max_distance=min(self.target_range, 2.5),
+                GazePlanOptions(max_distance=min(self.target_range, 2.5)),
                 facing=best.facing,
             )
             self.note(
@@ -656,12 +657,9 @@ class Indirect(SearchPolicy):
             if key not in cache:
                 # Furniture is found by one ring of images at its height (as Indirect.search does).
                 cache[key] = estimate_cover_seconds(
-                    ctx.grid,
-                    ctx.seen,
+                    ctx,
                     start,
                     key[0],
-                    ctx.spec,
-                    ctx.time_model,
                     tilts=FURNITURE_TILTS if furniture else ss.SWEEP_TILTS,
                     zmax=max(typ.size_max[2], 0.3) if furniture else None,
                 )
@@ -672,7 +670,7 @@ class Indirect(SearchPolicy):
     @staticmethod
     def _present(ctx: SearchContext, type_name: str) -> bool:
         """Only types the knowledge base has evidence about (n > 0) are worth looking for."""
-        kb = getattr(ctx.probs, "kb", None)
+        kb = ctx.probs.kb if ctx.probs is not None else None
         return kb is None or kb.n(type_name) > 0
 
     @staticmethod
@@ -693,13 +691,10 @@ class Indirect(SearchPolicy):
         size = tuple((np.asarray(typ.size_min) + np.asarray(typ.size_max)) / 2)
         mid = ObjectInstance(via, -1, (0.0, 0.0, size[2] / 2), 0.0, size)
         best = max(typ.relations, key=lambda r: (probs.p(r.name, ctx.target), r.name))
-        from knowledge.geometry import relation_volume
-
         costs = ss.CostModel(ctx.grid, tm, view_distance=ctx.target_range)
         images = costs.images(relation_volume(best, mid))
         drive = 0.5 * ctx._mean_drive
-        turn = (math.pi / 2) / tm.turn_rate if drive > 0.05 else 0.0
-        return drive / tm.drive_speed + turn + images * (costs.head_s + tm.image_cost)
+        return tm.leg_estimate(drive) + tm.looks_estimate(images, costs.head_s)
 
 
 class OraclePrior(Location):
@@ -726,8 +721,6 @@ class Oracle(SearchPolicy):
     name = "oracle"
 
     def search(self, ctx: SearchContext) -> None:
-        from agent.viewplan import Gaze, aim, plan_gazes
-
         tm, spec = ctx.time_model, ctx.spec
         tried: set[tuple[int, str]] = set()
         instances = list(ctx.layout.of_type(ctx.target))
@@ -758,16 +751,10 @@ class Oracle(SearchPolicy):
                 if (o.id, "near") not in tried:
                     box = o.box()
                     box = Box(box.center, box.yaw, np.maximum(box.half, 0.03))
-                    gz = plan_gazes(
-                        ctx.grid,
-                        box,
-                        pose,
-                        spec,
-                        tm,
-                        max_distance=min(ctx.target_range, 2.5),
-                        coverage_goal=0.5,
-                        max_gazes=2,
+                    near = GazePlanOptions(
+                        max_distance=min(ctx.target_range, 2.5), coverage_goal=0.5, max_gazes=2
                     )
+                    gz = plan_gazes(ctx.grid, box, pose, spec, tm, near)
                     options.append((sum(x.cost for x in gz) if gz else math.inf, o.id, "near", gz))
             options = [opt for opt in options if opt[3] and math.isfinite(opt[0])]
             if not options:
@@ -794,19 +781,18 @@ def _probs(ctx: SearchContext) -> ss.ProbabilitySource:
 
 
 def estimate_cover_seconds(
-    grid: OccupancyGrid,
-    seen: ss.SeenMap,
+    ctx: SearchContext,
     start_xy: np.ndarray,
     rng: float,
-    spec: RobotSpec,
-    tm: TimeModel,
     head_s: float = 0.6,
     tilts: Sequence[float] = ss.SWEEP_TILTS,
     zmax: float | None = None,
 ) -> float:
-    """Seconds a coverage of the room for detection range ``rng`` would take from ``start_xy``:
-    the tour plus the sweeps' images (predicted without occlusion), sweeping ``tilts`` and
-    counting only lattice points up to ``zmax`` (furniture: its height) if given."""
+    """Seconds a coverage of the room for detection range ``rng`` would take from ``start_xy``
+    on ``ctx``'s grid and seen map: the tour plus the sweeps' images (predicted without
+    occlusion), sweeping ``tilts`` and counting only lattice points up to ``zmax`` (furniture:
+    its height) if given."""
+    grid, seen, spec, tm = ctx.grid, ctx.seen, ctx.spec, ctx.time_model
     pts = seen.points if zmax is None else seen.points[seen.points[:, 2] <= zmax]
     unseen = seen.unseen(rng) if zmax is None else seen.unseen(rng)[seen.points[:, 2] <= zmax]
     sites = ss.coverage_viewpoints(grid, pts[unseen], start_xy, rng, spec)
@@ -814,11 +800,11 @@ def estimate_cover_seconds(
     todo = unseen.copy()
     heading = 0.0
     for xy in sites:
-        g = ss.sweep_gazes(xy, heading, pts, todo, spec, rng, tilts=tilts)
-        t += len(g) * (head_s + tm.image_cost)
+        g = ss.sweep_gazes(xy, heading, pts, todo, spec, rng, ss.SweepOptions(tilts=tuple(tilts)))
+        t += tm.looks_estimate(len(g), head_s)
         cam = np.array([xy[0], xy[1], spec.camera_height])
         for x in g:
-            todo &= ~ss.frustum_mask(cam, x.heading, x.tilt, pts, spec, rng)
+            todo &= ~frustum_mask(cam, x.heading, x.tilt, pts, spec, rng)
     return t
 
 
@@ -879,10 +865,6 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
 
     One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
     from the store), a store without examinations."""
-    from pathlib import Path
-
-    from knowledge.store import EvidenceStore
-
     p = Path(path)
     if not p.is_file():
         raise CtxsearchError(
@@ -904,15 +886,15 @@ def _learned_seeds(store) -> set[int]:
 
 
 def truth_probabilities(
-    style, catalog: Catalog, samples: int = 200, seed: int = 0, path=None
+    style: WorldStyle | str,
+    catalog: Catalog,
+    samples: int = 200,
+    seed: int = 0,
+    path: str | Path | None = None,
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
     at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
     if path is not None:
-        from envs.truth import load_truth
-
-        doc = load_truth(path, catalog, getattr(style, "name", style))
+        doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
         return ss.TableProbabilities.from_truth(doc)
-    from envs.truth import ground_truth
-
     return ss.TableProbabilities.from_truth(ground_truth(style, samples, seed, catalog))

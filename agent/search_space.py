@@ -63,10 +63,16 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import sparse
 
 from agent.navigation import OccupancyGrid, nearest_free
+from agent.perception import min_pixels_at
+from agent.viewplan import facing_for
+from envs.camera import PinholeCamera, focal_length, frustum_mask
 from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel
+from envs.parts import world_parts_array
+from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
+from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, ObjectType
 from knowledge.errors import CtxsearchError
@@ -88,7 +94,7 @@ SWEEP_MIN_SHARE = 0.1  # an image of a sweep must show this share of what is uns
 # =========================================================================== detectability
 def focal_px(spec: RobotSpec, height: int = 240) -> float:
     """The head camera's focal length in pixels for images ``height`` pixels high."""
-    return (height / 2) / math.tan(math.radians(spec.fovy_deg) / 2)
+    return focal_length(spec.fovy_deg, height)
 
 
 def mean_face_area(typ: ObjectType) -> float:
@@ -107,8 +113,6 @@ def effective_range(
 ) -> float:
     """How far (m) an instance of ``typ`` is reliably detected (see the module docstring)."""
     spec = spec or RobotSpec()
-    from agent.perception import min_pixels_at
-
     mp = min_pixels_at(typ.min_pixels, width, height)
     pixel_range = focal_px(spec, height) * math.sqrt(mean_face_area(typ) / mp) * safety
     return float(min(typ.max_range, pixel_range))
@@ -119,6 +123,7 @@ class ProbabilitySource:
     """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
 
     name = "none"
+    kb: KnowledgeBase | None = None  # the evidence behind the numbers, where there is one
 
     def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
         """The probability used to rank rel's volume when looking for ``type_name``."""
@@ -150,8 +155,6 @@ class KBProbabilities(ProbabilitySource):
         v = self._cache.get(key)
         if v is None:
             if self.rank == "p0":
-                from knowledge import intervals
-
                 rel = self.kb.catalog.relation(relation)
                 v = float(
                     intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
@@ -220,8 +223,6 @@ class SeenMap:
         z: tuple[float, float, float] = LATTICE_Z,
     ) -> SeenMap:
         """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
-        from envs.parts import world_parts_array
-
         hw, hd = layout.width / 2, layout.depth / 2
         xs = np.arange(-hw + step_xy / 2, hw, step_xy)
         ys = np.arange(-hd + step_xy / 2, hd, step_xy)
@@ -245,14 +246,12 @@ class SeenMap:
         """An independent copy."""
         return SeenMap(self.points.copy(), self.best.copy())
 
-    def update(self, camera, depth: np.ndarray) -> np.ndarray:
+    def update(self, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
         """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
-        ``camera`` (anything with position, xmat, fovy_deg, width, height). Returns their mask."""
-        from agent.viewplan import project
-
+        ``camera``. Returns their mask."""
         depth = np.asarray(depth, float)
         h, w = depth.shape
-        uv, z = project(camera, self.points)
+        uv, z = camera.project(self.points)
         ok = z > 0.05
         with np.errstate(invalid="ignore"):
             ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
@@ -268,12 +267,10 @@ class SeenMap:
         mask[idx] = True
         return mask
 
-    def mark_frustum(self, camera, max_distance: float) -> None:
+    def mark_frustum(self, camera: PinholeCamera, max_distance: float) -> None:
         """Record an image without depth: every point inside the frustum within ``max_distance``
         (no occlusion; for bodies that render nothing)."""
-        from agent.viewplan import points_in_view
-
-        m = points_in_view(camera, self.points, max_distance)
+        m = camera.sees(self.points, max_distance)
         d = np.linalg.norm(self.points[m] - np.asarray(camera.position, float), axis=1)
         self.best[m] = np.minimum(self.best[m], d)
 
@@ -332,8 +329,6 @@ def object_regions(
 ) -> list[Region]:
     """One region per rel in RELATIONS(type(b)) with P(rel(target)) > ``min_p`` whose volume
     holds lattice points (none for an instance of the target type itself)."""
-    from agent.viewplan import facing_for
-
     if b.type == target:
         return []
     out = []
@@ -423,8 +418,6 @@ def merge_regions(regions: Sequence[Region], jaccard: float = MERGE_JACCARD) -> 
 def region_probabilities(regions: Sequence[Region], unseen: np.ndarray) -> np.ndarray:
     """P(T in the unseen part of each region), counting every overlapping region (see the module
     docstring). (R,)"""
-    from scipy import sparse
-
     if not regions:
         return np.zeros(0)
     n = len(unseen)
@@ -471,8 +464,7 @@ class CostModel:
         if not math.isfinite(d):
             d = float(np.hypot(*(np.asarray(box.center[:2]) - np.asarray(xy))))
         tm = self.time_model
-        turn = (math.pi / 2) / tm.turn_rate if d > 0.05 else 0.0
-        return d / tm.drive_speed + turn + self.images(box) * (self.head_s + tm.image_cost)
+        return tm.leg_estimate(d) + tm.looks_estimate(self.images(box), self.head_s)
 
 
 def score_regions(
@@ -590,7 +582,7 @@ def tour_seconds(
         d = grid.distances_from(cur)[r, c] if grid.in_grid(r, c) else np.inf
         if not np.isfinite(d):
             d = float(np.hypot(*(s - cur)))
-        t += d / time_model.drive_speed + (math.pi / 2) / time_model.turn_rate
+        t += time_model.leg_estimate(d, always_turn=True)
         cur = s
     return t
 
@@ -604,32 +596,16 @@ class SweepGaze:
     gain: int  # unseen points predicted in the frustum
 
 
-def frustum_mask(
-    cam_xyz: np.ndarray,
-    heading: float,
-    tilt: float,
-    points: np.ndarray,
-    spec: RobotSpec,
-    max_range: float,
-    width: int = 320,
-    height: int = 240,
-) -> np.ndarray:
-    """(N,) bool: points inside the frustum of a camera at ``cam_xyz`` looking along world
-    ``heading`` with ``tilt``, within ``max_range``."""
-    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
-    fwd = np.array([ct * ch, ct * sh, st])
-    right = np.array([sh, -ch, 0.0])
-    up = np.array([-st * ch, -st * sh, ct])
-    rel = points - cam_xyz
-    z, x, y = rel @ fwd, rel @ right, rel @ up
-    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
-    tan_x = tan_y * width / height
-    return (
-        (z > 0.05)
-        & (np.abs(x) <= z * tan_x)
-        & (np.abs(y) <= z * tan_y)
-        & (np.linalg.norm(rel, axis=1) <= max_range)
-    )
+@dataclass(frozen=True)
+class SweepOptions:
+    """How a sweep is laid out: the tilts of each heading, the heading step, and what an image
+    must be predicted to show (``min_gain`` unseen points and ``min_share`` of those unseen
+    around)."""
+
+    tilts: Sequence[float] = SWEEP_TILTS
+    heading_step: float = SWEEP_HEADING_STEP
+    min_gain: int = 8
+    min_share: float = SWEEP_MIN_SHARE
 
 
 def sweep_gazes(
@@ -639,23 +615,21 @@ def sweep_gazes(
     unseen: np.ndarray,
     spec: RobotSpec,
     max_range: float,
-    min_gain: int = 8,
-    tilts: Sequence[float] = SWEEP_TILTS,
-    heading_step: float = SWEEP_HEADING_STEP,
-    min_share: float | None = None,
+    options: SweepOptions | None = None,
 ) -> list[SweepGaze]:
     """The images of a pan/tilt sweep at ``xy`` worth taking, ordered as one turn starting from
     ``current_heading``: each is predicted to show at least ``min_gain`` unseen points within
-    ``max_range`` and ``min_share`` (default ``SWEEP_MIN_SHARE``) of those unseen here, counting
-    the earlier images of the sweep."""
+    ``max_range`` and ``min_share`` of those unseen here, counting the earlier images of the
+    sweep."""
+    opt = options or SweepOptions()
+    min_gain, tilts, heading_step = opt.min_gain, opt.tilts, opt.heading_step
     cam = np.array([xy[0], xy[1], spec.camera_height])
     todo = unseen.copy()
     near = np.linalg.norm(points - cam, axis=1) <= max_range
     todo &= near
     if todo.sum() < min_gain:
         return []
-    share = SWEEP_MIN_SHARE if min_share is None else min_share
-    min_gain = max(min_gain, int(math.ceil(share * todo.sum())))
+    min_gain = max(min_gain, int(math.ceil(opt.min_share * todo.sum())))
     n_h = max(1, int(round(2 * math.pi / heading_step)))
     headings = [current_heading + i * 2 * math.pi / n_h for i in range(n_h)]
     out: list[SweepGaze] = []
@@ -665,7 +639,7 @@ def sweep_gazes(
             m = frustum_mask(cam, h, t, points, spec, max_range) & todo
             g = int(m.sum())
             if g >= min_gain:
-                out.append(SweepGaze(float(math.atan2(math.sin(h), math.cos(h))), t, g))
+                out.append(SweepGaze(wrap_angle(h), t, g))
                 todo &= ~m
     return out
 

@@ -61,12 +61,12 @@ class EuclideanCosts:
     def travel_s(self, obj: ObjectInstance) -> float:
         """Straight-line distance to a point ``standoff`` short of the object, over drive speed."""
         dist = math.hypot(obj.position[0] - self.pose.x, obj.position[1] - self.pose.y)
-        return max(0.0, dist - self.standoff) / self.time_model.drive_speed
+        return self.time_model.travel_time(max(0.0, dist - self.standoff))
 
     def examine_s(self, obj: ObjectInstance) -> float:
         """travel_s plus ``gazes_per_exam`` images and half-turn head moves."""
-        per_gaze = self.time_model.image_cost + 0.5 / self.time_model.pan_rate
-        return self.travel_s(obj) + self.gazes_per_exam * per_gaze
+        head_s = 0.5 / self.time_model.pan_rate
+        return self.travel_s(obj) + self.time_model.looks_estimate(self.gazes_per_exam, head_s)
 
 
 class Strategy(Protocol):

@@ -4,11 +4,8 @@ Used by the acquisition loop (look into every relation volume of an object being
 search (look at a candidate region). A *gaze* is a robot pose (base on a free, reachable grid
 cell; pan and tilt within their limits) plus the point the camera is aimed at.
 
-Camera model. As in envs/robot.py, the camera sits on both the pan and the tilt axis, at height
-``spec.camera_height`` above the base centre, so its position is (x, y, camera_height) whatever
-the head does, and it looks along heading yaw + pan, tilted by tilt (positive up).
-Conventions are MuJoCo's: ``xmat``'s columns are the camera's right (x), up (y) and backward (z)
-axes in the world, the camera looks along -z; pixel rows grow downwards.
+Camera model: envs.camera (the head camera at a pose is ``camera_at(pose, spec)``; the frusta of
+all candidate gazes are ``frustum_masks``, its vectorised frustum test).
 
 Planner (``plan_gazes``):
 1. sample points on a lattice filling the box (at most 0.25 m apart, corners included, coarser
@@ -32,83 +29,19 @@ Planner (``plan_gazes``):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from agent.interfaces import Body
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from envs.camera import Frame, PinholeCamera, frustum_masks, half_fov_tangents
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle, wrap_angles
 from knowledge.catalog import RelationSpec
 from knowledge.geometry import Box, ObjectInstance
 
-NEAR_CLIP = 0.05  # m: points closer to the camera than this are not seen
 
-
-# --------------------------------------------------------------------------- camera geometry
-def camera_axes(heading: float, tilt: float) -> np.ndarray:
-    """The camera's ``xmat`` (3, 3) for a world heading (yaw + pan) and a tilt (positive up):
-    columns right, up, backward (MuJoCo convention; the camera looks along -column 2)."""
-    ch, sh, ct, st = math.cos(heading), math.sin(heading), math.cos(tilt), math.sin(tilt)
-    right = [sh, -ch, 0.0]
-    up = [-st * ch, -st * sh, ct]
-    back = [-ct * ch, -ct * sh, -st]
-    return np.array([right, up, back]).T
-
-
-@dataclass(frozen=True)
-class PinholeView:
-    """A pinhole camera in the world: position (3,), ``xmat`` (3, 3) (MuJoCo convention), vertical
-    field of view and image size. Same fields as envs.world.CameraInfo, without a renderer."""
-
-    position: np.ndarray
-    xmat: np.ndarray
-    fovy_deg: float
-    width: int
-    height: int
-
-    @property
-    def focal(self) -> float:
-        """Focal length in pixels (square pixels)."""
-        return (self.height / 2) / math.tan(math.radians(self.fovy_deg) / 2)
-
-    def intrinsics(self) -> np.ndarray:
-        """The 3x3 matrix K (pixel coordinates: x right, y down, origin at the top-left corner)."""
-        f = self.focal
-        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
-
-    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels (N, 2) (x right, y down) and depth along the optical axis (N,) of world points."""
-        return project(self, points)
-
-
-def camera_at(
-    pose: RobotPose, spec: RobotSpec | None = None, width: int = 320, height: int = 240
-) -> PinholeView:
-    """The (approximate, see the module docstring) head camera of the robot at ``pose``."""
-    spec = spec or RobotSpec()
-    return PinholeView(
-        np.array([pose.x, pose.y, spec.camera_height]),
-        camera_axes(pose.yaw + pose.pan, pose.tilt),
-        spec.fovy_deg,
-        width,
-        height,
-    )
-
-
-def project(camera: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (N, 2) and optical-axis depth (N,) of world ``points`` (N, 3) for any camera with
-    ``position``, ``xmat``, ``fovy_deg``, ``width`` and ``height`` (MuJoCo convention)."""
-    pts = np.atleast_2d(np.asarray(points, float))
-    local = (pts - np.asarray(camera.position, float)) @ np.asarray(camera.xmat, float)
-    depth = -local[:, 2]
-    f = (camera.height / 2) / math.tan(math.radians(camera.fovy_deg) / 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.width / 2 + f * local[:, 0] / depth
-        v = camera.height / 2 - f * local[:, 1] / depth
-    return np.column_stack([u, v]), depth
-
-
+# --------------------------------------------------------------------------- sampling
 def box_samples(box: Box, spacing: float = 0.25, max_points: int = 400) -> np.ndarray:
     """World points (N, 3) on a lattice filling ``box``, corners included, at most ``spacing``
     apart (coarser if that would exceed ``max_points``). Ordered x-major, z fastest."""
@@ -128,22 +61,9 @@ def box_samples(box: Box, spacing: float = 0.25, max_points: int = 400) -> np.nd
     return out.reshape(-1, 3)
 
 
-def points_in_view(
-    camera: Any, points: np.ndarray, max_distance: float | None = None
-) -> np.ndarray:
-    """Which world ``points`` (N, 3) fall inside the camera's image (and within ``max_distance``)."""
-    pix, depth = project(camera, points)
-    ok = (depth > NEAR_CLIP) & (pix[:, 0] >= 0) & (pix[:, 0] <= camera.width)
-    ok &= (pix[:, 1] >= 0) & (pix[:, 1] <= camera.height)
-    if max_distance is not None:
-        d = np.linalg.norm(np.atleast_2d(points) - np.asarray(camera.position, float), axis=1)
-        ok &= d <= max_distance
-    return ok
-
-
-def in_view(camera: Any, box: Box, max_distance: float | None = None) -> float:
+def in_view(camera: PinholeCamera, box: Box, max_distance: float | None = None) -> float:
     """The fraction of ``box``'s sample points (lattice incl. corners) inside the camera's frustum."""
-    return float(points_in_view(camera, box_samples(box), max_distance).mean())
+    return float(camera.sees(box_samples(box), max_distance).mean())
 
 
 def aim(
@@ -182,10 +102,6 @@ def facing_for(rel: RelationSpec, ref: ObjectInstance) -> np.ndarray | None:
 
 
 # --------------------------------------------------------------------------- planning
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.arctan2(np.sin(a), np.cos(a))
-
-
 @dataclass(frozen=True)
 class Gaze:
     """A robot pose from which to take one image, the point it aims at, and the planner's
@@ -224,58 +140,6 @@ def _aim_angles(
     return heading, tilt
 
 
-_VISIBILITY_BLOCK = 65536  # (camera, aim, point) triples per block: temporaries stay in cache
-
-
-def _visibility(
-    cams: np.ndarray,
-    heading: np.ndarray,
-    tilt: np.ndarray,
-    points: np.ndarray,
-    spec: RobotSpec,
-    width: int,
-    height: int,
-    max_distance: float,
-) -> np.ndarray:
-    """(C, T, N) bool: point n inside the frustum of the camera at cams[c] looking along
-    (heading[c, t], tilt[c, t]) and within ``max_distance`` of it.
-
-    A point's camera-frame coordinates are the dot products of its offset with the camera's
-    forward (ct ch, ct sh, st), right (sh, -ch, 0) and up (-st ch, -st sh, ct) axes, written as
-    broadcast sums of products. Cameras are processed in blocks of about ``_VISIBILITY_BLOCK``
-    triples so the float temporaries stay in the CPU cache (a large volume has ten aims and
-    200 points for 150 cameras); blocking changes no value."""
-    n_c, n_t = heading.shape
-    n = len(points)
-    out = np.empty((n_c, n_t, n), bool)
-    ch, sh, ct, st = np.cos(heading), np.sin(heading), np.cos(tilt), np.sin(tilt)
-    fwd = [(ct * ch)[..., None], (ct * sh)[..., None], st[..., None]]  # (C, T, 1) each
-    right = [sh[..., None], (-ch)[..., None]]
-    up = [(-st * ch)[..., None], (-st * sh)[..., None], ct[..., None]]
-    tan_y = math.tan(math.radians(spec.fovy_deg) / 2)
-    tan_x = tan_y * width / height
-    step = max(1, _VISIBILITY_BLOCK // max(1, n_t * n))
-    for a in range(0, n_c, step):
-        b = slice(a, min(n_c, a + step))
-        rel = points[None, :, :] - cams[b, None, :]  # (c, N, 3)
-        near = np.linalg.norm(rel, axis=-1) <= max_distance  # (c, N)
-        rx, ry, rz = rel[:, None, :, 0], rel[:, None, :, 1], rel[:, None, :, 2]  # (c, 1, N)
-        z = fwd[0][b] * rx
-        z += fwd[1][b] * ry
-        z += fwd[2][b] * rz
-        ok = out[b]
-        np.greater(z, NEAR_CLIP, out=ok)
-        ok &= near[:, None, :]
-        x = right[0][b] * rx
-        x += right[1][b] * ry
-        ok &= np.abs(x, out=x) <= z * tan_x
-        y = up[0][b] * rx
-        y += up[1][b] * ry
-        y += up[2][b] * rz
-        ok &= np.abs(y, out=y) <= z * tan_y
-    return out
-
-
 def _gains(seen_w: np.ndarray, cov: np.ndarray, hit: np.ndarray, n: int, unit: bool) -> np.ndarray:
     """(P,) float32: the share of the ``n`` points each pair's weighted frustum ``seen_w`` (P, N)
     adds to the weighted coverage ``cov`` (N,): sum over points of max(w - cov, 0), over n.
@@ -287,32 +151,54 @@ def _gains(seen_w: np.ndarray, cov: np.ndarray, hit: np.ndarray, n: int, unit: b
     return np.maximum(seen_w - cov, 0.0).sum(-1) / n
 
 
+@dataclass(frozen=True)
+class GazePlanOptions:
+    """The planner's settings (see the module docstring): how far a viewpoint may stand from the
+    box, the image size, when to stop (``coverage_goal``, ``min_gain``, ``max_gazes``), how to cut
+    and sample the box, the candidate lattice step, and ``cost_weight``: gazes are ranked by
+    gain / cost**cost_weight (1: coverage per second; 0: coverage only, for the best picture
+    whatever the walk)."""
+
+    max_distance: float = 2.5
+    width: int = 320
+    height: int = 240
+    coverage_goal: float = 0.95
+    min_gain: float = 0.03
+    max_gazes: int = 6
+    split: float = 1.2
+    candidate_step: float = 0.3
+    max_points: int = 200
+    cost_weight: float = 1.0
+
+
+@dataclass
+class _Candidates:
+    """Everything the greedy cover scores: candidate base positions and their grid cells, aim
+    points and directions, sample points, and which (position, aim) pair sees which point."""
+
+    cand: np.ndarray  # (C, 2) base positions; row 0 is the start
+    cells: tuple[np.ndarray, np.ndarray]  # (rows, cols) of the candidates
+    aims: np.ndarray  # (T, 3)
+    heading: np.ndarray  # (C, T) world heading of the aim direction
+    tilt: np.ndarray  # (C, T)
+    seen_pairs: np.ndarray  # (C*T, N) bool: pair p = (p // T, p % T)
+
+
 def plan_gazes(
     grid: OccupancyGrid,
     box: Box,
     start_pose: RobotPose,
     spec: RobotSpec | None = None,
     time_model: TimeModel | None = None,
-    *,
-    max_distance: float = 2.5,
+    options: GazePlanOptions | None = None,
     facing: np.ndarray | None = None,
-    width: int = 320,
-    height: int = 240,
-    coverage_goal: float = 0.95,
-    min_gain: float = 0.03,
-    max_gazes: int = 6,
-    split: float = 1.2,
-    candidate_step: float = 0.3,
-    max_points: int = 200,
-    cost_weight: float = 1.0,
 ) -> list[Gaze]:
     """A short sequence of gazes whose frusta together cover ``box`` (see the module docstring).
 
-    The first gaze starts from ``start_pose``, each later one from the previous gaze. Gazes are
-    ranked by gain / cost**``cost_weight`` (1: coverage per second; 0: coverage only, for the best
-    picture whatever the walk). Sample points outside the grid (beyond the walls) are dropped. If
-    ``facing`` leaves no gaze worth taking (the open side is against a wall), the plan is made
-    without it. Returns [] if no reachable viewpoint sees any of the box.
+    The first gaze starts from ``start_pose``, each later one from the previous gaze. Sample
+    points outside the grid (beyond the walls) are dropped. If ``facing`` leaves no gaze worth
+    taking (the open side is against a wall), the plan is made without it. Returns [] if no
+    reachable viewpoint sees any of the box.
 
     Speed (about 1 ms for a small volume; the plans are those of scoring every pair in full):
     the candidate lattice is cached per grid (``OccupancyGrid.lattice_cells``) and the driving
@@ -323,112 +209,150 @@ def plan_gazes(
     """
     spec = spec or RobotSpec()
     tm = time_model or TimeModel()
+    opt = options or GazePlanOptions()
+    c = _candidates(grid, box, start_pose, spec, opt)
+    if c is None:
+        return []
+    weights = [np.ones(len(c.cand))]
+    if facing is not None:
+        f = np.asarray(facing, float)[:2]
+        f = f / max(np.linalg.norm(f), 1e-12)
+        off = c.cand - np.asarray(box.center[:2], float)
+        cos = (off @ f) / np.maximum(np.linalg.norm(off, axis=1), 1e-9)
+        weights.insert(0, np.maximum(0.05, (1.0 + cos) / 2) ** 2)
+    for weight in weights:  # with the facing preference; if that finds nothing, without it
+        gazes = _greedy_cover(grid, c, weight, start_pose, spec, tm, opt)
+        if gazes:
+            return gazes
+    return []
+
+
+def _room_points(grid: OccupancyGrid, box: Box, max_points: int) -> np.ndarray:
+    """The box's sample points inside the grid (points beyond the walls can never be seen)."""
     points = box_samples(box, max_points=max_points)
-    # Points beyond the walls can never be seen: plan for the part of the box inside the room.
     h, w = grid.shape
     lo = np.array([grid.x0, grid.y0])
     inside = np.all(
         (points[:, :2] >= lo) & (points[:, :2] <= lo + grid.resolution * np.array([w, h])), axis=1
     )
-    points = points[inside]
+    return points[inside]
+
+
+def _candidates(
+    grid: OccupancyGrid, box: Box, start_pose: RobotPose, spec: RobotSpec, opt: GazePlanOptions
+) -> _Candidates | None:
+    """Steps 1-4 of the planner; None when no reachable viewpoint sees any of the box."""
+    points = _room_points(grid, box, opt.max_points)
     if len(points) == 0:
-        return []
-    aims = _aim_points(box, split)
+        return None
+    aims = _aim_points(box, opt.split)
     # Candidate base positions: reachable free cells on a coarse lattice near the box.
     start_xy = nearest_free(grid, start_pose.xy)
     if start_xy is None:
-        return []
-    k = max(1, int(round(candidate_step / grid.resolution)))
+        return None
+    k = max(1, int(round(opt.candidate_step / grid.resolution)))
     rows, cols = grid.lattice_cells(k)
     reach = np.isfinite(grid.distances_from(start_xy)[rows, cols])
     rows, cols = rows[reach], cols[reach]
     xs, ys = grid.cell_centers()
     cand = np.column_stack([xs[cols], ys[rows]])
-    cand = cand[box.footprint_distance(cand) <= max_distance]
+    cand = cand[box.footprint_distance(cand) <= opt.max_distance]
     cand = np.vstack([start_xy[None, :], cand])
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
     # Heading and tilt of the aim direction for every (candidate, aim): the frusta, and the
     # head/turn cost estimate.
-    aim_heading, aim_tilt = _aim_angles(cams, aims, spec)
-    seen = _visibility(cams, aim_heading, aim_tilt, points, spec, width, height, max_distance)
+    heading, tilt = _aim_angles(cams, aims, spec)
+    tangents = half_fov_tangents(spec.fovy_deg, opt.width, opt.height)
+    seen = frustum_masks(cams, heading, tilt, points, tangents, opt.max_distance)
     if not seen.any():
-        return []
-    weights = [np.ones(len(cand))]
-    if facing is not None:
-        f = np.asarray(facing, float)[:2]
-        f = f / max(np.linalg.norm(f), 1e-12)
-        off = cand - np.asarray(box.center[:2], float)
-        cos = (off @ f) / np.maximum(np.linalg.norm(off, axis=1), 1e-9)
-        weights.insert(0, np.maximum(0.05, (1.0 + cos) / 2) ** 2)
-    n_t, n = len(aims), len(points)
-    seen_pairs = seen.reshape(-1, n)  # (C*T, N): pair p = (p // T, p % T)
+        return None
     # Grid cell of every candidate, for its driving distance.
     r_c = np.floor((cand[:, 1] - grid.y0) / grid.resolution).astype(int)
     c_c = np.floor((cand[:, 0] - grid.x0) / grid.resolution).astype(int)
+    return _Candidates(cand, (r_c, c_c), aims, heading, tilt, seen.reshape(-1, len(points)))
 
+
+def _greedy_cover(
+    grid: OccupancyGrid,
+    c: _Candidates,
+    weight: np.ndarray,
+    start_pose: RobotPose,
+    spec: RobotSpec,
+    tm: TimeModel,
+    opt: GazePlanOptions,
+) -> list[Gaze]:
+    """Step 5: greedy weighted set cover by gain per second from the previous gaze."""
+    n_t, n = len(c.aims), c.seen_pairs.shape[1]
+    # Only pairs that see something can ever be chosen; ``live`` (row-major (c, t) order)
+    # shrinks as pairs fall below min_gain.
+    live = np.flatnonzero(c.seen_pairs.any(axis=1))
+    seen_w = c.seen_pairs[live] * np.repeat(weight.astype(np.float32), n_t)[live, None]
+    unit = bool(np.all(weight == 1.0))
+    cov = np.zeros(n, np.float32)  # weighted coverage so far
+    hit = np.zeros(n, bool)  # in some chosen frustum
+    cur = start_pose
     gazes: list[Gaze] = []
-    for weight in weights:  # with the facing preference; if that finds nothing, without it
-        # Only pairs that see something can ever be chosen; ``live`` (row-major (c, t) order)
-        # shrinks as pairs fall below min_gain.
-        live = np.flatnonzero(seen_pairs.any(axis=1))
-        seen_w = seen_pairs[live] * np.repeat(weight.astype(np.float32), n_t)[live, None]
-        unit = bool(np.all(weight == 1.0))
-        cov = np.zeros(n, np.float32)  # weighted coverage so far
-        hit = np.zeros(n, bool)  # in some chosen frustum
-        cur_xy, cur_yaw = np.asarray(start_pose.xy, float), float(start_pose.yaw)
-        cur_pan, cur_tilt = float(start_pose.pan), float(start_pose.tilt)
-        while len(gazes) < max_gazes and hit.mean() < coverage_goal:
-            gain = _gains(seen_w, cov, hit, n, unit)  # (P,)
-            keep = gain >= min_gain
-            if not keep.any():
-                break
-            if not keep.all():
-                live, seen_w, gain = live[keep], seen_w[keep], gain[keep]
-            ci, ti = np.divmod(live, n_t)
-            p_xy = cand[ci]
-            drive = grid.distances_from(cur_xy)[r_c[ci], c_c[ci]]  # metres along the grid
-            moved = np.hypot(*(p_xy - cur_xy).T) > 1e-3
-            arrive = np.where(
-                moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), cur_yaw
-            )
-            turn = np.where(moved, np.abs(_wrap(arrive - cur_yaw)) / tm.turn_rate, 0.0)
-            t_drive = drive / tm.drive_speed + turn
-            pan = _wrap(aim_heading[ci, ti] - arrive)
-            pan0 = np.where(moved, 0.0, cur_pan)  # the head is kept while driving
-            t_head = np.maximum(
-                np.abs(pan - pan0) / tm.pan_rate, np.abs(aim_tilt[ci, ti] - cur_tilt) / tm.tilt_rate
-            )
-            cost = t_drive + t_head + tm.image_cost
-            best = int(np.argmax(gain / cost**cost_weight))
-            c_i, t_i = int(ci[best]), int(ti[best])
-            xy = cand[c_i]
-            path = plan_path(grid, cur_xy, xy)
-            yaw = cur_yaw
-            if path is not None and len(path) >= 2:
-                seg = path[-1] - path[-2]
-                if np.hypot(*seg) > 1e-9:
-                    yaw = math.atan2(seg[1], seg[0])
-            pan_i, tilt_i = aim(xy, yaw, spec.camera_height, aims[t_i], spec)
-            if (
-                abs(wrap_angle(yaw + pan_i - aim_heading[c_i, t_i])) > 1e-3
-            ):  # pan limit: turn the base
-                yaw, pan_i = float(aim_heading[c_i, t_i]), 0.0
-            gazes.append(
-                Gaze(
-                    RobotPose(float(xy[0]), float(xy[1]), float(yaw), float(pan_i), float(tilt_i)),
-                    aims[t_i].copy(),
-                    coverage=float(gain[best]),
-                    cost=float(cost[best]),
-                    path=path,
-                )
-            )
-            if not unit:
-                cov = np.maximum(cov, seen_w[best])
-            hit |= seen_pairs[live[best]]
-            cur_xy, cur_yaw, cur_pan, cur_tilt = xy, yaw, pan_i, tilt_i
-        if gazes:
+    while len(gazes) < opt.max_gazes and hit.mean() < opt.coverage_goal:
+        gain = _gains(seen_w, cov, hit, n, unit)  # (P,)
+        keep = gain >= opt.min_gain
+        if not keep.any():
             break
+        if not keep.all():
+            live, seen_w, gain = live[keep], seen_w[keep], gain[keep]
+        ci, ti = np.divmod(live, n_t)
+        cost = _pair_costs(grid, c, ci, ti, cur, tm)
+        best = int(np.argmax(gain / cost**opt.cost_weight))
+        gaze = _gaze(grid, c, int(ci[best]), int(ti[best]), cur, spec)
+        gazes.append(replace(gaze, coverage=float(gain[best]), cost=float(cost[best])))
+        if not unit:
+            cov = np.maximum(cov, seen_w[best])
+        hit |= c.seen_pairs[live[best]]
+        cur = gaze.pose
     return gazes
+
+
+def _pair_costs(
+    grid: OccupancyGrid,
+    c: _Candidates,
+    ci: np.ndarray,
+    ti: np.ndarray,
+    cur: RobotPose,
+    tm: TimeModel,
+) -> np.ndarray:
+    """Seconds from pose ``cur`` to the gaze of every (position ci, aim ti) pair: the drive over
+    the grid distance with its turn, the head slew (the head is kept while driving) and the
+    image (the vectorised TimeModel)."""
+    cur_xy = np.asarray(cur.xy, float)
+    p_xy = c.cand[ci]
+    drive = grid.distances_from(cur_xy)[c.cells[0][ci], c.cells[1][ci]]  # metres along the grid
+    moved = np.hypot(*(p_xy - cur_xy).T) > 1e-3
+    arrive = np.where(
+        moved, np.arctan2(p_xy[:, 1] - cur_xy[1], p_xy[:, 0] - cur_xy[0]), float(cur.yaw)
+    )
+    t_drive = tm.travel_time(drive) + np.where(moved, tm.turn_times(float(cur.yaw), arrive), 0.0)
+    pan = wrap_angles(c.heading[ci, ti] - arrive)
+    pan0 = np.where(moved, 0.0, float(cur.pan))
+    t_head = tm.head_times(pan0, float(cur.tilt), pan, c.tilt[ci, ti])
+    return t_drive + t_head + tm.image_cost
+
+
+def _gaze(
+    grid: OccupancyGrid, c: _Candidates, c_i: int, t_i: int, cur: RobotPose, spec: RobotSpec
+) -> Gaze:
+    """The gaze of pair (c_i, t_i) reached from ``cur``: the planned path, the heading it
+    arrives with, and the head aimed at the aim point (turning the base beyond the pan limit)."""
+    xy = c.cand[c_i]
+    path = plan_path(grid, np.asarray(cur.xy, float), xy)
+    yaw = float(cur.yaw)
+    if path is not None and len(path) >= 2:
+        seg = path[-1] - path[-2]
+        if np.hypot(*seg) > 1e-9:
+            yaw = math.atan2(seg[1], seg[0])
+    pan, tilt = aim(xy, yaw, spec.camera_height, c.aims[t_i], spec)
+    if abs(wrap_angle(yaw + pan - c.heading[c_i, t_i])) > 1e-3:  # pan limit: turn the base
+        yaw, pan = float(c.heading[c_i, t_i]), 0.0
+    pose = RobotPose(float(xy[0]), float(xy[1]), float(yaw), float(pan), float(tilt))
+    return Gaze(pose, c.aims[t_i].copy(), path=path)
 
 
 def _path_between(path: np.ndarray | None, a: tuple[float, float], b: tuple[float, float]) -> bool:
@@ -442,8 +366,8 @@ def _path_between(path: np.ndarray | None, a: tuple[float, float], b: tuple[floa
 
 
 def execute_gaze(
-    world: Any, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
-) -> Any:
+    world: Body, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
+) -> Frame | None:
     """Drive to the gaze's base position (a planned path), turn, point the head at its target and
     capture a frame; returns the world's ``Frame``. If the position cannot be reached from where
     the robot stands, the robot looks at the target from where it is.

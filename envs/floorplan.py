@@ -36,7 +36,7 @@ import numpy as np
 
 from envs.houses import CORRIDOR, HouseError, HouseStyle
 from envs.layout import Door, Passage, Room, RoomLayout
-from envs.robot_spec import RobotSpec
+from envs.robot_spec import RobotSpec, wrap_angle
 from envs.rooms import RoomShell, generate_room
 from envs.styles import Style
 from knowledge.catalog import Catalog, load_catalog
@@ -552,7 +552,7 @@ def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | No
 
     def angle(q: np.ndarray, ref: float) -> float:
         a = math.atan2(q[1] - y, q[0] - x) - ref
-        return math.atan2(math.sin(a), math.cos(a))
+        return wrap_angle(a)
 
     def walk(room: int, lo: float, hi: float, ref: float, used: frozenset[int]) -> None:
         for k, p in doors[room]:

@@ -5,7 +5,8 @@ house is. Two tests, both conservative (they never hide what could show):
 - rooms: the rooms the camera cannot see into through door openings
   (``envs.floorplan.visible_rooms``, 2-D portal visibility);
 - frustum: objects whose bounding sphere lies wholly outside one of the four side planes of the
-  camera's view pyramid (behind the camera included).
+  camera's view pyramid (behind the camera included): ``envs.camera.in_frustum`` with the
+  sphere's radius and no near plane.
 
 MuJoCo's ``mjv_updateScene`` skips geoms whose alpha is 0: ``hide`` sets the alpha of the culled
 objects' geoms to 0 for one image and ``restore`` puts it back. The images do not change (tested
@@ -18,6 +19,7 @@ import math
 
 import numpy as np
 
+from envs.camera import half_fov_tangents, in_frustum
 from envs.floorplan import visible_rooms
 from envs.layout import RoomLayout
 
@@ -54,13 +56,9 @@ class RoomCulling:
         rooms = visible_rooms(self.layout, float(pos[0]), float(pos[1]))
         if rooms is not None:
             ok &= np.isin(self._room, np.fromiter(rooms, np.int64, len(rooms)))
-        ty = math.tan(math.radians(fovy_deg) / 2)
-        tx = ty * width / height
-        normals = np.array([[1.0, 0.0, tx], [-1.0, 0.0, tx], [0.0, 1.0, ty], [0.0, -1.0, ty]])
-        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-        world = normals @ np.asarray(xmat, float).reshape(3, 3).T  # outward plane normals
-        dist = (self._center - pos) @ world.T  # (N, 4) signed distances outside each plane
-        ok &= np.all(dist <= self._radius[:, None], axis=1)
+        tx, ty = half_fov_tangents(fovy_deg, width, height)
+        local = (self._center - pos) @ np.asarray(xmat, float).reshape(3, 3)  # right, up, back
+        ok &= in_frustum(-local[:, 2], local[:, 0], local[:, 1], tx, ty, -math.inf, self._radius)
         return ok
 
     def hide(

@@ -111,17 +111,15 @@ def _cyl(
 
 
 def _legs(
-    x0: float,
-    x1: float,
-    y0: float,
-    y1: float,
-    z0: float,
-    z1: float,
+    lo: tuple[float, float, float],
+    hi: tuple[float, float, float],
     t: float,
     scale: float = 0.7,
     prefix: str = "leg",
 ) -> list[Part]:
-    """Four square legs of side t in the corners of [x0,x1] x [y0,y1], from z0 to z1."""
+    """Four square legs of side t in the corners of [x0,x1] x [y0,y1], from z0 to z1 (``lo`` =
+    (x0, y0, z0), ``hi`` = (x1, y1, z1))."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
     out = []
     for i, (xa, ya) in enumerate(((x1 - t, y1 - t), (x1 - t, y0), (x0, y1 - t), (x0, y0))):
         out.append(_box(f"{prefix}{i}", (xa, ya, z0), (xa + t, ya + t, z1), scale))
@@ -143,7 +141,7 @@ def _desk(sx, sy, sz, *, drawer: bool) -> list[Part]:
     t = min(TOP, sz * 0.1)
     leg = min(LEG, sx * 0.15, sy * 0.15)
     parts = [_box("top", (-X, -Y, Z - t), (X, Y, Z))]
-    parts += _legs(-X + 0.02, X - 0.02, -Y + 0.02, Y - 0.02, -Z, Z - t, leg)
+    parts += _legs((-X + 0.02, -Y + 0.02, -Z), (X - 0.02, Y - 0.02, Z - t), leg)
     if drawer and desk_has_drawer(sy):
         dy = min(0.42, sy * 0.3)
         dz = min(0.25, (sz - t) * 0.4)
@@ -161,7 +159,7 @@ def _chair(sx, sy, sz) -> list[Part]:
     back_t = min(0.05, sx * 0.15)
     leg = min(0.04, sx * 0.1, sy * 0.1)
     parts = [_box("seat", (-X, -Y, seat_top - st), (X, Y, seat_top))]
-    parts += _legs(-X, X, -Y, Y, -Z, seat_top - st, leg, 0.6)
+    parts += _legs((-X, -Y, -Z), (X, Y, seat_top - st), leg, 0.6)
     parts.append(_box("back", (-X, -Y, seat_top), (-X + back_t, Y, Z), 0.9))
     return parts
 
@@ -436,7 +434,9 @@ def _shape_of(obj: ObjectInstance, catalog: Catalog | None) -> str:
     return (catalog or _default_catalog()).type(obj.type).shape
 
 
-@functools.lru_cache(maxsize=4096)
+# Sizes are drawn per object, so entries are useful within one room only (its generator asks for
+# the same object many times): a small cache keeps memory flat over many rooms.
+@functools.lru_cache(maxsize=512)
 def _local_parts_array(
     shape: str, size: tuple[float, float, float]
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -38,6 +38,31 @@ SERVO_BANDWIDTH = 30.0  # rad/s: natural frequency of every position servo
 BASE_MASS, PAN_MASS, TILT_MASS = 25.0, 0.6, 0.4  # kg
 HEAD_ARMATURE = 0.01  # kg m^2 of reflected motor inertia on pan and tilt
 DEFAULT_WORKSPACE = (-10.0, 10.0)  # m, slide limits until a room sets them
+HEAD_INERTIA = 0.002  # kg m^2 of the pan body (the tilt body has half)
+DARK, LIGHT = [0.18, 0.18, 0.2, 1], [0.85, 0.85, 0.88, 1]  # robot colours
+
+
+def _add_defaults(root: mjcf.RootElement, spec: RobotSpec) -> None:
+    """The default classes: robot geoms (visual only, their own group), and per joint class
+    (slide, yaw, pan, tilt) the joint type and a position servo whose gain gives every joint
+    the same bandwidth for the inertia it drives."""
+    base_izz = _cylinder_inertia(BASE_MASS, spec.base_radius, spec.base_height)[2]
+    inertia = {
+        "slide": BASE_MASS + PAN_MASS + TILT_MASS,
+        "yaw": base_izz + 2 * HEAD_INERTIA,
+        "pan": 2 * HEAD_INERTIA + HEAD_ARMATURE,
+        "tilt": HEAD_INERTIA + HEAD_ARMATURE,
+    }
+    d = root.default
+    d.geom.set_attributes(group=ROBOT_GEOM_GROUP, contype=0, conaffinity=0, density=0)
+    for cls in ("slide", "yaw", "pan", "tilt"):
+        c = d.add("default", dclass=cls)
+        c.joint.set_attributes(
+            type="slide" if cls == "slide" else "hinge",
+            armature=HEAD_ARMATURE if cls in ("pan", "tilt") else 0.0,
+            damping=0.0,
+        )
+        c.position.set_attributes(kp=inertia[cls] * SERVO_BANDWIDTH**2, dampratio=1.0)
 
 
 def _cylinder_inertia(mass: float, radius: float, height: float) -> list[float]:
@@ -53,28 +78,23 @@ class Robot(composer.Entity):
         self._spec = spec
         root = mjcf.RootElement(model=name)
         self._mjcf_root = root
+        _add_defaults(root, spec)
+        base = self._add_base(root, spec)
+        self._add_head(base, spec)
+        self._joints = (self._x, self._y, self._yaw, self._pan, self._tilt)
+        self._actuators = []
+        for joint in self._joints:
+            act = root.actuator.add("position", name=joint.name, joint=joint, dclass=joint.dclass)
+            if joint.range is not None:
+                act.ctrlrange = joint.range
+            else:
+                act.ctrllimited = False
+            self._actuators.append(act)
+        root.keyframe.add("key", name="home", qpos=[0.0] * 5, ctrl=[0.0] * 5)
+
+    def _add_base(self, root: mjcf.RootElement, spec: RobotSpec) -> mjcf.Element:
+        """The base body: its x, y and yaw joints, the base cylinder, the nose and the mast."""
         r, hb = spec.base_radius, spec.base_height
-
-        # Effective inertia each servo drives, for equal bandwidth on every joint.
-        base_izz = _cylinder_inertia(BASE_MASS, r, hb)[2]
-        head_i = 0.002
-        inertia = {
-            "slide": BASE_MASS + PAN_MASS + TILT_MASS,
-            "yaw": base_izz + 2 * head_i,
-            "pan": 2 * head_i + HEAD_ARMATURE,
-            "tilt": head_i + HEAD_ARMATURE,
-        }
-        d = root.default
-        d.geom.set_attributes(group=ROBOT_GEOM_GROUP, contype=0, conaffinity=0, density=0)
-        for cls in ("slide", "yaw", "pan", "tilt"):
-            c = d.add("default", dclass=cls)
-            c.joint.set_attributes(
-                type="slide" if cls == "slide" else "hinge",
-                armature=HEAD_ARMATURE if cls in ("pan", "tilt") else 0.0,
-                damping=0.0,
-            )
-            c.position.set_attributes(kp=inertia[cls] * SERVO_BANDWIDTH**2, dampratio=1.0)
-
         base = root.worldbody.add("body", name="base")
         base.add(
             "inertial",
@@ -89,9 +109,8 @@ class Robot(composer.Entity):
             "joint", name="y", dclass="slide", axis=[0, 1, 0], range=DEFAULT_WORKSPACE
         )
         self._yaw = base.add("joint", name="yaw", dclass="yaw", axis=[0, 0, 1], limited=False)
-        dark, light = [0.18, 0.18, 0.2, 1], [0.85, 0.85, 0.88, 1]
         base.add(
-            "geom", name="base", type="cylinder", size=[r, hb / 2], pos=[0, 0, hb / 2], rgba=dark
+            "geom", name="base", type="cylinder", size=[r, hb / 2], pos=[0, 0, hb / 2], rgba=DARK
         )
         base.add(
             "geom",
@@ -108,11 +127,14 @@ class Robot(composer.Entity):
             type="cylinder",
             size=[spec.mast_radius, (mast_top - hb) / 2],
             pos=[0, 0, (mast_top + hb) / 2],
-            rgba=light,
+            rgba=LIGHT,
         )
+        return base
 
+    def _add_head(self, base: mjcf.Element, spec: RobotSpec) -> None:
+        """The pan body on the mast, the tilt body on it, and the camera (on both axes)."""
         pan = base.add("body", name="head_pan", pos=[0, 0, spec.camera_height])
-        pan.add("inertial", pos=[0, 0, 0], mass=PAN_MASS, diaginertia=[head_i] * 3)
+        pan.add("inertial", pos=[0, 0, 0], mass=PAN_MASS, diaginertia=[HEAD_INERTIA] * 3)
         self._pan = pan.add("joint", name="pan", dclass="pan", axis=[0, 0, 1], range=spec.pan_range)
         pan.add(
             "geom",
@@ -120,15 +142,14 @@ class Robot(composer.Entity):
             type="box",
             size=[0.03, 0.05, 0.02],
             pos=[0, 0, -0.04],
-            rgba=dark,
+            rgba=DARK,
         )
-
         tilt = pan.add("body", name="head_tilt")
-        tilt.add("inertial", pos=[0, 0, 0], mass=TILT_MASS, diaginertia=[head_i / 2] * 3)
+        tilt.add("inertial", pos=[0, 0, 0], mass=TILT_MASS, diaginertia=[HEAD_INERTIA / 2] * 3)
         self._tilt = tilt.add(
             "joint", name="tilt", dclass="tilt", axis=[0, -1, 0], range=spec.tilt_range
         )
-        tilt.add("geom", name="head", type="box", size=[0.035, 0.09, 0.025], rgba=dark)
+        tilt.add("geom", name="head", type="box", size=[0.035, 0.09, 0.025], rgba=DARK)
         tilt.add(
             "geom",
             name="lens",
@@ -141,17 +162,6 @@ class Robot(composer.Entity):
         self._camera = tilt.add(
             "camera", name="head_cam", pos=[0, 0, 0], xyaxes=[0, -1, 0, 0, 0, 1], fovy=spec.fovy_deg
         )
-
-        self._joints = (self._x, self._y, self._yaw, self._pan, self._tilt)
-        self._actuators = []
-        for joint in self._joints:
-            act = root.actuator.add("position", name=joint.name, joint=joint, dclass=joint.dclass)
-            if joint.range is not None:
-                act.ctrlrange = joint.range
-            else:
-                act.ctrllimited = False
-            self._actuators.append(act)
-        root.keyframe.add("key", name="home", qpos=[0.0] * 5, ctrl=[0.0] * 5)
 
     @property
     def mjcf_model(self) -> mjcf.RootElement:

@@ -31,6 +31,11 @@ def wrap_angle(a: float) -> float:
     return float(math.atan2(math.sin(a), math.cos(a)))
 
 
+def wrap_angles(a: np.ndarray) -> np.ndarray:
+    """``wrap_angle`` of every element of an array."""
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
 @dataclass(frozen=True)
 class RobotSpec:
     """Geometry, joint limits and camera of the robot."""
@@ -88,9 +93,27 @@ class TimeModel:
     tilt_rate: float = 1.5  # rad/s
     image_cost: float = 0.25  # s per image acquired and analysed
 
+    def travel_time(self, distance: float | np.ndarray) -> float | np.ndarray:
+        """Seconds to drive ``distance`` metres straight (a number or an array)."""
+        return distance / self.drive_speed
+
     def turn_time(self, yaw0: float, yaw1: float) -> float:
         """Seconds to rotate the base in place from yaw0 to yaw1 (shortest way)."""
         return abs(wrap_angle(yaw1 - yaw0)) / self.turn_rate
+
+    def turn_times(self, yaw0: np.ndarray | float, yaw1: np.ndarray) -> np.ndarray:
+        """``turn_time`` for arrays of headings (the vectorised planners)."""
+        return np.abs(wrap_angles(yaw1 - yaw0)) / self.turn_rate
+
+    def leg_estimate(self, distance: float, always_turn: bool = False) -> float:
+        """Expected seconds of one leg of a tour whose path is not planned yet: the drive plus a
+        quarter turn (only if the leg is longer than 5 cm, unless ``always_turn``)."""
+        turn = (math.pi / 2) / self.turn_rate if always_turn or distance > 0.05 else 0.0
+        return distance / self.drive_speed + turn
+
+    def looks_estimate(self, images: float, head_s: float) -> float:
+        """Expected seconds of ``images`` images with a mean head slew of ``head_s`` before each."""
+        return images * (head_s + self.image_cost)
 
     def drive_time(self, path: np.ndarray, yaw0: float, yaw1: float | None = None) -> float:
         """Seconds to follow a polyline ``path`` (K, 2) starting at heading yaw0.
@@ -115,6 +138,14 @@ class TimeModel:
     def head_time(self, pan0: float, tilt0: float, pan1: float, tilt1: float) -> float:
         """Seconds to slew the head; pan and tilt move simultaneously."""
         return max(abs(pan1 - pan0) / self.pan_rate, abs(tilt1 - tilt0) / self.tilt_rate)
+
+    def head_times(
+        self, pan0: np.ndarray, tilt0: np.ndarray | float, pan1: np.ndarray, tilt1: np.ndarray
+    ) -> np.ndarray:
+        """``head_time`` for arrays of head moves (the vectorised planners)."""
+        return np.maximum(
+            np.abs(pan1 - pan0) / self.pan_rate, np.abs(tilt1 - tilt0) / self.tilt_rate
+        )
 
     @staticmethod
     def path_length(path: np.ndarray) -> float:

@@ -39,7 +39,7 @@ from scipy import ndimage
 
 from envs.layout import Door, RoomLayout
 from envs.parts import WorldSurface, world_parts_array, world_surfaces
-from envs.robot_spec import RobotSpec
+from envs.robot_spec import RobotSpec, wrap_angle
 from envs.styles import Rule, Style
 from knowledge.catalog import Catalog, ObjectType, load_catalog
 from knowledge.geometry import (
@@ -47,7 +47,9 @@ from knowledge.geometry import (
     Box,
     BoxArray,
     ObjectInstance,
+    box_overlap,
     footprint_distance,
+    overlap_any,
     relation_volume,
 )
 
@@ -352,7 +354,7 @@ class _Builder:
             yaw = float(rng.integers(4)) * math.pi / 2
             if rng.random() < 0.3:
                 yaw += float(rng.uniform(-0.15, 0.15))
-        return ObjectInstance(ot.name, oid, (x, y, sz / 2), _wrap(yaw), size)
+        return ObjectInstance(ot.name, oid, (x, y, sz / 2), wrap_angle(yaw), size)
 
     def place_furniture(self, tname: str) -> bool:
         ot = self.catalog.type(tname)
@@ -382,7 +384,9 @@ class _Builder:
                 yaw = ref.yaw
             else:
                 yaw = ref.yaw + float(self.rng.integers(4)) * math.pi / 2
-            obj = ObjectInstance(ot.name, oid, (float(x), float(y), size[2] / 2), _wrap(yaw), size)
+            obj = ObjectInstance(
+                ot.name, oid, (float(x), float(y), size[2] / 2), wrap_angle(yaw), size
+            )
             if box_overlap(obj.box(), vol) and self.try_furniture(obj, (ref.id, rel.name)):
                 return True
         return False
@@ -399,7 +403,7 @@ class _Builder:
 
     def small_yaw(self, ot: ObjectType, facing: float | None) -> float:
         if ot.shape in ALIGNED and facing is not None:
-            return _wrap(facing + float(self.rng.uniform(-0.25, 0.25)))
+            return wrap_angle(facing + float(self.rng.uniform(-0.25, 0.25)))
         return float(self.rng.uniform(-math.pi, math.pi))
 
     def try_small(
@@ -425,7 +429,7 @@ class _Builder:
         if region is not None:  # proposal rect (u0, u1, v0, v1) in the surface frame
             lo_u, hi_u = max(lo_u, region[0] - ex), min(hi_u, region[1] + ex)
             lo_v, hi_v = max(lo_v, region[2] - ey), min(hi_v, region[3] + ey)
-        if ot.shape in BACK_HALF and surf.owner >= 0 and abs(_wrap(yaw - surf.yaw)) < 0.5:
+        if ot.shape in BACK_HALF and surf.owner >= 0 and abs(wrap_angle(yaw - surf.yaw)) < 0.5:
             hi_u = min(hi_u, 0.0)  # screens stand in the back half of a desk, facing its front
         if lo_u > hi_u or lo_v > hi_v:
             return False
@@ -433,7 +437,7 @@ class _Builder:
         c, s = math.cos(surf.yaw), math.sin(surf.yaw)
         x = surf.center[0] + c * u - s * v
         y = surf.center[1] + s * u + c * v
-        obj = ObjectInstance(ot.name, oid, (x, y, surf.center[2] + sz / 2), _wrap(yaw), size)
+        obj = ObjectInstance(ot.name, oid, (x, y, surf.center[2] + sz / 2), wrap_angle(yaw), size)
         if check is not None and not check(obj):
             return False
         on_floor = surf.owner < 0
@@ -516,63 +520,6 @@ class _Builder:
             if self.try_small(ot, size, self.small_yaw(ot, facing), surf, oid, None):
                 return True
         return False
-
-
-def overlap_any(a: BoxArray, b: BoxArray, eps: float = EPS) -> bool:
-    """True if some box of ``a`` overlaps some box of ``b`` with positive volume.
-
-    The same separating-axis test as ``knowledge.geometry.overlaps`` (every axis overlap > eps),
-    done for all pairs at once.
-    """
-    if len(a) == 0 or len(b) == 0:
-        return False
-    alo, ahi = (
-        a.centers[:, None, 2] - a.halves[:, None, 2],
-        a.centers[:, None, 2] + a.halves[:, None, 2],
-    )
-    blo, bhi = (
-        b.centers[None, :, 2] - b.halves[None, :, 2],
-        b.centers[None, :, 2] + b.halves[None, :, 2],
-    )
-    ok = np.minimum(ahi, bhi) - np.maximum(alo, blo) > eps
-    if not ok.any():
-        return False
-    delta = a.yaws[:, None] - b.yaws[None, :]
-    C, S = np.abs(np.cos(delta)), np.abs(np.sin(delta))
-    dx = b.centers[None, :, 0] - a.centers[:, None, 0]
-    dy = b.centers[None, :, 1] - a.centers[:, None, 1]
-    ca, sa = np.cos(a.yaws)[:, None], np.sin(a.yaws)[:, None]
-    cb, sb = np.cos(b.yaws)[None, :], np.sin(b.yaws)[None, :]
-    ha0, ha1 = a.halves[:, None, 0], a.halves[:, None, 1]
-    hb0, hb1 = b.halves[None, :, 0], b.halves[None, :, 1]
-    ok &= ha0 + C * hb0 + S * hb1 - np.abs(dx * ca + dy * sa) > eps
-    ok &= ha1 + S * hb0 + C * hb1 - np.abs(-dx * sa + dy * ca) > eps
-    ok &= hb0 + C * ha0 + S * ha1 - np.abs(dx * cb + dy * sb) > eps
-    ok &= hb1 + S * ha0 + C * ha1 - np.abs(-dx * sb + dy * cb) > eps
-    return bool(ok.any())
-
-
-def box_overlap(a: Box, b: Box, eps: float = EPS) -> bool:
-    """Two yaw-only boxes overlap with positive volume: ``knowledge.geometry.overlaps`` for one
-    pair, in plain floats (fast for the generator's many single checks)."""
-    az, bz = float(a.center[2]), float(b.center[2])
-    ah, bh = a.half, b.half
-    if min(az + ah[2], bz + bh[2]) - max(az - ah[2], bz - bh[2]) <= eps:
-        return False
-    ca, sa, cb, sb = math.cos(a.yaw), math.sin(a.yaw), math.cos(b.yaw), math.sin(b.yaw)
-    C, S = abs(ca * cb + sa * sb), abs(sa * cb - ca * sb)
-    dx, dy = float(b.center[0] - a.center[0]), float(b.center[1] - a.center[1])
-    ha0, ha1, hb0, hb1 = float(ah[0]), float(ah[1]), float(bh[0]), float(bh[1])
-    return (
-        ha0 + C * hb0 + S * hb1 - abs(dx * ca + dy * sa) > eps
-        and ha1 + S * hb0 + C * hb1 - abs(-dx * sa + dy * ca) > eps
-        and hb0 + C * ha0 + S * ha1 - abs(dx * cb + dy * sb) > eps
-        and hb1 + S * ha0 + C * ha1 - abs(-dx * sb + dy * cb) > eps
-    )
-
-
-def _wrap(a: float) -> float:
-    return float(math.atan2(math.sin(a), math.cos(a)))
 
 
 def _volume_region(vol: Box, surf: WorldSurface) -> tuple[float, float, float, float]:

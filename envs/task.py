@@ -18,6 +18,7 @@ from dm_control import composer, mjcf
 
 from envs.arena import PHYSICS_TIMESTEP, RoomArena
 from envs.entities import RoomObjects
+from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot import Robot
 from envs.robot_spec import RobotPose, RobotSpec
@@ -91,8 +92,6 @@ class RoomTask(composer.Task):
     def _next_layout(self) -> RoomLayout:
         if self._fixed_layout is not None:
             return self._fixed_layout
-        from envs.houses import generate_layout, resolve_style
-
         layout = generate_layout(
             resolve_style(self._style, self._catalog), self._seed + self._episode, self._catalog
         )

@@ -30,6 +30,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from envs.houses import HouseStyle, generate_layout, resolve_style
 from envs.layout import RoomLayout
@@ -136,8 +137,6 @@ def ground_truth(
         style = resolve_style(style, catalog)
     seeds = range(int(seed), int(seed) + int(samples))
     if progress:
-        from tqdm import tqdm
-
         unit = "house" if isinstance(style, HouseStyle) else "room"
         seeds = tqdm(seeds, desc=f"truth {style.name}", unit=unit)
     return truth_document(style, samples, seed, catalog, sample_counts(style, seeds, catalog))

@@ -29,13 +29,13 @@ import atexit
 import logging
 import math
 import weakref
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from dm_control import mjcf
 
 from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
+from envs.camera import Frame, PinholeCamera
 from envs.house_view import RoomCulling
 from envs.layout import RoomLayout
 from envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
@@ -53,81 +53,6 @@ MAX_SETTLE_S = 3.0  # give up settling after this much physics time (never reach
 EGL_HINT = "apt-get install -y libegl1 libgl1-mesa-dri"
 
 _gl_renderer: str | None = None  # the GL renderer string, once a renderer has been made
-
-
-@dataclass(frozen=True)
-class CameraInfo:
-    """A pinhole camera in the world: position (3,), world rotation ``xmat`` (3, 3) whose columns
-    are the camera's x (image right), y (image up) and z axes (MuJoCo: it looks along -z),
-    vertical field of view and image size.
-
-    Pixel coordinates: u to the right, v down, the image's top-left corner at (0, 0), so pixel
-    (row i, column j) has its centre at (j + 0.5, i + 0.5).
-    """
-
-    position: np.ndarray
-    xmat: np.ndarray
-    fovy_deg: float
-    width: int
-    height: int
-
-    @property
-    def focal(self) -> float:
-        """Focal length in pixels (square pixels)."""
-        return (self.height / 2) / math.tan(math.radians(self.fovy_deg) / 2)
-
-    @property
-    def forward(self) -> np.ndarray:
-        """The viewing direction (3,), a unit vector."""
-        return -self.xmat[:, 2]
-
-    def intrinsics(self) -> np.ndarray:
-        """The 3x3 intrinsic matrix K (OpenCV convention: x right, y down, z forward)."""
-        f = self.focal
-        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
-
-    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World points (N, 3) -> pixel coordinates (N, 2) (u, v) and depth (N,) along the optical
-        axis; points at or behind the camera get NaN pixels and depth <= 0."""
-        p = (np.atleast_2d(np.asarray(points, float)) - self.position) @ self.xmat
-        depth = -p[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(depth > 1e-9, 1.0 / depth, np.nan)
-        f = self.focal
-        uv = np.column_stack(
-            [self.width / 2 + f * p[:, 0] * inv, self.height / 2 - f * p[:, 1] * inv]
-        )
-        return uv, depth
-
-    def pixel_rays(self) -> np.ndarray:
-        """(H, W, 3) world-frame unit rays through every pixel centre."""
-        f = self.focal
-        x = (np.arange(self.width) + 0.5 - self.width / 2) / f
-        y = -(np.arange(self.height) + 0.5 - self.height / 2) / f
-        local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), axis=-1)
-        local /= np.linalg.norm(local, axis=-1, keepdims=True)
-        return local @ self.xmat.T
-
-    def backproject(self, depth: np.ndarray) -> np.ndarray:
-        """(H, W, 3) world points of a depth image (distance along the optical axis)."""
-        f = self.focal
-        x = (np.arange(self.width) + 0.5 - self.width / 2) / f
-        y = -(np.arange(self.height) + 0.5 - self.height / 2) / f
-        local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), axis=-1)
-        return self.position + (local * np.asarray(depth, float)[..., None]) @ self.xmat.T
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One image from the head camera: RGB (only when asked), depth in metres along the optical
-    axis (when asked), the object instance id of every pixel (-1: floor, walls, ceiling,
-    background), the camera it was taken with and the robot's pose at the time."""
-
-    rgb: np.ndarray | None
-    depth: np.ndarray | None
-    instance_ids: np.ndarray
-    camera: CameraInfo
-    pose: RobotPose
 
 
 _shared_gl = None  # the process's one GL context, shared by every renderer (see _Renderer)
@@ -302,17 +227,6 @@ class World:
         _open_renderers[id(self._renderers)] = self._renderers
         mujoco.mj_forward(self._m, self._d)
 
-    @classmethod
-    def from_style(cls, style_name: str, seed: int, catalog: Catalog | None = None, **kw) -> World:
-        """A World for the room (or house) ``generate_layout`` makes from ``style_name`` (a room
-        or house style) and ``seed``."""
-        from envs.houses import generate_layout, resolve_style
-
-        catalog = catalog or load_catalog()
-        return cls(
-            generate_layout(resolve_style(style_name, catalog), seed, catalog), catalog, **kw
-        )
-
     # -- pose and motion ---------------------------------------------------------------------
 
     def pose(self) -> RobotPose:
@@ -339,20 +253,19 @@ class World:
             length = float(np.hypot(*(b - a)))
             if length < 1e-9:
                 continue
-            turn = wrap_angle(math.atan2(b[1] - a[1], b[0] - a[0]) - q[2])
+            heading = math.atan2(b[1] - a[1], b[0] - a[0])
+            knots_t.append(knots_t[-1] + tm.turn_time(q[2], heading))
             q = q.copy()
-            q[2] += turn
-            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            q[2] += wrap_angle(heading - q[2])
             knots_q.append(q)
             q = q.copy()
             q[:2] = b
-            knots_t.append(knots_t[-1] + length / tm.drive_speed)
+            knots_t.append(knots_t[-1] + tm.travel_time(length))
             knots_q.append(q)
         if final_yaw is not None:
+            knots_t.append(knots_t[-1] + tm.turn_time(q[2], final_yaw))
             q = q.copy()
-            turn = wrap_angle(final_yaw - q[2])
-            q[2] += turn
-            knots_t.append(knots_t[-1] + abs(turn) / tm.turn_rate)
+            q[2] += wrap_angle(final_yaw - q[2])
             knots_q.append(q)
         self._execute(np.asarray(knots_t), np.asarray(knots_q))
         seconds = float(tm.drive_time(path, wrap_angle(q0[2]), final_yaw))
@@ -395,9 +308,9 @@ class World:
 
     # -- images --------------------------------------------------------------------------------
 
-    def camera_info(self) -> CameraInfo:
+    def camera_info(self) -> PinholeCamera:
         """The head camera where it is now."""
-        return CameraInfo(
+        return PinholeCamera(
             position=self._d.cam_xpos[self._cam_id].copy(),
             xmat=self._d.cam_xmat[self._cam_id].reshape(3, 3).copy(),
             fovy_deg=float(self._m.cam_fovy[self._cam_id]),

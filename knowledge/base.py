@@ -437,11 +437,5 @@ class KnowledgeBase:
         a = self._order[rel.ref]
         return a, self.catalog.types[a].relations.index(rel)
 
-    def _order_of(self, name: str) -> int:
-        return self._idx(name)
-
-    def _check_type(self, name: str) -> None:
-        self._idx(name)
-
     def _invalidate(self, a: int) -> None:
         self._score_cache.pop(a, None)

@@ -122,6 +122,15 @@ class BoxArray:
             np.array([o.size for o in objs], float) / 2,
         )
 
+    @classmethod
+    def of(cls, boxes: Sequence[Box]) -> BoxArray:
+        """Pack boxes into arrays."""
+        return cls(
+            np.array([b.center for b in boxes], float).reshape(-1, 3),
+            np.array([b.yaw for b in boxes], float),
+            np.array([b.half for b in boxes], float).reshape(-1, 3),
+        )
+
     def __len__(self) -> int:
         return len(self.yaws)
 
@@ -136,37 +145,66 @@ def footprint_distance(box: Box, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
 
 
-def overlaps(boxes: BoxArray, box: Box, eps: float = EPS) -> np.ndarray:
-    """Which of ``boxes`` overlap ``box`` with positive volume (every axis overlap > eps). (N,) bool."""
-    n = len(boxes)
-    if n == 0:
-        return np.zeros(0, bool)
-    # z: interval overlap.
-    z_ov = np.minimum(
-        boxes.centers[:, 2] + boxes.halves[:, 2], box.center[2] + box.half[2]
-    ) - np.maximum(boxes.centers[:, 2] - boxes.halves[:, 2], box.center[2] - box.half[2])
-    ok = z_ov > eps
-    # ground plane: separating-axis test on the 4 edge normals (2 of each rectangle).
-    d = boxes.centers[:, :2] - box.center[:2]  # (N, 2)
-    ca, sa = np.cos(boxes.yaws), np.sin(boxes.yaws)  # (N,)
-    cb, sb = np.cos(box.yaw), np.sin(box.yaw)
-    ua = np.stack([np.stack([ca, sa], -1), np.stack([-sa, ca], -1)], 1)  # (N, 2 axes, 2)
-    ub = np.array([[cb, sb], [-sb, cb]])  # (2 axes, 2)
-    ha = boxes.halves[:, :2]  # (N, 2)
-    hb = box.half[:2]
-    # Axes of the many boxes.
-    for k in range(2):
-        axis = ua[:, k, :]  # (N, 2)
-        dist = np.abs(np.einsum("ij,ij->i", d, axis))
-        rb = np.abs(axis @ ub.T) @ hb  # (N,)
-        ok &= ha[:, k] + rb - dist > eps
-    # Axes of the single box.
-    for k in range(2):
-        axis = ub[k]
-        dist = np.abs(d @ axis)
-        ra = np.abs(ua @ axis) * ha  # (N, 2)
-        ok &= ra.sum(1) + hb[k] - dist > eps
+def overlap_matrix(a: BoxArray, b: BoxArray, eps: float = EPS) -> np.ndarray:
+    """THE box-overlap test: (Na, Nb) bool, box i of ``a`` and box j of ``b`` overlap with
+    positive volume (every axis overlap > ``eps``). Yaw-only boxes: the z intervals overlap and,
+    on the ground plane, no edge normal of either rectangle separates them (separating axes)."""
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((len(a), len(b)), bool)
+    alo, ahi = (
+        a.centers[:, None, 2] - a.halves[:, None, 2],
+        a.centers[:, None, 2] + a.halves[:, None, 2],
+    )
+    blo, bhi = (
+        b.centers[None, :, 2] - b.halves[None, :, 2],
+        b.centers[None, :, 2] + b.halves[None, :, 2],
+    )
+    ok = np.minimum(ahi, bhi) - np.maximum(alo, blo) > eps
+    if not ok.any():
+        return ok
+    delta = a.yaws[:, None] - b.yaws[None, :]
+    C, S = np.abs(np.cos(delta)), np.abs(np.sin(delta))
+    dx = b.centers[None, :, 0] - a.centers[:, None, 0]
+    dy = b.centers[None, :, 1] - a.centers[:, None, 1]
+    ca, sa = np.cos(a.yaws)[:, None], np.sin(a.yaws)[:, None]
+    cb, sb = np.cos(b.yaws)[None, :], np.sin(b.yaws)[None, :]
+    ha0, ha1 = a.halves[:, None, 0], a.halves[:, None, 1]
+    hb0, hb1 = b.halves[None, :, 0], b.halves[None, :, 1]
+    ok &= ha0 + C * hb0 + S * hb1 - np.abs(dx * ca + dy * sa) > eps
+    ok &= ha1 + S * hb0 + C * hb1 - np.abs(-dx * sa + dy * ca) > eps
+    ok &= hb0 + C * ha0 + S * ha1 - np.abs(dx * cb + dy * sb) > eps
+    ok &= hb1 + S * ha0 + C * ha1 - np.abs(-dx * sb + dy * cb) > eps
     return ok
+
+
+def overlaps(boxes: BoxArray, box: Box, eps: float = EPS) -> np.ndarray:
+    """Which of ``boxes`` overlap ``box`` with positive volume (``overlap_matrix``). (N,) bool."""
+    return overlap_matrix(boxes, BoxArray.of([box]), eps)[:, 0]
+
+
+def overlap_any(a: BoxArray, b: BoxArray, eps: float = EPS) -> bool:
+    """True if some box of ``a`` overlaps some box of ``b`` (``overlap_matrix``)."""
+    return bool(overlap_matrix(a, b, eps).any())
+
+
+def box_overlap(a: Box, b: Box, eps: float = EPS) -> bool:
+    """Two boxes overlap with positive volume: ``overlap_matrix``'s test for one pair, the same
+    expressions in plain floats (about 20 times faster for the room generator's many single
+    checks than going through arrays)."""
+    az, bz = float(a.center[2]), float(b.center[2])
+    ah, bh = a.half, b.half
+    if min(az + ah[2], bz + bh[2]) - max(az - ah[2], bz - bh[2]) <= eps:
+        return False
+    ca, sa, cb, sb = math.cos(a.yaw), math.sin(a.yaw), math.cos(b.yaw), math.sin(b.yaw)
+    C, S = abs(ca * cb + sa * sb), abs(sa * cb - ca * sb)
+    dx, dy = float(b.center[0] - a.center[0]), float(b.center[1] - a.center[1])
+    ha0, ha1, hb0, hb1 = float(ah[0]), float(ah[1]), float(bh[0]), float(bh[1])
+    return (
+        ha0 + C * hb0 + S * hb1 - abs(dx * ca + dy * sa) > eps
+        and ha1 + S * hb0 + C * hb1 - abs(-dx * sa + dy * ca) > eps
+        and hb0 + C * ha0 + S * ha1 - abs(dx * cb + dy * sb) > eps
+        and hb1 + S * ha0 + C * ha1 - abs(-dx * sb + dy * cb) > eps
+    )
 
 
 def relation_volume(rel: RelationSpec, ref: ObjectInstance) -> Box:

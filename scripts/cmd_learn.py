@@ -100,20 +100,22 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
     # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from agent.acquisition import learn
+    from agent.learning import LearnConfig, learn
 
     s = learn(
-        args.style,
-        args.rooms,
-        args.kb,
-        strategy=args.strategy,
-        perception=args.perception,
-        alpha=args.alpha,
-        seed=args.seed,
-        record=args.record,
-        max_examinations=args.max_examinations,
-        progress=not args.no_progress,
-        room_budget_s=args.room_budget,
+        LearnConfig(
+            args.style,
+            args.rooms,
+            args.kb,
+            strategy=args.strategy,
+            perception=args.perception,
+            alpha=args.alpha,
+            seed=args.seed,
+            record=args.record,
+            max_examinations=args.max_examinations,
+            progress=not args.no_progress,
+            room_budget_s=args.room_budget,
+        )
     )
     for line in s.lines():
         print(line)

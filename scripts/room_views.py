@@ -14,7 +14,7 @@ import numpy as np
 from agent.navigation import OccupancyGrid, nearest_free
 from agent.perception import detect
 from agent.recording import Recorder
-from agent.viewplan import execute_gaze, plan_gazes
+from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
 from envs.floorplan import layout_dict
 from envs.houses import generate_layout, resolve_style
@@ -278,12 +278,14 @@ class _Viewer:
             world.pose(),
             spec,
             world.time_model,
-            max_distance=3.5,
-            max_gazes=1,
-            min_gain=0.0,
-            cost_weight=0.3,
-            width=cfg.width,
-            height=cfg.height,
+            GazePlanOptions(
+                max_distance=3.5,
+                max_gazes=1,
+                min_gain=0.0,
+                cost_weight=0.3,
+                width=cfg.width,
+                height=cfg.height,
+            ),
         )
         if not gazes:
             print(f"  view {i}: no reachable viewpoint sees {target.type} #{target.id}, skipped")

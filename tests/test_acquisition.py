@@ -7,8 +7,10 @@ import math
 
 import pytest
 
-from agent.acquisition import learn, room_seed, start_pose
+from agent import learning
+from agent.acquisition import start_pose
 from agent.exam_volumes import group_volumes, relation_boxes
+from agent.learning import LearnConfig, room_seed
 from agent.navigation import OccupancyGrid
 from agent.perception_modes import KinematicBody, OraclePerception
 from envs.layout import Door, RoomLayout
@@ -16,6 +18,13 @@ from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.catalog import parse_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
+
+
+def learn(*args, **kw):
+    """``learning.learn`` with the configuration's fields and the hooks as keywords."""
+    names = ("catalog", "layouts", "on_examination", "on_choice", "perceive")
+    hooks = {k: kw.pop(k) for k in names if k in kw}
+    return learning.learn(LearnConfig(*args, **kw), **hooks)
 
 
 def _rel(name, lo, hi, mlo=(0, 0, 0), mhi=(0, 0, 0)):
@@ -536,3 +545,102 @@ def test_resume_replays_an_object_that_could_not_be_examined(tmp_path):
     assert kb_part.n("Lamp") == kb_full.n("Lamp") == 0
     for t in cat.type_names:
         assert kb_full.n(t) == kb_part.n(t) and kb_full.nonzero(t) == kb_part.nonzero(t)
+
+
+@pytest.mark.render
+def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
+    from agent.perception_modes import CameraPerception
+
+    cat = tiny_catalog()
+    room = tiny_room(0)
+    spec = RobotSpec(camera_height=1.0, fovy_deg=70.0)
+    tm = TimeModel(drive_speed=0.2, turn_rate=0.5, pan_rate=0.7, tilt_rate=0.6, image_cost=0.9)
+    cam = CameraPerception(room, cat, spec, tm)
+    try:
+        body = cam.body
+        assert body.spec is spec and body.time_model is tm
+        body.reset_pose(RobotPose(0.0, 0.0, 0.0))
+        frame = body.capture()
+        assert body.sim_time == pytest.approx(0.9)
+        assert frame.camera.fovy_deg == pytest.approx(70.0)
+        assert frame.camera.position[2] == pytest.approx(1.0, abs=0.02)
+        assert body.move_head(0.7, 0.0) == pytest.approx(1.0)  # 0.7 rad at 0.7 rad/s
+    finally:
+        cam.close()
+    # A whole run: halving every rate and doubling the image cost doubles the seconds charged
+    # (the same motions; the camera mode used to charge the default TimeModel whatever it got).
+    base = TimeModel()
+    slow = TimeModel(
+        base.drive_speed / 2, base.turn_rate / 2, base.pan_rate / 2, base.tilt_rate / 2,
+        2 * base.image_cost,
+    )  # fmt: skip
+    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera")
+    s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", time_model=slow)
+    assert s0.examinations == s1.examinations == 4
+    assert s1.sim_s == pytest.approx(2 * s0.sim_s, rel=0.02)
+
+
+def test_a_perception_of_ones_own_plugs_into_learn(tmp_path):
+    """Any agent.interfaces Perception works: here the oracle's, wrapped to count its calls."""
+
+    class Counting:
+        name, reads_truth, last_detections = "mine", True, ()
+
+        def __init__(self, layout, catalog, spec, time_model, rgb):
+            self._inner = OraclePerception(layout, catalog, spec, time_model)
+            self.body = self._inner.body
+            self.calls = calls
+
+        def see(self, frame):
+            self.calls["see"] += 1
+            return self._inner.see(frame)
+
+        def related(self, obj, seen):
+            self.calls["related"] += 1
+            return self._inner.related(obj, seen)
+
+        def close(self):
+            self._inner.close()
+
+    calls = {"see": 0, "related": 0}
+    mine, _ = _learn(tmp_path, "mine.sqlite", perception="mine", perceive=Counting)
+    oracle, _ = _learn(tmp_path, "oracle.sqlite")
+    assert mine.run == "hif/mine/seed=0" and mine.examinations == oracle.examinations == 4
+    assert calls["related"] == 4 and calls["see"] >= 6  # one look-around at least
+    assert mine.sim_s == oracle.sim_s
+    with pytest.raises(CtxsearchError, match="unknown perception mode 'mine'"):
+        _learn(tmp_path, "no.sqlite", perception="mine")
+
+
+def test_a_huge_room_count_builds_nothing_up_front(tmp_path):
+    # Room seeds are made as the run reaches them: asking for 10**12 rooms costs nothing more.
+    s, _ = _learn(tmp_path, rooms=10**12, max_examinations=2)
+    assert s.examinations == 2 and s.rooms == 0 and s.rooms_done_now == 0
+
+
+def test_each_rooms_perception_is_closed_and_released_when_the_room_is_done(tmp_path):
+    import gc
+    import weakref
+
+    made: list[weakref.ref] = []
+    closed: list[bool] = []
+
+    class Tracked(OraclePerception):
+        def __init__(self, layout, catalog, spec, time_model, rgb):
+            super().__init__(layout, catalog, spec, time_model)
+            made.append(weakref.ref(self))
+            closed.append(False)
+            self._k = len(closed) - 1
+
+        def close(self):
+            closed[self._k] = True
+
+    alive_before: list[int] = []
+
+    def on_exam(res, kb):
+        gc.collect()
+        alive_before.append(sum(r() is not None for r in made[:-1]))
+
+    s, _ = _learn(tmp_path, rooms=3, perception="tracked", perceive=Tracked, on_examination=on_exam)
+    assert s.rooms == 3 and len(made) == 3 and all(closed)
+    assert alive_before and max(alive_before) == 0  # no earlier room's perception kept alive

@@ -10,7 +10,7 @@ import pytest
 
 from agent.perception import detect_ids
 from agent.recording import Recorder, wall_boxes
-from agent.viewplan import camera_at
+from envs.camera import camera_at
 from envs.layout import Door, RoomLayout
 from envs.robot_spec import RobotPose
 from knowledge.geometry import ObjectInstance, relation_volume

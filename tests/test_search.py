@@ -40,15 +40,13 @@ def room(*objects: ObjectInstance) -> RoomLayout:
     )
 
 
-class Cam:
-    """A minimal camera for SeenMap.update."""
+def Cam(position, heading, tilt, width=320, height=240, fovy=58.0):  # noqa: N802
+    """A camera for SeenMap.update."""
+    from envs.camera import PinholeCamera, camera_axes
 
-    def __init__(self, position, heading, tilt, width=320, height=240, fovy=58.0):
-        from agent.viewplan import camera_axes
-
-        self.position = np.asarray(position, float)
-        self.xmat = camera_axes(heading, tilt)
-        self.fovy_deg, self.width, self.height = fovy, width, height
+    return PinholeCamera(
+        np.asarray(position, float), camera_axes(heading, tilt), fovy, width, height
+    )
 
 
 # =========================================================================== pure parts
@@ -222,7 +220,7 @@ def test_aggregate_counts_failures_at_the_budget():
 
 
 def test_held_out_seeds_differ_from_learning_seeds():
-    from agent.acquisition import room_seed
+    from agent.learning import room_seed
 
     learn = {room_seed(0, i) for i in range(200)}
     search = {S.held_out_seed(0, i) for i in range(200)}

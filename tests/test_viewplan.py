@@ -11,18 +11,14 @@ import agent.viewplan as viewplan_module
 from agent.navigation import OccupancyGrid, plan_path
 from agent.viewplan import (
     Gaze,
-    PinholeView,
     aim,
     box_samples,
-    camera_at,
-    camera_axes,
     execute_gaze,
     facing_for,
     in_view,
     plan_gazes,
-    points_in_view,
-    project,
 )
+from envs.camera import PinholeCamera, camera_at, camera_axes
 from envs.layout import Door, RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.geometry import Box, ObjectInstance, relation_volume
@@ -79,7 +75,7 @@ def test_projection_and_aim():
     )
     # Pixel conventions: a point up and to the right lands up (small v) and right (large u).
     cam = camera_at(RobotPose(0, 0, 0), SPEC)
-    pix, _ = project(cam, np.array([[2.0, -0.3, 1.5]]))
+    pix, _ = cam.project(np.array([[2.0, -0.3, 1.5]]))
     assert pix[0, 0] > 160 and pix[0, 1] < 120
     k = cam.intrinsics()
     assert k[0, 0] == pytest.approx(120 / math.tan(math.radians(29)))
@@ -105,7 +101,7 @@ def test_in_view_and_samples():
     big = Box(np.array([0.0, 0.0, 1.0]), 0.4, np.array([2.0, 2.0, 1.0]))
     pts = box_samples(big, max_points=200)
     assert len(pts) <= 200 and _grown(big).contains_points(pts).all()
-    assert points_in_view(cam, pts).dtype == bool
+    assert cam.sees(pts).dtype == bool
 
 
 def test_facing_for_desk_relations(catalog):
@@ -134,7 +130,7 @@ def _coverage(gazes: list[Gaze], box: Box, max_distance: float) -> float:
     pts = box_samples(box, max_points=200)
     hit = np.zeros(len(pts), bool)
     for g in gazes:
-        hit |= points_in_view(camera_at(g.pose, SPEC), pts, max_distance)
+        hit |= camera_at(g.pose, SPEC).sees(pts, max_distance)
     return float(hit.mean())
 
 
@@ -207,7 +203,7 @@ def test_volume_against_a_wall_still_gets_gazes(catalog):
     inside = inside[inside[:, 1] <= 2.5]
     hit = np.zeros(len(inside), bool)
     for g in gazes:
-        hit |= points_in_view(camera_at(g.pose, SPEC), inside, 2.5)
+        hit |= camera_at(g.pose, SPEC).sees(inside, 2.5)
     assert hit.mean() > 0.9
     # Entirely outside the room: nothing to plan.
     outside = Box(np.array([0.0, 4.0, 0.5]), 0.0, np.array([0.3, 0.3, 0.3]))
@@ -308,16 +304,26 @@ def _visibility_reference(cams, heading, tilt, points, width, height, max_distan
 
 @pytest.mark.parametrize("block", [1, 700, 65536])
 def test_visibility_matches_the_plain_frustum_test(monkeypatch, block):
-    monkeypatch.setattr(viewplan_module, "_VISIBILITY_BLOCK", block)
+    import envs.camera as camera_module
+
+    monkeypatch.setattr(camera_module, "_FRUSTUM_BLOCK", block)
     rng = np.random.default_rng(3)
     cams = np.column_stack([rng.uniform(-3, 3, (40, 2)), np.full(40, SPEC.camera_height)])
     aims = rng.uniform([-2, -2, 0], [2, 2, 1.5], (5, 3))
     points = rng.uniform([-2.5, -2.5, 0], [2.5, 2.5, 2], (120, 3))
     heading, tilt = viewplan_module._aim_angles(cams, aims, SPEC)
-    got = viewplan_module._visibility(cams, heading, tilt, points, SPEC, 320, 240, 2.5)
+    tangents = camera_module.half_fov_tangents(SPEC.fovy_deg, 320, 240)
+    got = camera_module.frustum_masks(cams, heading, tilt, points, tangents, 2.5)
     want = _visibility_reference(cams, heading, tilt, points, 320, 240, 2.5)
     assert got.shape == (40, 5, 120) and 0 < want.sum() < want.size
     np.testing.assert_array_equal(got, want)
+    # The single-camera form of the same test agrees too.
+    for c in range(0, 40, 7):
+        for t in range(5):
+            one = camera_module.frustum_mask(
+                cams[c], float(heading[c, t]), float(tilt[c, t]), points, SPEC, 2.5
+            )
+            np.testing.assert_array_equal(one, want[c, t])
 
 
 def test_unit_weight_gains_are_the_weighted_formula():
@@ -335,7 +341,7 @@ def test_unit_weight_gains_are_the_weighted_formula():
 
 def test_pinhole_view_is_a_camera():
     cam = camera_at(RobotPose(0.5, 0.5, 1.0, 0.2, -0.3), SPEC, 640, 480)
-    assert isinstance(cam, PinholeView)
+    assert isinstance(cam, PinholeCamera)
     assert cam.width == 640 and cam.focal == pytest.approx(240 / math.tan(math.radians(29)))
 
 

@@ -20,7 +20,7 @@ fewest would pick from the same knowledge, and how often HIF's pick can only com
 of eq. 3 (impact(0, n) is not monotonic in n). ``learning.png`` draws the curves with
 inter-quartile bands.
 
-``room_budget_s`` gives every room a simulated-time budget (agent.acquisition): the robot leaves a
+``room_budget_s`` gives every room a simulated-time budget (agent.learning): the robot leaves a
 room when it is spent, so the strategies examine different objects, not only the same objects in
 another order. Then ``learning.md`` opens with a generated "Reading": the share of each room's
 objects examined, and every strategy's mean width minus HIF's (paired per seed) at marks in

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent import search_space as ss
-from agent.acquisition import learn, room_seed, run_id
+from agent.learning import LearnConfig, learn, room_seed, run_id
 from agent.search import SearchResult, check_target, open_knowledge
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
@@ -166,14 +166,16 @@ def _learn_step(config: DemoConfig, echo) -> _Learned:
             f"[1/3] learning in {rooms} {DEMO_STYLE} rooms ({perception} perception, strategy {DEMO_STRATEGY})"
         )
         s = learn(
-            DEMO_STYLE,
-            rooms,
-            kb_path,
-            strategy=DEMO_STRATEGY,
-            perception=perception,
-            seed=DEMO_SEED,
-            record=learn_rrd,
-            progress=progress,
+            LearnConfig(
+                DEMO_STYLE,
+                rooms,
+                kb_path,
+                strategy=DEMO_STRATEGY,
+                perception=perception,
+                seed=DEMO_SEED,
+                record=learn_rrd,
+                progress=progress,
+            )
         )
         if s.interrupted:
             raise KeyboardInterrupt

@@ -187,10 +187,9 @@ def run_policy(
             layout,
             catalog,
             world,
-            grid=grid,
+            maps=S.RoomMaps(grid, seen),
             probs=probs,
             recorder=rec,
-            seen=seen,
             policy=name,
         )
         res = S.make_policy(base).run(ctx)

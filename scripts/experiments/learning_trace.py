@@ -1,7 +1,7 @@
 """One learning run measured against the ground truth after every examination.
 
 ``TruthTracker`` keeps the counts of the (A, rel, B) entries that have ground truth and the
-metrics of their intervals against p_true; ``run_trace`` runs ``agent.acquisition.learn`` in a
+metrics of their intervals against p_true; ``run_trace`` runs ``agent.learning.learn`` in a
 fresh store and records, per examination, the metrics, the simulated second, and how the
 strategy's pick relates to what hif, expected-hif and fewest would have picked.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.acquisition import learn, style_layouts
+from agent.learning import LearnConfig, learn, style_layouts
 from knowledge import intervals
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
@@ -207,19 +207,21 @@ def run_trace(
     layouts, on_exam, on_choice = hooks.layouts, hooks.on_exam, hooks.on_choice
     t0 = time.perf_counter()
     summary = learn(
-        style,
-        rooms,
-        workdir / f"{strategy}-{seed}.sqlite",
-        strategy=strategy,
-        perception=perception,
-        alpha=alpha,
-        seed=seed,
-        progress=False,
+        LearnConfig(
+            style,
+            rooms,
+            workdir / f"{strategy}-{seed}.sqlite",
+            strategy=strategy,
+            perception=perception,
+            alpha=alpha,
+            seed=seed,
+            progress=False,
+            room_budget_s=room_budget_s,
+        ),
         catalog=catalog,
         layouts=layouts,
         on_examination=on_exam,
         on_choice=on_choice,
-        room_budget_s=room_budget_s,
     )
     tr.wall_s = time.perf_counter() - t0
     tr.rooms_left_early = summary.rooms_left_early

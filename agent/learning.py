@@ -1,0 +1,337 @@
+"""A learning run: procedure learn-spatial-contexts (Figure 2) over a sequence of rooms.
+
+``learn(LearnConfig(...))`` runs agent.acquisition's ``RoomLearner`` room after room; the
+knowledge (the evidence store and the knowledge base derived from it) carries over. Room i's seed
+is derived from (seed, i) and its room is generated when the run reaches it; each room's learner,
+world and renderer are closed when the room is done, so memory stays flat over any number of
+rooms.
+
+A run is identified by (strategy, perception, seed, room budget) (``run_id``): runs with another
+budget are separate runs in the same store. Rooms done in the store are skipped and a room in
+progress is replayed (agent.resume), so a resumed run makes exactly the choices of an
+uninterrupted one. Every examination is one store transaction: Ctrl-C or a kill loses at most
+the one in flight. With ``record``, agent.learn_log's ``RunLog`` writes the run to rerun.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import gc
+import math
+import time
+from collections.abc import Callable
+from contextlib import nullcontext
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from agent import strategies as strat
+from agent.acquisition import RoomLearner
+from agent.learn_log import RunLog
+from agent.perception_modes import PERCEPTION_MODES
+from agent.resume import RunHistory
+from agent.run_state import (
+    ROOM_DONE,
+    ROOM_STARTED,
+    ChoiceCallback,
+    ExamResult,
+    PerceptionFactory,
+    Run,
+)
+from envs.houses import generate_layout, resolve_style
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec, TimeModel
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
+from knowledge.store import EvidenceStore
+
+ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
+LayoutFn = Callable[[int, int], RoomLayout]  # (room index, room seed) -> layout
+
+
+# =========================================================================== seeds and run ids
+def room_seed(seed: int, index: int) -> int:
+    """The seed of room ``index`` of a run started with ``seed`` (deterministic, spread out)."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+def run_id(strategy: str, perception: str, seed: int, room_budget_s: float | None = None) -> str:
+    """The store's run key: runs with another strategy, perception, seed or room budget are
+    separate runs (no budget: the key has no budget part)."""
+    key = f"{strategy}/{perception}/seed={int(seed)}"
+    return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
+
+
+def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
+    """The style's name and its world generator (a room style's rooms or a house style's houses)."""
+    st = resolve_style(style, catalog)
+    return st.name, lambda index, seed: generate_layout(st, seed, catalog)
+
+
+def release_memory() -> None:
+    """Free what a finished room leaves behind. Its MuJoCo model, data and renderer sit in
+    reference cycles (dm_control's MJCF objects), so they are collected now rather than at
+    Python's next full collection; then glibc is asked to return the freed heap to the system
+    (``malloc_trim``; without it the heap of a camera-mode run grew about 1 MB a room through
+    fragmentation: 40 Worlds built, rendered and closed in a loop held 205 -> 252 MB without it,
+    205 -> 205 MB with it). Elsewhere than glibc only the collection is done."""
+    gc.collect()
+    if _LIBC is not None:
+        _LIBC.malloc_trim(0)
+
+
+def _load_libc() -> ctypes.CDLL | None:
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.malloc_trim.argtypes = [ctypes.c_size_t]
+        return libc
+    except (OSError, AttributeError):
+        return None
+
+
+_LIBC = _load_libc()
+
+
+# =========================================================================== configuration
+@dataclass(frozen=True)
+class LearnConfig:
+    """What to learn from and how (``learn``).
+
+    ``kb_path`` is the evidence store, created or resumed; ``alpha`` defaults to the store's.
+    ``max_examinations`` stops the call after that many new examinations (run it again to go
+    on). ``room_budget_s`` limits the simulated seconds spent in each room (None: every room to
+    completion, Figure 2 as published). ``spec`` and ``time_model`` are the robot's.
+    """
+
+    style: str
+    rooms: int
+    kb_path: str | Path
+    strategy: str = "hif"
+    perception: str = "camera"
+    alpha: float | None = None
+    seed: int = 0
+    record: str | Path | None = None
+    max_examinations: int | None = None
+    progress: bool = True
+    room_budget_s: float | None = None
+    spec: RobotSpec = field(default_factory=RobotSpec)
+    time_model: TimeModel = field(default_factory=TimeModel)
+
+    def checked(self, own_perception: bool = False) -> LearnConfig:
+        """The configuration with the budget as a float; a one-line error for bad values
+        (``own_perception``: ``perception`` names the caller's own, any name goes)."""
+        if self.rooms < 0:
+            raise CtxsearchError(f"rooms must be >= 0, got {self.rooms}")
+        if self.max_examinations is not None and self.max_examinations < 0:
+            raise CtxsearchError(f"max_examinations must be >= 0, got {self.max_examinations}")
+        budget = self.room_budget_s
+        if budget is not None:
+            try:
+                budget = float(budget)
+            except (TypeError, ValueError):
+                raise CtxsearchError(
+                    f"room budget must be a number of seconds, got {budget!r}"
+                ) from None
+            if not (math.isfinite(budget) and budget > 0):
+                raise CtxsearchError(
+                    f"room budget must be a positive number of seconds, got {budget}"
+                )
+        if not own_perception and self.perception not in PERCEPTION_MODES:
+            raise CtxsearchError(
+                f"unknown perception mode '{self.perception}' "
+                f"(known: {', '.join(PERCEPTION_MODES)})"
+            )
+        return replace(self, room_budget_s=budget)
+
+    def limit_reached(self, examinations: int) -> bool:
+        """Whether ``examinations`` new examinations end the call."""
+        return self.max_examinations is not None and examinations >= self.max_examinations
+
+
+@dataclass
+class Summary:
+    """What a ``learn`` call did and what the knowledge base holds at its end."""
+
+    run: str
+    rooms: int = 0  # rooms of the run done (the call's rooms, up to where it stopped)
+    rooms_done_now: int = 0
+    examinations: int = 0  # made by this call (replayed ones not counted)
+    total_examinations: int = 0  # in the store
+    types_seen: int = 0  # types with n > 0
+    mean_width: float = 0.0
+    wall_s: float = 0.0
+    sim_s: float = 0.0  # simulated seconds of this call (replayed motions not counted)
+    interrupted: bool = False
+    files: list[Path] = field(default_factory=list)  # recordings written
+    room_budget_s: float | None = None  # simulated seconds per room (None: no limit)
+    rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
+
+    @property
+    def exams_per_wall_s(self) -> float:
+        """Examinations per wall-clock second of this call."""
+        return self.examinations / self.wall_s if self.wall_s > 0 else 0.0
+
+    def lines(self) -> list[str]:
+        """Human-readable summary lines."""
+        return [
+            f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
+            f"examinations: {self.examinations} now, {self.total_examinations} in the store",
+            f"types seen: {self.types_seen}; mean interval width: {self.mean_width:.4f}",
+            f"time: {self.wall_s:.1f} s wall, {self.sim_s:.1f} s simulated; "
+            f"{self.exams_per_wall_s:.1f} examinations per wall second",
+        ] + (
+            [
+                f"room budget: {self.room_budget_s:g} s simulated per room; the budget ended "
+                f"{self.rooms_left_early} of the {self.rooms_done_now} rooms done in this call"
+            ]
+            if self.room_budget_s is not None
+            else []
+        )
+
+
+# =========================================================================== learn
+def learn(
+    config: LearnConfig,
+    *,
+    catalog: Catalog | None = None,
+    layouts: LayoutFn | None = None,
+    on_examination: ExamCallback | None = None,
+    on_choice: ChoiceCallback | None = None,
+    perceive: PerceptionFactory | None = None,
+) -> Summary:
+    """Run learn-spatial-contexts (Figure 2) over ``config.rooms`` rooms of ``config.style``.
+
+    ``layouts`` replaces the room generator (tests); ``on_examination(result, kb)`` is called
+    after every examination, replayed ones included, and ``on_choice(kb, choice)`` after every
+    choice, before the examination (benchmarks). ``perceive(layout, catalog, spec, time_model,
+    rgb)`` gives the robot's agent.interfaces ``Perception`` in a room, for a perception of one's
+    own (``config.perception`` is then only its name in the run key). Ctrl-C ends the call at once (the examination
+    in flight is lost) with ``Summary.interrupted`` set.
+
+    The run clock (``sim_time`` in the store) runs on from room to room. A room done in an
+    earlier call resumes the clock from the end time the store recorded for it, a replayed room
+    takes its clock from its stored examinations, so a resumed run's clock equals an
+    uninterrupted one's (agent.resume).
+    """
+    config = config.checked(own_perception=perceive is not None)
+    strategy = strat.make_strategy(config.strategy)
+    catalog = catalog or load_catalog()
+    style = config.style
+    if layouts is None:
+        style, layouts = style_layouts(style, catalog)
+    rid = run_id(config.strategy, config.perception, config.seed, config.room_budget_s)
+    t_wall = time.perf_counter()
+    summary = Summary(rid, room_budget_s=config.room_budget_s)
+    store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
+    with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
+        kb = KnowledgeBase(catalog, store.alpha)
+        history = RunHistory.load(store, rid, style, kb, strategy)
+        run = Run(catalog, kb, store, strategy, config.perception, style, config.seed, rid,
+                  config.spec, config.time_model, room_budget_s=config.room_budget_s,
+                  on_choice=on_choice, perceive=perceive)  # fmt: skip
+        rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
+        try:
+            if rooms.learn(config):
+                history.release(kb, strategy)
+        except KeyboardInterrupt:
+            summary.interrupted = True
+        summary.total_examinations = store.examinations_count()
+        summary.types_seen = sum(1 for t in catalog.type_names if kb.n(t) > 0)
+        summary.mean_width = kb.mean_width()
+        summary.files = list(log.files)
+    summary.wall_s = time.perf_counter() - t_wall
+    return summary
+
+
+def _progress(config: LearnConfig, style: str):
+    """The progress bar over the rooms, or a context giving None."""
+    if not config.progress:
+        return nullcontext(None)
+    return tqdm(total=config.rooms, unit="room", desc=f"learn {style}", dynamic_ncols=True)
+
+
+@dataclass
+class _Rooms:
+    """The rooms of one call, in order (``learn``)."""
+
+    run: Run
+    log: RunLog
+    history: RunHistory
+    layouts: LayoutFn
+    summary: Summary
+    bar: tqdm | None
+    on_examination: ExamCallback | None
+    _last_post: float = 0.0
+
+    def learn(self, config: LearnConfig) -> bool:
+        """Go through rooms 0 .. rooms-1 (seeds made one at a time); True when all were gone
+        through, False when ``max_examinations`` stopped the call."""
+        run, summary = self.run, self.summary
+        for i in range(config.rooms):
+            s = room_seed(config.seed, i)
+            if self.history.is_done(s):
+                run.clock_offset = self.history.done_clock(run.store, run.run, run.style, s,
+                                                           run.clock_offset)  # fmt: skip
+                summary.rooms += 1
+                self._advance(run.clock_offset)
+                continue
+            if config.limit_reached(summary.examinations):
+                return False
+            if not self.room(config, i, s):
+                return False
+        return True
+
+    def room(self, config: LearnConfig, index: int, seed: int) -> bool:
+        """Learn in room ``index`` (a replay first, if it is in progress); False when the call's
+        examination limit stopped it before the room was done."""
+        run, store, summary = self.run, self.run.store, self.summary
+        L = RoomLearner(run, self.log, self.layouts(index, seed), index, self.history.replay(seed))
+        try:
+            if store.room_status(run.run, run.style, seed) is None:
+                store.mark_room(run.run, run.style, seed, ROOM_STARTED)
+            self.log.start_room(L)
+            stopped = False
+            for res in L.run_room():
+                self._examined(L, res)
+                if not res.replayed and config.limit_reached(summary.examinations):
+                    stopped = True
+                    break
+            self.log.end_room(L, L.n_room)
+        finally:
+            L.close()
+            release_memory()
+        run.sim_new += L.clock - L.new_since
+        summary.sim_s = run.sim_new
+        if stopped:
+            return False
+        store.mark_room(run.run, run.style, seed, ROOM_DONE, end_time=L.clock)
+        run.clock_offset = L.clock
+        summary.rooms += 1
+        summary.rooms_done_now += 1
+        summary.rooms_left_early += int(L.left_early)
+        self._advance(run.clock_offset)
+        return True
+
+    def _examined(self, L: RoomLearner, res: ExamResult) -> None:
+        """Log, count and report one examination."""
+        self.log.examination(L, res)
+        if not res.replayed:
+            self.summary.examinations += 1
+            self.summary.sim_s = self.run.sim_new + (L.clock - L.new_since)
+        if self.on_examination is not None:
+            self.on_examination(res, self.run.kb)
+        if self.bar is not None and time.perf_counter() - self._last_post > 0.2:
+            self._last_post = time.perf_counter()
+            self.bar.set_postfix_str(
+                f"exams {self.run.examinations}, sim {res.sim_time:.0f} s", refresh=True
+            )
+
+    def _advance(self, clock: float) -> None:
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix_str(
+                f"exams {self.run.examinations}, sim {clock:.0f} s", refresh=True
+            )

@@ -1,0 +1,92 @@
+"""The state a learning run carries from room to room, and the records its rooms produce.
+
+Shared by the per-room procedure (agent.acquisition), its recording (agent.learn_log), resume
+(agent.resume) and the multi-room run (agent.learning), so none of them imports another.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.interfaces import Perception
+from agent.perception_modes import make_perception
+from agent.strategies import Choice, Strategy
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec, TimeModel
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog
+from knowledge.geometry import ObjectInstance
+from knowledge.store import EvidenceStore
+
+ROOM_DONE = "done"
+ROOM_STARTED = "started"
+
+ChoiceCallback = Callable[[KnowledgeBase, Choice], None]
+# (layout, catalog, spec, time model, render RGB) -> the robot's perception in that room
+PerceptionFactory = Callable[[RoomLayout, Catalog, RobotSpec, TimeModel, bool], Perception]
+
+
+def room_rng(seed: int, index: int) -> np.random.Generator:
+    """The strategy's rng for room ``index`` (fresh per room, so a replayed room draws the same)."""
+    return np.random.default_rng([int(seed), int(index), 0x51])
+
+
+@dataclass(frozen=True)
+class StoredExam:
+    """An examination read back from the store: the object, its type and the related rows."""
+
+    object_id: int
+    ref_type: str
+    related: tuple[tuple[str, str, int], ...]  # (relation, type, related object id)
+    sim_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class ExamResult:
+    """One examination as the loop made it (what callbacks and the recorder get)."""
+
+    index: int  # examinations so far in this run, this one included
+    room_index: int
+    room_seed: int
+    choice: Choice
+    related: tuple[tuple[str, ObjectInstance], ...]
+    gazes: int
+    sim_time: float  # run clock after the examination
+    replayed: bool = False
+
+    @property
+    def pairs(self) -> set[tuple[str, str]]:
+        """RELATED-TYPES: the distinct (relation, type) pairs."""
+        return {(r, o.type) for r, o in self.related}
+
+
+@dataclass
+class Run:
+    """Run-level state shared by the rooms: knowledge, store, strategy, robot, clock."""
+
+    catalog: Catalog
+    kb: KnowledgeBase
+    store: EvidenceStore
+    strategy: Strategy
+    perception: str  # the perception mode's name (agent.perception_modes, or the user's)
+    style: str
+    seed: int
+    run: str  # the store's run key
+    spec: RobotSpec = field(default_factory=RobotSpec)
+    time_model: TimeModel = field(default_factory=TimeModel)
+    clock_offset: float = 0.0  # the run clock when the current room started
+    examinations: int = 0  # made in this run so far (replayed ones included)
+    sim_new: float = 0.0  # simulated seconds of new (not replayed) work in this call
+    room_budget_s: float | None = None  # simulated seconds per room (None: each to completion)
+    on_choice: ChoiceCallback | None = None  # before each examination
+    perceive: PerceptionFactory | None = None  # None: the mode ``perception`` names
+
+    def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
+        """The robot's perception (and body) in the room ``layout``."""
+        if self.perceive is not None:
+            return self.perceive(layout, self.catalog, self.spec, self.time_model, rgb)
+        return make_perception(self.perception, layout, self.catalog, self.spec,
+                               self.time_model, rgb=rgb)  # fmt: skip
