@@ -40,7 +40,8 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
-from envs.houses import generate_layout, resolve_style
+from envs.floorplan import generate_layout
+from envs.houses import resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase

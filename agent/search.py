@@ -204,18 +204,30 @@ class _PathMeter(WrappedBody):
 
 @dataclass(frozen=True)
 class RoomMaps:
-    """Maps of a room built once and shared by the policies run in it: the occupancy grid and
-    the seen map's lattice (each policy gets a copy of the seen map)."""
+    """What the robot is given of a room before it searches it, built once and shared by the
+    policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy)
+    and the furniture poses the location constraint may assume."""
 
     grid: OccupancyGrid
     seen: ss.SeenMap
+    furniture: tuple[ObjectInstance, ...] = ()
+
+    @classmethod
+    def given(cls, layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> RoomMaps:
+        """The ``given`` map scenario: the maps of the true layout (walls, furniture poses).
+        This, the simulated sensor and the oracle policies are the only places a search reads
+        the true layout."""
+        furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
+        grid = OccupancyGrid.from_layout(layout, spec)
+        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture)
 
 
 class SearchContext:
     """One policy's run of one episode on a built world: the body (an agent.interfaces ``Body``,
     e.g. an envs.world.World), the map, what has been seen, what is known, the clock, the trace
-    and the recording. ``maps`` defaults to the maps of ``layout``; images are read by the
-    simulated detector (agent.perception) against the layout's poses."""
+    and the recording. ``maps`` defaults to ``RoomMaps.given(layout, ...)``; ``truth`` (the true
+    layout) is read only by the simulated detector (agent.perception), which renders what the
+    body's images show against the layout's poses, and by the oracle policies."""
 
     def __init__(
         self,
@@ -229,11 +241,12 @@ class SearchContext:
         recorder: Recorder | None = None,
         policy: str = "?",
     ):
-        self.episode, self.layout, self.catalog = episode, layout, catalog
+        self.episode, self.truth, self.catalog = episode, layout, catalog
         self.spec: RobotSpec = body.spec
         self.time_model: TimeModel = body.time_model
         self.body = _PathMeter(body)
-        self.grid = maps.grid if maps else OccupancyGrid.from_layout(layout, self.spec)
+        self.maps = maps or RoomMaps.given(layout, catalog, self.spec)
+        self.grid = self.maps.grid
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = policy
@@ -242,7 +255,7 @@ class SearchContext:
         self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: detect(
             frame, objs, catalog
         )
-        self.seen = maps.seen.copy() if maps else ss.SeenMap.for_room(layout, catalog)
+        self.seen = self.maps.seen.copy()
         self.target = episode.target
         catalog.type(self.target)
         self.target_range = ss.effective_range(
@@ -280,8 +293,8 @@ class SearchContext:
         return r
 
     def furniture_map(self) -> list[ObjectInstance]:
-        """The map the location constraint may assume: the poses of the room's furniture."""
-        return [o for o in self.layout.objects if self.catalog.type(o.type).is_furniture]
+        """The map the location constraint may assume: the furniture poses of ``maps``."""
+        return list(self.maps.furniture)
 
     def note(self, msg: str) -> None:
         """A line in the result's log and the recording's text log."""
@@ -723,7 +736,7 @@ class Oracle(SearchPolicy):
     def search(self, ctx: SearchContext) -> None:
         tm, spec = ctx.time_model, ctx.spec
         tried: set[tuple[int, str]] = set()
-        instances = list(ctx.layout.of_type(ctx.target))
+        instances = list(ctx.truth.of_type(ctx.target))  # the oracle reads the truth
         while True:
             ctx.check()
             pose = ctx.body.pose()

@@ -186,8 +186,7 @@ class RoomArena(composer.Arena):
         Kept cheap: every wall run between two openings is one box, the ceiling is one box,
         and the per-room lights are few (see ``MAX_LIGHTS``)."""
         hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, WALL_THICKNESS
-        root = self._mjcf_root
-        wb = root.worldbody
+        wb = self._mjcf_root.worldbody
         # The rooms' floors cover the whole plan (under the walls too); the base floor is not
         # needed: shrunk out of sight (drawing a plane costs in proportion to its area).
         self._floor.size = [0.01, 0.01, 0.1]
@@ -207,62 +206,8 @@ class RoomArena(composer.Arena):
                     group=group,
                 )
             )
-        materials: dict[str, mjcf.Element] = {}
-        for room in layout.rooms:
-            if room.style not in materials:
-                rgb = _room_floor_rgb(room.style)
-                k = len(materials)
-                tex = root.asset.add(
-                    "texture",
-                    name=f"house_floor{k}",
-                    type="2d",
-                    builtin="checker",
-                    width=64,
-                    height=64,
-                    rgb1=rgb,
-                    rgb2=[0.92 * c for c in rgb],
-                    mark="edge",
-                    markrgb=[0.8 * c for c in rgb],
-                )
-                mat = root.asset.add(
-                    "material",
-                    name=f"house_floor{k}",
-                    texture=tex,
-                    texrepeat=[1, 1],
-                    texuniform=True,
-                    reflectance=0.0,
-                    specular=0.1,
-                )
-                self._shell += [tex, mat]
-                materials[room.style] = mat
-            x0, y0, x1, y1 = _floor_rect(room.outline, hw, hd, t)
-            self._shell.append(
-                wb.add(
-                    "geom",
-                    name=f"floor_room{room.index}",
-                    type="plane",
-                    pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0],
-                    size=[(x1 - x0) / 2, (y1 - y0) / 2, 0.1],
-                    material=materials[room.style],
-                    group=ROOM_GEOM_GROUP,
-                )
-            )
-        largest = sorted(layout.rooms, key=lambda r: -r.area)[: MAX_LIGHTS - len(self._lights)]
-        for room in sorted(largest, key=lambda r: r.index):
-            cx, cy = room.center
-            self._shell.append(
-                wb.add(
-                    "light",
-                    name=f"room_light{room.index}",
-                    directional=False,
-                    castshadow=False,
-                    pos=[cx, cy, h - 0.3],
-                    dir=[0, 0, -1],
-                    diffuse=[0.12] * 3,
-                    specular=[0.0] * 3,
-                    attenuation=[1.0, 0.05, 0.0],
-                )
-            )
+        self._add_room_floors(layout, hw, hd, t)
+        self._add_room_lights(layout, h)
         self._shell.append(
             wb.add(
                 "geom",
@@ -274,6 +219,72 @@ class RoomArena(composer.Arena):
                 group=OVERHEAD_GEOM_GROUP,
             )
         )
+
+    def _floor_material(self, style: str, k: int) -> mjcf.Element:
+        """A checker floor material in the colour of room style ``style`` (the k-th one)."""
+        root = self._mjcf_root
+        rgb = _room_floor_rgb(style)
+        tex = root.asset.add(
+            "texture",
+            name=f"house_floor{k}",
+            type="2d",
+            builtin="checker",
+            width=64,
+            height=64,
+            rgb1=rgb,
+            rgb2=[0.92 * c for c in rgb],
+            mark="edge",
+            markrgb=[0.8 * c for c in rgb],
+        )
+        mat = root.asset.add(
+            "material",
+            name=f"house_floor{k}",
+            texture=tex,
+            texrepeat=[1, 1],
+            texuniform=True,
+            reflectance=0.0,
+            specular=0.1,
+        )
+        self._shell += [tex, mat]
+        return mat
+
+    def _add_room_floors(self, layout: RoomLayout, hw: float, hd: float, t: float) -> None:
+        """One floor plane per room, one material per room style."""
+        materials: dict[str, mjcf.Element] = {}
+        for room in layout.rooms:
+            if room.style not in materials:
+                materials[room.style] = self._floor_material(room.style, len(materials))
+            x0, y0, x1, y1 = _floor_rect(room.outline, hw, hd, t)
+            self._shell.append(
+                self._mjcf_root.worldbody.add(
+                    "geom",
+                    name=f"floor_room{room.index}",
+                    type="plane",
+                    pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0],
+                    size=[(x1 - x0) / 2, (y1 - y0) / 2, 0.1],
+                    material=materials[room.style],
+                    group=ROOM_GEOM_GROUP,
+                )
+            )
+
+    def _add_room_lights(self, layout: RoomLayout, h: float) -> None:
+        """A dim light over each of the largest rooms (at most ``MAX_LIGHTS`` lights in all)."""
+        largest = sorted(layout.rooms, key=lambda r: -r.area)[: MAX_LIGHTS - len(self._lights)]
+        for room in sorted(largest, key=lambda r: r.index):
+            cx, cy = room.center
+            self._shell.append(
+                self._mjcf_root.worldbody.add(
+                    "light",
+                    name=f"room_light{room.index}",
+                    directional=False,
+                    castshadow=False,
+                    pos=[cx, cy, h - 0.3],
+                    dir=[0, 0, -1],
+                    diffuse=[0.12] * 3,
+                    specular=[0.0] * 3,
+                    attenuation=[1.0, 0.05, 0.0],
+                )
+            )
 
 
 def _floor_rect(

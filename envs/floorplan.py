@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from envs.houses import CORRIDOR, HouseError, HouseStyle
+from envs.houses import CORRIDOR, HouseError, HouseStyle, WorldStyle
 from envs.layout import Door, Passage, Room, RoomLayout
 from envs.robot_spec import RobotSpec, wrap_angle
 from envs.rooms import RoomShell, generate_room
@@ -582,3 +582,11 @@ def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | No
         seen.add(other)
         walk(other, a0, a1, ref, frozenset({k}))
     return frozenset(seen)
+
+
+def generate_layout(style: WorldStyle, seed: int, catalog: Catalog | None = None) -> RoomLayout:
+    """The world of a room style (``generate_room``) or a house style (``generate_house``), the
+    same for the same (style, seed)."""
+    if isinstance(style, HouseStyle):
+        return generate_house(style, seed, catalog)
+    return generate_room(style, seed, catalog)

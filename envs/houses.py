@@ -14,7 +14,6 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from envs.layout import RoomLayout
 from envs.styles import STYLES_DIR, Style, StyleError, available_styles, load_style
 from knowledge.catalog import ASSETS_DIR, Catalog, load_catalog
 
@@ -113,15 +112,19 @@ def _room_style(path, key: str, catalog: Catalog) -> Style:
     return load_style(p, catalog)
 
 
-def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
-    """Validate a parsed house document; HouseError naming file and field on any problem."""
-    unknown = set(doc) - TOP_FIELDS
+def _unknown(path, given: dict, allowed: set[str], prefix: str = "") -> None:
+    unknown = set(given) - allowed
     if unknown:
         raise HouseError(
             path,
-            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TOP_FIELDS)})",
-            field=sorted(unknown)[0],
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(allowed)})",
+            field=prefix + sorted(unknown)[0],
         )
+
+
+def _header(doc: dict, path) -> tuple[str, str]:
+    """The house style's (name, description)."""
+    _unknown(path, doc, TOP_FIELDS)
     name = doc.get("name", Path(path).stem)
     if not isinstance(name, str) or not name:
         raise HouseError(path, "must be a non-empty string", field="name")
@@ -130,56 +133,50 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
     desc = doc.get("description", "")
     if not isinstance(desc, str):
         raise HouseError(path, "must be a string", field="description")
+    return name, desc
+
+
+def _house_table(doc: dict, path) -> dict:
+    """The validated ``[house]`` table: total, footprint, height, plan, corridor and door widths,
+    entrance (still unchecked against the rooms)."""
     house = doc.get("house")
     if not isinstance(house, dict):
         raise HouseError(path, "missing [house] table (rooms, footprint, plan...)", field="house")
-    unknown = set(house) - HOUSE_FIELDS
-    if unknown:
-        raise HouseError(
-            path,
-            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(HOUSE_FIELDS)})",
-            field=f"house.{sorted(unknown)[0]}",
-        )
+    _unknown(path, house, HOUSE_FIELDS, "house.")
     for req in ("rooms", "footprint"):
         if req not in house:
             raise HouseError(path, "missing", field=f"house.{req}")
-    total = _range(path, "house.rooms", house["rooms"], integer=True, lo_min=1, hi_max=MAX_ROOMS)
-    footprint = _range(
-        path,
-        "house.footprint",
-        house["footprint"],
-        integer=False,
-        lo_min=FOOTPRINT_LIMITS[0],
-        hi_max=FOOTPRINT_LIMITS[1],
-    )
-    height = _range(
-        path, "house.height", house.get("height", [2.6, 2.9]), integer=False, lo_min=2.3, hi_max=5
-    )
-    plan = house.get("plan", "corridor")
-    if plan not in PLANS:
-        raise HouseError(path, f"must be one of {PLANS}, got {plan!r}", field="house.plan")
-    corridor = _range(
-        path,
-        "house.corridor_width",
-        house.get("corridor_width", [1.3, 1.6]),
-        integer=False,
-        lo_min=1.2,
-        hi_max=4.0,
-    )
-    door = _range(
-        path,
-        "house.door_width",
-        house.get("door_width", [0.85, 1.0]),
-        integer=False,
-        lo_min=0.75,
-        hi_max=1.6,
-    )
-    if plan == "corridor" and door[1] > corridor[0] - 0.3:
+
+    def num(key, default, lo, hi):
+        return _range(
+            path, f"house.{key}", house.get(key, default), integer=False, lo_min=lo, hi_max=hi
+        )
+
+    out = {
+        "total": _range(
+            path, "house.rooms", house["rooms"], integer=True, lo_min=1, hi_max=MAX_ROOMS
+        ),
+        "footprint": num("footprint", None, *FOOTPRINT_LIMITS),
+        "height": num("height", [2.6, 2.9], 2.3, 5),
+        "plan": house.get("plan", "corridor"),
+        "corridor_width": num("corridor_width", [1.3, 1.6], 1.2, 4.0),
+        "door_width": num("door_width", [0.85, 1.0], 0.75, 1.6),
+        "entrance": house.get("entrance"),
+    }
+    if out["plan"] not in PLANS:
+        raise HouseError(path, f"must be one of {PLANS}, got {out['plan']!r}", field="house.plan")
+    door, corridor = out["door_width"], out["corridor_width"]
+    if out["plan"] == "corridor" and door[1] > corridor[0] - 0.3:
         raise HouseError(
             path,
             f"a {door[1]} m entrance does not fit the end of a {corridor[0]} m corridor",
             field="house.door_width",
         )
+    return out
+
+
+def _rooms(doc: dict, path, catalog: Catalog) -> list[tuple[Style, tuple[int, int]]]:
+    """The ``[rooms]`` table: (room style, [min, max] count) in file order."""
     raw = doc.get("rooms")
     if not isinstance(raw, dict) or not raw:
         raise HouseError(path, "must be a table of room_style = [min, max]", field="rooms")
@@ -187,6 +184,12 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
     for key, val in raw.items():
         count = _range(path, f"rooms.{key}", val, integer=True, lo_min=0, hi_max=MAX_ROOMS)
         rooms.append((_room_style(path, key, catalog), count))
+    return rooms
+
+
+def _check_consistent(path, house: dict, rooms: list[tuple[Style, tuple[int, int]]]) -> None:
+    """The room counts, the entrance and the footprint agree with each other."""
+    total, entrance = house["total"], house["entrance"]
     lo = sum(c[0] for _, c in rooms)
     hi = sum(c[1] for _, c in rooms)
     if lo > total[1] or hi < total[0]:
@@ -195,9 +198,8 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
             f"the room counts give {lo}..{hi} rooms, outside house.rooms {list(total)}",
             field="rooms",
         )
-    if plan == "open" and total[0] < 1:
+    if house["plan"] == "open" and total[0] < 1:
         raise HouseError(path, "an open plan needs at least one room", field="house.rooms")
-    entrance = house.get("entrance")
     names = [s.name for s, _ in rooms]
     if entrance is not None:
         if entrance not in names:
@@ -211,26 +213,22 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
                 field="house.entrance",
             )
     smallest = sum(c[0] * s.width[0] * s.depth[0] for s, c in rooms)
-    if smallest * 0.7 > footprint[1]:
+    if smallest * 0.7 > house["footprint"][1]:
         raise HouseError(
             path,
             f"the fewest rooms need about {smallest:.0f} m^2, the footprint allows "
-            f"{footprint[1]:.0f} m^2",
+            f"{house['footprint'][1]:.0f} m^2",
             field="house.footprint",
         )
-    return HouseStyle(
-        name=name,
-        path=str(path),
-        description=desc,
-        rooms=tuple(rooms),
-        total=total,
-        footprint=footprint,
-        height=height,
-        plan=plan,
-        corridor_width=corridor,
-        door_width=door,
-        entrance=entrance,
-    )
+
+
+def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
+    """Validate a parsed house document; HouseError naming file and field on any problem."""
+    name, desc = _header(doc, path)
+    house = _house_table(doc, path)
+    rooms = _rooms(doc, path, catalog)
+    _check_consistent(path, house, rooms)
+    return HouseStyle(name=name, path=str(path), description=desc, rooms=tuple(rooms), **house)
 
 
 def _read(path: Path, cls: type[StyleError]) -> dict:
@@ -291,15 +289,3 @@ def resolve_style(path_or_name: str | Path, catalog: Catalog | None = None) -> W
     if isinstance(doc, dict) and "house" in doc:
         return parse_house(doc, path, catalog)
     return load_style(path, catalog)
-
-
-def generate_layout(style: WorldStyle, seed: int, catalog: Catalog | None = None) -> RoomLayout:
-    """The world of a room style (``generate_room``) or a house style (``generate_house``), the
-    same for the same (style, seed)."""
-    if isinstance(style, HouseStyle):
-        from envs.floorplan import generate_house
-
-        return generate_house(style, seed, catalog)
-    from envs.rooms import generate_room
-
-    return generate_room(style, seed, catalog)

@@ -18,7 +18,8 @@ from dm_control import composer, mjcf
 
 from envs.arena import PHYSICS_TIMESTEP, RoomArena
 from envs.entities import RoomObjects
-from envs.houses import generate_layout, resolve_style
+from envs.floorplan import generate_layout
+from envs.houses import resolve_style
 from envs.layout import RoomLayout
 from envs.robot import Robot
 from envs.robot_spec import RobotPose, RobotSpec

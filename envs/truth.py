@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from envs.houses import HouseStyle, generate_layout, resolve_style
+from envs.floorplan import generate_layout
+from envs.houses import HouseStyle, resolve_style
 from envs.layout import RoomLayout
 from envs.styles import Style
 from knowledge.catalog import Catalog, load_catalog

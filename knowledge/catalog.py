@@ -313,6 +313,101 @@ def _parse_relation(path: Path, tname: str, raw: object, size_lo, size_hi) -> Re
     return spec
 
 
+def _type_name(path: Path, i: int, raw: object, seen: set[str]) -> str:
+    """The i-th type table's name, checked (capitalised word, not seen before)."""
+    name = raw.get("name") if isinstance(raw, dict) else None
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise CatalogError(
+            path, f"type #{i + 1}: name must be a capitalised word, got {name!r}", field="name"
+        )
+    if name in seen:
+        raise CatalogError(path, "duplicate type name", type_name=name, field="name")
+    return name
+
+
+def _type_fields(path: Path, name: str, raw: dict) -> None:
+    """No unknown field, every required one there, kind and shape known."""
+    unknown = set(raw) - TYPE_FIELDS
+    if unknown:
+        raise CatalogError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TYPE_FIELDS)})",
+            type_name=name,
+            field=sorted(unknown)[0],
+        )
+    for req in ("kind", "shape", "size", "color", "min_pixels", "max_range"):
+        if req not in raw:
+            raise CatalogError(path, "missing", type_name=name, field=req)
+    if raw["kind"] not in KINDS:
+        raise CatalogError(
+            path, f"must be one of {KINDS}, got {raw['kind']!r}", type_name=name, field="kind"
+        )
+    if raw["shape"] not in SHAPES:
+        raise CatalogError(
+            path, f"must be one of {SHAPES}, got {raw['shape']!r}", type_name=name, field="shape"
+        )
+
+
+def _detectability(path: Path, name: str, raw: dict) -> tuple[int, float]:
+    """(min_pixels, max_range), each finite and in range."""
+    mp, mr = raw["min_pixels"], raw["max_range"]
+    if not isinstance(mp, int) or isinstance(mp, bool) or not 1 <= mp <= MAX_PIXELS:
+        raise CatalogError(
+            path,
+            f"must be an integer in [1, {MAX_PIXELS}], got {mp!r}",
+            type_name=name,
+            field="min_pixels",
+        )
+    if not _is_number(mr, MAX_RANGE) or mr <= 0:
+        raise CatalogError(
+            path,
+            f"must be a positive number of metres up to {MAX_RANGE:g}, got {mr!r}",
+            type_name=name,
+            field="max_range",
+        )
+    return mp, float(mr)
+
+
+def _relations(path: Path, name: str, raw: dict, size_lo, size_hi) -> tuple[RelationSpec, ...]:
+    """The type's [[type.relation]] tables, each validated, no name twice."""
+    raw_rels = raw.get("relation", [])
+    if not isinstance(raw_rels, list):
+        raise CatalogError(
+            path, "must be an array of tables [[type.relation]]", type_name=name, field="relation"
+        )
+    rels = [_parse_relation(path, name, r, size_lo, size_hi) for r in raw_rels]
+    names = [r.name for r in rels]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise CatalogError(
+            path, f"duplicate relation '{dup}'", type_name=name, field="relation.name"
+        )
+    return tuple(rels)
+
+
+def _parse_type(path: Path, name: str, raw: dict) -> ObjectType:
+    """One validated [[type]] table."""
+    _type_fields(path, name, raw)
+    size_lo, size_hi = _parse_size(path, name, raw["size"])
+    color = _vec3(path, name, "color", raw["color"], 1.0)
+    if not all(0.0 <= c <= 1.0 for c in color):
+        raise CatalogError(
+            path, f"components must be in [0, 1], got {list(color)}", type_name=name, field="color"
+        )
+    mp, mr = _detectability(path, name, raw)
+    return ObjectType(
+        name=name,
+        kind=raw["kind"],
+        shape=raw["shape"],
+        size_min=size_lo,
+        size_max=size_hi,
+        color=color,
+        min_pixels=mp,
+        max_range=mr,
+        relations=_relations(path, name, raw, size_lo, size_hi),
+    )
+
+
 def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
     """Validate a parsed TOML document and build a Catalog; CatalogError on any problem."""
     path = Path(path) if not isinstance(path, Path) else path
@@ -325,88 +420,9 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
     types: list[ObjectType] = []
     seen: set[str] = set()
     for i, raw in enumerate(raw_types):
-        name = raw.get("name") if isinstance(raw, dict) else None
-        if not isinstance(name, str) or not _NAME_RE.match(name):
-            raise CatalogError(
-                path, f"type #{i + 1}: name must be a capitalised word, got {name!r}", field="name"
-            )
-        if name in seen:
-            raise CatalogError(path, "duplicate type name", type_name=name, field="name")
+        name = _type_name(path, i, raw, seen)
         seen.add(name)
-        unknown = set(raw) - TYPE_FIELDS
-        if unknown:
-            raise CatalogError(
-                path,
-                f"unknown field(s) {sorted(unknown)} (allowed: {sorted(TYPE_FIELDS)})",
-                type_name=name,
-                field=sorted(unknown)[0],
-            )
-        for req in ("kind", "shape", "size", "color", "min_pixels", "max_range"):
-            if req not in raw:
-                raise CatalogError(path, "missing", type_name=name, field=req)
-        if raw["kind"] not in KINDS:
-            raise CatalogError(
-                path, f"must be one of {KINDS}, got {raw['kind']!r}", type_name=name, field="kind"
-            )
-        if raw["shape"] not in SHAPES:
-            raise CatalogError(
-                path,
-                f"must be one of {SHAPES}, got {raw['shape']!r}",
-                type_name=name,
-                field="shape",
-            )
-        size_lo, size_hi = _parse_size(path, name, raw["size"])
-        color = _vec3(path, name, "color", raw["color"], 1.0)
-        if not all(0.0 <= c <= 1.0 for c in color):
-            raise CatalogError(
-                path,
-                f"components must be in [0, 1], got {list(color)}",
-                type_name=name,
-                field="color",
-            )
-        mp, mr = raw["min_pixels"], raw["max_range"]
-        if not isinstance(mp, int) or isinstance(mp, bool) or not 1 <= mp <= MAX_PIXELS:
-            raise CatalogError(
-                path,
-                f"must be an integer in [1, {MAX_PIXELS}], got {mp!r}",
-                type_name=name,
-                field="min_pixels",
-            )
-        if not _is_number(mr, MAX_RANGE) or mr <= 0:
-            raise CatalogError(
-                path,
-                f"must be a positive number of metres up to {MAX_RANGE:g}, got {mr!r}",
-                type_name=name,
-                field="max_range",
-            )
-        raw_rels = raw.get("relation", [])
-        if not isinstance(raw_rels, list):
-            raise CatalogError(
-                path,
-                "must be an array of tables [[type.relation]]",
-                type_name=name,
-                field="relation",
-            )
-        rels = [_parse_relation(path, name, r, size_lo, size_hi) for r in raw_rels]
-        names = [r.name for r in rels]
-        if len(set(names)) != len(names):
-            dup = next(n for n in names if names.count(n) > 1)
-            raise CatalogError(
-                path, f"duplicate relation '{dup}'", type_name=name, field="relation.name"
-            )
-        types.append(
-            ObjectType(
-                name=name,
-                kind=raw["kind"],
-                shape=raw["shape"],
-                size_min=size_lo,
-                size_max=size_hi,
-                color=color,
-                min_pixels=mp,
-                max_range=float(mr),
-                relations=tuple(rels),
-            )
-        )
+        types.append(_parse_type(path, name, raw))
     hierarchy = parse_hierarchy(doc.get("class"), {t.name: t.relation_names for t in types}, path)
     return Catalog(types=tuple(types), path=str(path), hierarchy=hierarchy)
 

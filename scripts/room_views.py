@@ -16,8 +16,8 @@ from agent.perception import detect
 from agent.recording import Recorder
 from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
-from envs.floorplan import layout_dict
-from envs.houses import generate_layout, resolve_style
+from envs.floorplan import generate_layout, layout_dict
+from envs.houses import resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose
 from envs.world import World

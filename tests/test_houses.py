@@ -14,6 +14,7 @@ from agent.navigation import OccupancyGrid
 from envs.floorplan import (
     _shared_edge,
     generate_house,
+    generate_layout,
     layout_dict,
     room_at,
     wall_boxes,
@@ -24,7 +25,6 @@ from envs.houses import (
     HouseError,
     HouseStyle,
     available_houses,
-    generate_layout,
     load_house,
     resolve_style,
 )

@@ -31,7 +31,8 @@ from dm_control import mjcf
 from matplotlib.figure import Figure
 
 from agent.perception import detect
-from envs.houses import generate_layout, resolve_style
+from envs.floorplan import generate_layout
+from envs.houses import resolve_style
 from envs.layout import RoomLayout
 from envs.task import RoomTask, start_pose
 from envs.world import World, gl_renderer

@@ -24,7 +24,8 @@ from agent import search as S
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid
 from agent.recording import Recorder
-from envs.houses import WorldStyle, generate_layout, resolve_style
+from envs.floorplan import generate_layout
+from envs.houses import WorldStyle, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
 from envs.world import World
@@ -165,8 +166,7 @@ class EpisodeRoom:
     layout: RoomLayout
     catalog: Catalog
     world: World
-    grid: OccupancyGrid
-    seen: ss.SeenMap
+    maps: S.RoomMaps  # the given map scenario
 
 
 def run_policy(
@@ -177,7 +177,7 @@ def run_policy(
     rec_path: Path | None = None,
 ) -> S.SearchResult:
     """Policy ``name`` searches episode ``ep`` in ``room`` (a rerun recording to ``rec_path``)."""
-    layout, catalog, world, grid, seen = room.layout, room.catalog, room.world, room.grid, room.seen
+    layout, catalog, world = room.layout, room.catalog, room.world
     base, _ = split_name(name)
     with Recorder(rec_path) as rec:
         rec.log_room(layout, catalog)
@@ -187,7 +187,7 @@ def run_policy(
             layout,
             catalog,
             world,
-            maps=S.RoomMaps(grid, seen),
+            maps=room.maps,
             probs=probs,
             recorder=rec,
             policy=name,
@@ -207,9 +207,7 @@ def _search_room(
     """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``."""
     layout = generate_layout(style, ep.room_seed, catalog)
     with World(layout, catalog) as world:
-        grid = OccupancyGrid.from_layout(layout, world.spec)
-        seen = ss.SeenMap.for_room(layout, catalog)
-        room = EpisodeRoom(layout, catalog, world, grid, seen)
+        room = EpisodeRoom(layout, catalog, world, S.RoomMaps.given(layout, catalog, world.spec))
         out = []
         for name, probs, rec_path in runs:
             res = run_policy(ep, name, room, probs, rec_path)
