@@ -33,7 +33,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "vs backoff, on paired episodes. Writes DIR/hierarchy.json, DIR/hierarchy.md and "
         "DIR/hierarchy.png.",
     )
-    p.add_argument("--style", default="office", help="room style (default: office)")
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style (assets/styles/): name or TOML path; not a house style (default: office)",
+    )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=20, help="learning rooms (default: 20)"

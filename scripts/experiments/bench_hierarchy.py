@@ -246,10 +246,16 @@ def held_out_errors(
     )
     for t in types:
         out["per_type"][t] = {
-            f"abs_error_{name}": [_mean(tallies[(k, m, t)].err) for k in config.ks]
+            f"{what}_{name}": [_mean(_tally_values(tallies[(k, m, t)], what)) for k in config.ks]
+            for what in ("abs_error", "coverage")
             for m, name in ((0, "flat"), (1, "backoff"))
         }
     return out
+
+
+def _tally_values(t: _Tally, what: str) -> list:
+    """A tally's errors (``abs_error``) or coverage flags (``coverage``)."""
+    return t.err if what == "abs_error" else t.covered
 
 
 def _mean(xs: Sequence[float | bool]) -> float:
@@ -495,6 +501,7 @@ def plot(doc: dict, path: Path) -> None:
         ax2.plot(k, doc[f"coverage_{m}"], style, label=m)
     ax1.set(xlabel="examinations of the held type (k)", ylabel="mean |p0 - p_true|")
     ax2.set(xlabel="examinations of the held type (k)", ylabel="coverage (informative)")
+    ax2.axhline(1 - intervals.DEFAULT_ALPHA, color="grey", ls=":", lw=0.8, label="nominal")
     ax2.set_ylim(0, 1.05)
     ax1.legend()
     ax2.legend()
