@@ -45,6 +45,7 @@ bench: $(STAMP)
 	rm -f build/kb_office.sqlite && mkdir -p build
 	$(VENV)/bin/ctxsearch learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
 	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --out results/search
+	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -72,6 +72,7 @@ from envs.truth import ground_truth, load_truth
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance, relation_volume
+from knowledge.pooling import PooledCounts
 from knowledge.store import EvidenceStore
 
 DEFAULT_BUDGET_S = 300.0
@@ -891,6 +892,13 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
             f"{p}: the knowledge store is empty (no examinations); run ctxsearch learn first"
         )
     return kb, learned
+
+
+def open_pooled(path, catalog: Catalog) -> PooledCounts:
+    """The evidence of the store at ``path`` pooled over the catalog's hierarchy (for the backoff
+    estimate); the store's one-line errors as ``open_knowledge``."""
+    with EvidenceStore.open(Path(path), catalog, read_only=True) as store:
+        return PooledCounts.from_store(store)
 
 
 def _learned_seeds(store) -> set[int]:

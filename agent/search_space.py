@@ -72,14 +72,22 @@ from envs.camera import PinholeCamera, focal_length, frustum_mask
 from envs.layout import RoomLayout
 from envs.parts import world_parts_array
 from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, ObjectType
-from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance, relation_volume
 
-RANK_MODES = ("low", "p0", "high")
-DEFAULT_RANK = "low"  # chosen by measurement: see agent/search.py's docstring
+# The probability sources live in knowledge.ranking (one place); re-exported for the policies.
+from knowledge.ranking import (  # noqa: F401
+    DEFAULT_ESTIMATE,
+    DEFAULT_MIN_EVIDENCE,
+    DEFAULT_RANK,
+    ESTIMATES,
+    RANK_MODES,
+    BackoffProbabilities,
+    KBProbabilities,
+    ProbabilitySource,
+    TableProbabilities,
+)
+
 RANGE_SAFETY = 0.8
 LATTICE_XY = 0.2  # m
 LATTICE_Z = (0.05, 1.85, 0.15)  # first, last, step (m)
@@ -116,94 +124,6 @@ def effective_range(
     mp = min_pixels_at(typ.min_pixels, width, height)
     pixel_range = focal_px(spec, height) * math.sqrt(mean_face_area(typ) / mp) * safety
     return float(min(typ.max_range, pixel_range))
-
-
-# =========================================================================== probabilities
-class ProbabilitySource:
-    """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
-
-    name = "none"
-    kb: KnowledgeBase | None = None  # the evidence behind the numbers, where there is one
-
-    def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
-        """The probability used to rank rel's volume when looking for ``type_name``."""
-        raise NotImplementedError
-
-    def instances(self, type_name: str) -> float | None:
-        """Expected instances of ``type_name`` per room, or None if unknown."""
-        return None
-
-
-class KBProbabilities(ProbabilitySource):
-    """The learned intervals: lower bound, p0 (the Wilson centre) or upper bound, by ``rank``."""
-
-    def __init__(self, kb: KnowledgeBase, rank: str = DEFAULT_RANK, rooms: int | None = None):
-        if rank not in RANK_MODES:
-            raise CtxsearchError(f"unknown rank '{rank}' (known: {', '.join(RANK_MODES)})")
-        self.kb, self.rank, self.rooms = kb, rank, rooms
-        self.name = f"kb-{rank}"
-        self._cache: dict[tuple[str, str], float] = {}
-
-    def instances(self, type_name: str) -> float | None:
-        """n_T / rooms learned in: examined instances per room (None without a room count)."""
-        if not self.rooms:
-            return None
-        return self.kb.n(type_name) / self.rooms
-
-    def p(self, relation: str, type_name: str) -> float:
-        key = (relation, type_name)
-        v = self._cache.get(key)
-        if v is None:
-            if self.rank == "p0":
-                rel = self.kb.catalog.relation(relation)
-                v = float(
-                    intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
-                )
-            else:
-                lo, hi = self.kb.interval(relation, type_name)
-                v = lo if self.rank == "low" else hi
-            self._cache[key] = v
-        return v
-
-
-class TableProbabilities(ProbabilitySource):
-    """Fixed probabilities from a table {(relation, type): p} (ground truth, or a test's)."""
-
-    def __init__(
-        self,
-        table: Mapping[tuple[str, str], float],
-        name: str = "table",
-        per_room: Mapping[str, float] | None = None,
-    ):
-        self.table = {k: float(v) for k, v in table.items()}
-        self.name = name
-        self.per_room = dict(per_room) if per_room is not None else None
-
-    @classmethod
-    def from_truth(cls, doc: Mapping) -> TableProbabilities:
-        """From ``ctxsearch truth``'s JSON document ({"samples", "entries": [{"ref", "relation",
-        "type", "p", "n"}, ...]}); instances per room are n_ref / samples."""
-        entries = doc.get("entries", [])
-        per_room = None
-        if doc.get("samples"):
-            per_room = {
-                e["ref"]: float(e["n"]) / float(doc["samples"])
-                for e in entries
-                if "n" in e and "ref" in e
-            }
-        return cls(
-            {(e["relation"], e["type"]): float(e["p"]) for e in entries},
-            name="truth",
-            per_room=per_room,
-        )
-
-    def p(self, relation: str, type_name: str) -> float:
-        return self.table.get((relation, type_name), 0.0)
-
-    def instances(self, type_name: str) -> float | None:
-        if self.per_room is None:
-            return None
-        return self.per_room.get(type_name, 0.0)
 
 
 # =========================================================================== the seen map

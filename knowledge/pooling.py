@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from knowledge import intervals
-from knowledge.base import IntervalRow
+from knowledge.base import IntervalRow, KnowledgeBase
 from knowledge.catalog import Catalog
 from knowledge.hierarchy import Hierarchy
 from knowledge.store import EvidenceStore
@@ -99,6 +99,31 @@ class PooledCounts:
             store.catalog.hierarchy,
             ((e.type, [(r, t) for r, t, _ in e.related]) for e in store.examinations(run)),
         )
+
+    @classmethod
+    def from_knowledge_base(cls, kb: KnowledgeBase) -> PooledCounts:
+        """Pooled counts of a knowledge base's counts, for concrete related types only (a class
+        on the related side needs the log's 'at least one'). Exact where no type or class has
+        two relations that map onto one relation of its class (true of assets/types.toml;
+        tests/test_hierarchy_search.py checks it): then a class's y for a type B is the sum of
+        its members' y. Used where only counts are at hand (the learning loop's strategies)."""
+        h = kb.catalog.hierarchy
+        out = cls(h)
+        for t in kb.catalog.type_names:
+            n = kb.n(t)
+            if n == 0:
+                continue
+            out.n[t] += n
+            for c in h.ancestors(t):
+                out.n[c] += n
+            for (rel, b), y in kb.nonzero(t).items():
+                owner, child, r = t, None, rel
+                while r is not None and owner is not None:
+                    out.y[(owner, r, b)] += y
+                    if child is not None:
+                        out.via[(owner, child, r, b)] += y
+                    child, owner, r = owner, h.parent(owner), h.lift(r)
+        return out
 
     def interval(
         self, owner: str, relation: str, related: str, alpha: float
@@ -167,8 +192,11 @@ class Backoff:
                 rhos.append(min(1.0, tau2 / (p * (1 - p))))
         return float(np.mean(rhos)) if rhos else None
 
-    def estimate(self, ref_type: str, relation: str, related: str) -> BackoffEstimate:
-        """The backed-off interval of entry (ref_type, relation, related)."""
+    def pseudo_counts(
+        self, ref_type: str, relation: str, related: str
+    ) -> tuple[float, float, float, float | None]:
+        """(y_eff, n_eff, kappa, p_class) of entry (ref_type, relation, related): the type's own
+        counts plus kappa pseudo-examinations at its class's leave-one-out rate."""
         pc, h = self.pooled, self.pooled.hierarchy
         y = pc.y.get((ref_type, relation, related), 0)
         n = pc.n.get(ref_type, 0)
@@ -184,7 +212,11 @@ class Backoff:
                 rho = self.rho(cname)
                 kappa = KAPPA_MAX if rho <= 0 else min(KAPPA_MAX, 1.0 / rho - 1.0)
                 kappa = max(0.0, min(kappa, float(n_rest)))
-        y_eff, n_eff = y + kappa * (p_class or 0.0), n + kappa
+        return y + kappa * (p_class or 0.0), n + kappa, kappa, p_class
+
+    def estimate(self, ref_type: str, relation: str, related: str) -> BackoffEstimate:
+        """The backed-off interval of entry (ref_type, relation, related)."""
+        y_eff, n_eff, kappa, p_class = self.pseudo_counts(ref_type, relation, related)
         lo, hi = intervals.interval(y_eff, n_eff, self.alpha)
         p = y_eff / n_eff if n_eff > 0 else 0.5
         return BackoffEstimate(float(lo), float(hi), float(p), y_eff, n_eff, kappa, p_class)

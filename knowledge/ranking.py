@@ -5,7 +5,8 @@ This is the robot-independent half of object search. Given the objects a robot k
 detections, as ``ObjectInstance``), every known object b and every rel in RELATIONS(type(b))
 give one candidate volume v_rel(b) with probability P(rel(T)), read from a ``ProbabilitySource``:
 the knowledge base's interval (its lower bound, the Wilson centre p0, or the upper bound, by
-``rank``), or a fixed table (ground truth, or a test's). ``candidate_volumes`` returns them best
+``rank``; for reference types with little evidence optionally the class's backoff estimate,
+``BackoffProbabilities``), or a fixed table (ground truth, or a test's). ``candidate_volumes`` returns them best
 first. The simulated robot's search (``agent/search_space.py``) builds its regions from exactly
 these candidates and then adds what only a robot with a map knows: which part of each volume it
 has already seen and how many seconds it costs to look there.
@@ -23,16 +24,25 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import Box, ObjectInstance, relation_volume
+from knowledge.pooling import Backoff, PooledCounts
 
 RANK_MODES = ("low", "p0", "high")
 # The lower bound was best or tied on three stores of different sizes (measured; README, Search).
 DEFAULT_RANK = "low"
+# Where P(rel(T)) comes from: the type's own counts (the paper's, "flat"), or, for reference types
+# with fewer than ``min_evidence`` examinations, their class's backoff (knowledge.pooling).
+ESTIMATES = ("flat", "backoff")
+DEFAULT_ESTIMATE = "flat"
+# Below this many examinations a reference type reads the backoff estimate (bench hierarchy: the
+# backoff's error is below the flat estimate's up to k = 10 examinations; README, Hierarchy).
+DEFAULT_MIN_EVIDENCE = 10
 
 
 class ProbabilitySource:
     """P(rel(T)) for the search: a number in [0, 1] per (relation, type)."""
 
     name = "none"
+    kb: KnowledgeBase | None = None  # the evidence behind the numbers, where there is one
 
     def p(self, relation: str, type_name: str) -> float:  # pragma: no cover - interface
         """The probability used to rank rel's volume when looking for ``type_name``."""
@@ -113,6 +123,45 @@ class TableProbabilities(ProbabilitySource):
         if self.per_room is None:
             return None
         return self.per_room.get(type_name, 0.0)
+
+
+class BackoffProbabilities(KBProbabilities):
+    """``KBProbabilities`` where the reference type has fewer than ``min_evidence`` examinations
+    and a class: there the backed-off interval (knowledge.pooling.Backoff on ``pooled``, the
+    evidence pooled over the catalog's hierarchy), ranked by its lower bound, its Wilson centre
+    or its upper bound. A never-examined type of a known class is searched around from its
+    class's knowledge; types with enough evidence, or in no class, read their own interval."""
+
+    def __init__(
+        self,
+        kb: KnowledgeBase,
+        pooled: PooledCounts,
+        rank: str = DEFAULT_RANK,
+        rooms: int | None = None,
+        min_evidence: int = DEFAULT_MIN_EVIDENCE,
+    ):
+        super().__init__(kb, rank, rooms)
+        if min_evidence < 0:
+            raise CtxsearchError(f"min_evidence must be >= 0, got {min_evidence}")
+        self.backoff = Backoff(pooled, kb.alpha)
+        self.min_evidence = int(min_evidence)
+        self.name = f"backoff-{rank}"
+
+    def p(self, relation: str, type_name: str) -> float:
+        ref = self.kb.catalog.relation(relation).ref
+        h = self.kb.catalog.hierarchy
+        if self.kb.n(ref) >= self.min_evidence or h.parent(ref) is None or h.lift(relation) is None:
+            return super().p(relation, type_name)
+        key = (relation, type_name)
+        v = self._cache.get(key)
+        if v is None:
+            e = self.backoff.estimate(ref, relation, type_name)
+            if self.rank == "p0":
+                v = float(intervals.p0(e.y_eff, e.n_eff, self.kb.alpha))
+            else:
+                v = e.low if self.rank == "low" else e.high
+            self._cache[key] = v
+        return v
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ BENCH_MODULES = [
     "scripts.cmd_sim",
     "scripts.cmd_learn",
     "scripts.cmd_search",
+    "scripts.cmd_hierarchy",
 ]
 
 

@@ -21,6 +21,9 @@ POLICY_NAMES = (
 DEFAULT_BUDGET_S = 300.0
 RANK_MODES = ("low", "p0", "high")
 DEFAULT_RANK = "low"
+ESTIMATES = ("flat", "backoff")  # knowledge.ranking.ESTIMATES
+DEFAULT_ESTIMATE = "flat"
+DEFAULT_MIN_EVIDENCE = 10
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -37,6 +40,22 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_RANK,
         help=f"which part of the interval ranks candidate regions (default: {DEFAULT_RANK}, "
         "chosen by measurement, see README)",
+    )
+    p.add_argument(
+        "--estimate",
+        choices=ESTIMATES,
+        default=DEFAULT_ESTIMATE,
+        help="P(rel(T)) from each type's own evidence (flat, the paper's; default) or, for "
+        "reference types with fewer than --min-evidence examinations, from their class "
+        "(backoff: the type hierarchy's empirical-Bayes estimate)",
+    )
+    p.add_argument(
+        "--min-evidence",
+        type=argtypes.non_negative_int,
+        default=DEFAULT_MIN_EVIDENCE,
+        metavar="N",
+        help=f"with --estimate backoff: types examined fewer than N times back off "
+        f"(default: {DEFAULT_MIN_EVIDENCE})",
     )
     p.add_argument(
         "--truth",
@@ -102,6 +121,8 @@ def _config_fields(args: argparse.Namespace) -> dict:
         "rank": args.rank,
         "truth": args.truth,
         "truth_samples": args.truth_samples,
+        "estimate": args.estimate,
+        "min_evidence": args.min_evidence,
     }
 
 

@@ -199,3 +199,6 @@ def test_parser_constants_match_the_search_stack():
     assert cmd_search.DEFAULT_BUDGET_S == search.DEFAULT_BUDGET_S
     assert tuple(search_space.RANK_MODES) == cmd_search.RANK_MODES
     assert cmd_search.DEFAULT_RANK == search_space.DEFAULT_RANK
+    assert tuple(search_space.ESTIMATES) == cmd_search.ESTIMATES
+    assert cmd_search.DEFAULT_ESTIMATE == search_space.DEFAULT_ESTIMATE
+    assert cmd_search.DEFAULT_MIN_EVIDENCE == search_space.DEFAULT_MIN_EVIDENCE

@@ -79,6 +79,7 @@ def test_registry_and_unknown_name():
         "fewest",
         "expected-hif",
         "cost-hif",
+        "hif-backoff",
     }
     with pytest.raises(CtxsearchError, match="unknown strategy 'bogus' \\(known: hif, random"):
         make_strategy("bogus")

@@ -282,6 +282,8 @@ def _write_files(
         "policies": {n: st.to_json() for n, st in stats.items()},
         "episode_list": [_episode_json(ep, i, results) for i, ep in enumerate(eps)],
     }
+    if config.estimate != "flat":  # flat (the default) documents stay as they were
+        doc["estimate"] = {"name": config.estimate, "min_evidence": config.min_evidence}
     files = [out / "search.json", out / "search.md", out / "search.png"]
     files[0].write_text(json.dumps(doc, indent=1) + "\n")
     kb_line = (
@@ -290,8 +292,13 @@ def _write_files(
         else ""
     )
     files[1].write_text(
-        f"# Object search: {style}\n\n{kb_line}ranking by the interval's `{config.rank}`, "
-        f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
+        f"# Object search: {style}\n\n{kb_line}ranking by the interval's `{config.rank}`"
+        + (
+            f" (backoff for types with < {config.min_evidence} examinations), "
+            if config.estimate == "backoff"
+            else ", "
+        )
+        + f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
     )
     title = f"time to find ({style}, {len(eps)} paired episodes)"
     plot_cdf(results, config.budget_s, files[2], title)

@@ -32,6 +32,7 @@ from envs.world import World
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
+from knowledge.pooling import PooledCounts
 
 ProbsFor = Callable[[str, str | None], ss.ProbabilitySource | None]
 
@@ -49,6 +50,10 @@ class SearchConfig:
         None  # ground-truth JSON of `ctxsearch truth` for the oracle-prior policies
     )
     truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
+    # "flat" (the paper's intervals) or "backoff" (the class's estimate for reference types with
+    # fewer than ``min_evidence`` examinations: knowledge.ranking.BackoffProbabilities)
+    estimate: str = ss.DEFAULT_ESTIMATE
+    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
 
 
 def split_name(name: str) -> tuple[str, str | None]:
@@ -119,6 +124,8 @@ class Priors:
     learned: frozenset[int]  # room seeds the knowledge was learned in (never searched)
     rank: str  # the rank of policies named without one
     truth: ss.ProbabilitySource | None
+    pooled: PooledCounts | None = None  # evidence over the hierarchy: the backoff estimate
+    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
 
     def check(self, names: Sequence[str]) -> None:
         """A one-line error if a policy needs a knowledge store and none was given."""
@@ -131,7 +138,12 @@ class Priors:
         """The probabilities policy ``base`` ranks by (rank ``r`` or the default), if any."""
         needs = S.POLICIES[base].needs
         if needs == "kb":
-            return ss.KBProbabilities(self.kb, r or self.rank, rooms=len(self.learned) or None)
+            rooms = len(self.learned) or None
+            if self.pooled is not None:
+                return ss.BackoffProbabilities(
+                    self.kb, self.pooled, r or self.rank, rooms, self.min_evidence
+                )
+            return ss.KBProbabilities(self.kb, r or self.rank, rooms=rooms)
         if needs == "truth":
             return self.truth
         return None
@@ -146,15 +158,26 @@ def load_priors(
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
 ) -> Priors:
     """The priors of ``config.policies``: ``kb`` or the store at ``kb_path`` (whose learning rooms
-    join ``exclude_seeds``), and the ground truth if an oracle-prior policy runs."""
+    join ``exclude_seeds``), and the ground truth if an oracle-prior policy runs. With
+    ``config.estimate == "backoff"`` the evidence is also pooled over the hierarchy (from the
+    store's log, or from ``kb``'s counts)."""
+    if config.estimate not in ss.ESTIMATES:
+        raise CtxsearchError(
+            f"unknown estimate '{config.estimate}' (known: {', '.join(ss.ESTIMATES)})"
+        )
     learned = set(exclude_seeds)
+    pooled = None
     if kb is None and kb_path is not None:
         kb, seeds = S.open_knowledge(kb_path, catalog)
         learned |= seeds
+        if config.estimate == "backoff":
+            pooled = S.open_pooled(kb_path, catalog)
+    elif kb is not None and config.estimate == "backoff":
+        pooled = PooledCounts.from_knowledge_base(kb)
     truth = None
     if any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in config.policies):
         truth = S.truth_probabilities(style, catalog, config.truth_samples, path=config.truth)
-    priors = Priors(kb, frozenset(learned), config.rank, truth)
+    priors = Priors(kb, frozenset(learned), config.rank, truth, pooled, config.min_evidence)
     priors.check(config.policies)
     return priors
 
@@ -197,14 +220,15 @@ def run_policy(
     return res
 
 
-def _search_room(
+def search_room(
     ep: S.Episode,
     style: WorldStyle,
     catalog: Catalog,
     runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
     progress: Callable[[str], None] | None = None,
 ) -> list[S.SearchResult]:
-    """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``."""
+    """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs`` (a
+    policy may appear twice with other probabilities: results are in ``runs``' order)."""
     layout = generate_layout(style, ep.room_seed, catalog)
     with World(layout, catalog) as world:
         room = EpisodeRoom(layout, catalog, world, S.RoomMaps.given(layout, catalog, world.spec))
@@ -230,7 +254,7 @@ def run_episodes(
     for ep in episodes:
         runs = [(name, probs_for(*split_name(name)), None) for name in policies]
         for name, res in zip(
-            policies, _search_room(ep, style, catalog, runs, progress), strict=True
+            policies, search_room(ep, style, catalog, runs, progress), strict=True
         ):
             results[name].append(res)
     return results
@@ -274,5 +298,5 @@ def search_once(
         (name, priors.for_policy(*split_name(name)), rec)
         for name, rec in zip(names, records, strict=True)
     ]
-    out = _search_room(ep, style, catalog, runs)
+    out = search_room(ep, style, catalog, runs)
     return OneSearch(ep, out, [Path(p) for p in records if p is not None])
