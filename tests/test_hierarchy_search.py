@@ -116,7 +116,8 @@ def test_hif_backoff_is_registered_and_hif_unchanged(catalog):
 
 
 def test_the_workbench_experiment_leaves_the_catalog_alone():
-    from envs.houses import generate_layout, resolve_style
+    from envs.floorplan import generate_layout
+    from envs.houses import resolve_style
     from scripts.experiments.bench_hierarchy import (
         NEW_TYPE,
         extended_catalog,
