@@ -31,6 +31,16 @@ def positive_int(text: str) -> int:
     return v
 
 
+def count(text: str) -> int:
+    """An integer in [0, MAX_COUNT] (how many of something, none allowed)."""
+    v = _int(text)
+    if v is None or v < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    if v > MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_COUNT:_}, got {v:_}")
+    return v
+
+
 def seed(text: str) -> int:
     """A random seed: an integer in [0, 2**32 - 1]."""
     v = _int(text)
