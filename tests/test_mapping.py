@@ -53,7 +53,7 @@ def test_an_empty_map_knows_nothing_but_the_robot_and_grows_with_images():
 
 
 @pytest.mark.render
-@pytest.mark.parametrize(("style", "seeds", "budget"), [("office", range(6), 120.0),
+@pytest.mark.parametrize(("style", "seeds", "budget"), [("office", range(4), 80.0),
                                                         ("apartment", [3], 150.0)])  # fmt: skip
 def test_the_built_map_never_calls_an_occupied_cell_free_and_drives_touch_nothing(
     style, seeds, budget

@@ -109,7 +109,7 @@ def write_map_overview(
     img[m.occupied] = (0.1, 0.1, 0.1)
     img[m.grid.free & ~given.free] = (1.0, 0.0, 0.0)
     w, d = layout.width, layout.depth
-    fig = Figure(figsize=(8, 8 * d / w + 0.8))
+    fig = Figure(figsize=(9, 7 * d / w + 0.9))
     ax = fig.subplots()
     ax.imshow(img, origin="lower", extent=(-w / 2, w / 2, -d / 2, d / 2), interpolation="nearest")
     for o in layout.objects:
@@ -131,12 +131,12 @@ def write_map_overview(
         bbox_to_anchor=(1.0, 1.0),
     )
     ax.set_title(
-        f"{layout.style} seed {layout.seed}: built map after {ex.looks} look-arounds, "
-        f"{m.images} images, {ex.sim_s:.0f} s simulated; free recall {q.free_recall:.2f}, "
-        f"false free {q.false_free}",
+        f"{layout.style} seed {layout.seed}: the built map after {ex.looks} look-arounds, "
+        f"{m.images} images, {ex.sim_s:.0f} s simulated\n"
+        f"free recall {q.free_recall:.2f}, false free {q.false_free} "
+        f"(within the margin: {q.false_free_margin}); the drives in magenta",
         fontsize=9,
     )
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
