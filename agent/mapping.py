@@ -1,8 +1,8 @@
 """The robot's own map: an occupancy grid built from its depth images (``--map built``).
 
 In camera mode the robot starts knowing only its own pose. Every depth image it renders updates
-``BuiltMap``: each pixel's depth is back-projected to a world point (envs.camera's
-``PinholeCamera.backproject``) within ``max_range`` of the camera, and
+``BuiltMap``: each pixel's depth is back-projected to a world point within ``max_range``
+of the camera (every second column: ``COL_STRIDE``), and
 
 - a point on the floor (z below ``FLOOR_EPS``) marks its cell *floor seen*;
 - a point between ``FLOOR_EPS`` and the head (``camera_height + HEAD_MARGIN``) marks its cell
@@ -48,6 +48,9 @@ FLOOR_EPS = 0.005  # m: depth points below this height are floor (a pen lying th
 HEAD_MARGIN = 0.10  # m above the camera: the head's top (points up to here are obstacles)
 VOXEL = 0.10  # m: the seen-space record's voxel edge
 RAY_STRIDE = 12  # pixels between the rays traced into the seen-space record
+# Every second column of a depth image is used: 2 pixels are 4 cm across at 5 m (the cells are
+# 5 cm), and the rows, which space the far floor along the view, are all kept.
+COL_STRIDE = 2
 
 
 def default_map_mode(perception: str) -> str:
@@ -109,7 +112,7 @@ class BuiltMap:
         if frame is None or frame.depth is None:
             return
         cam = frame.camera
-        depth = np.asarray(frame.depth, np.float32).ravel()
+        depth = np.asarray(frame.depth, np.float32)[:, ::COL_STRIDE].ravel()
         local = self._local_rays(cam)  # (N, 3) rays with z = -1 in the camera frame
         # Distance along a ray = depth * |local ray|; within range and past the near clip only.
         rng = depth * local[:, 3]
@@ -127,18 +130,20 @@ class BuiltMap:
         flo = ok & (z < FLOOR_EPS)
         self.floor[rows[flo], cols[flo]] = True
         self.floor &= ~self.occupied
-        sub = keep % cam.width % RAY_STRIDE == 0
-        sub &= keep // cam.width % RAY_STRIDE == 0
+        w_sub = len(range(0, cam.width, COL_STRIDE))
+        sub = keep % w_sub % (RAY_STRIDE // COL_STRIDE) == 0
+        sub &= keep // w_sub % RAY_STRIDE == 0
         self._trace(np.asarray(cam.position, float), pts[sub], rng[keep][sub])
         self.images += 1
         self._dirty = True
 
     def _local_rays(self, cam: PinholeCamera) -> np.ndarray:
-        """(H * W, 4) float32: each pixel's camera-frame ray scaled to z = -1, and its length."""
+        """(H * W', 4) float32: the camera-frame ray of each pixel of every ``COL_STRIDE``-th
+        column, scaled to z = -1, and its length."""
         key = (cam.width, cam.height, cam.fovy_deg)
         if self._rays_key != key:
             f = cam.focal
-            x = (np.arange(cam.width) + 0.5 - cam.width / 2) / f
+            x = (np.arange(0, cam.width, COL_STRIDE) + 0.5 - cam.width / 2) / f
             y = -(np.arange(cam.height) + 0.5 - cam.height / 2) / f
             local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), -1).reshape(-1, 3)
             self._rays = np.column_stack([local, np.linalg.norm(local, axis=1)]).astype(np.float32)
