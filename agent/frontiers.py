@@ -18,10 +18,10 @@ The rule that picks the goal (``FRONTIER_RULES``):
   ``info_radius`` of it over (travel seconds + one look-around's images);
 - ``nearest``: the goal with the shortest driving distance.
 
-Measured on apartments 0-3 (full exploration, ``ctxsearch bench sim --style apartment
---explore 4 --frontier-rule R``): ``info`` reached the same free recall (0.902, 0.896, 0.863,
-0.897) as ``nearest`` (0.903, 0.896, 0.864, 0.897) in 545-659 simulated seconds against
-654-943 (medians 598 s against 793 s), with about half the goals (29-36 against 51-73).
+Measured on apartments 0-3 (full exploration, ``ctxsearch bench sim --style apartment --rooms 4
+--explore 4 --frontier-rule R``): ``info`` reached the same free recall (0.903, 0.896, 0.863,
+0.897) as ``nearest`` (0.903, 0.896, 0.864, 0.897) in 594-691 simulated seconds against 685-944
+(medians 649 s against 815 s), with about half the goals (31-40 against 52-73).
 
 A look-around is ``LOOK_PANS_DEG`` at two tilts: ``LOOK_TILT`` (furniture, desk tops, far floor)
 and ``NEAR_TILT`` (the floor from about 0.1 m to 2.2 m, which the first tilt misses: without it

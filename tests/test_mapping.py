@@ -119,3 +119,19 @@ def test_learning_on_the_built_map_resumes_exactly(tmp_path):
     _, seq2 = go(tmp_path / "part.sqlite")
     assert seq1 == seq_full[:4]
     assert seq2 == seq_full
+
+
+def test_learn_says_which_map_and_takes_the_world_budget(tmp_path, capsys):
+    from scripts.cli import main
+
+    kb = tmp_path / "k.sqlite"
+    args = ["learn", "--style", "office", "--rooms", "1", "--kb", str(kb), "--no-progress"]
+    assert main([*args, "--perception", "oracle", "--world-budget", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "map: given" in out and "room budget: 30 s simulated per room" in out
+    assert "run hif/oracle/seed=0/budget=30.0s" in out
+    with pytest.raises(SystemExit) as e:
+        main([*args, "--map", "sonar"])
+    assert e.value.code == 2
+    assert main([*args, "--perception", "oracle", "--map", "built"]) == 2
+    assert "needs --map given" in capsys.readouterr().err
