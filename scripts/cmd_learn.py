@@ -187,10 +187,12 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--room-budget",
+        "--world-budget",
+        dest="room_budget",
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP,
+        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
     )
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
