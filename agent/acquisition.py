@@ -33,6 +33,14 @@ Without a budget every room is run to completion as in Figure 2.
 
 A room in progress in the store is replayed (agent.resume): its stored examinations are read
 back instead of perceived, with the same choices, motions and clock.
+
+The map (``Run.map_mode``). ``given``: the occupancy grid of the true layout (the oracle's, and an
+ablation of the camera mode). ``built``: the robot starts knowing only its pose; every depth image
+updates its own map (agent.mapping's ``BuiltMap``), navigation, gaze planning and the cost model
+use that map's grid as it stands, and lines 4-7 explore its frontiers (agent.frontiers). An
+object recognized but not examinable from the map known so far is deferred until the next
+look-around, and is unexaminable only once no frontier is left. A replay in a built map renders
+depth images for the map (charged as the stored run was), so it rebuilds the same map.
 """
 
 from __future__ import annotations
@@ -44,13 +52,16 @@ import numpy as np
 from agent import strategies as strat
 from agent.exam_volumes import group_volume_members, relation_boxes
 from agent.exploration import Explorer
+from agent.frontiers import FrontierExplorer
 from agent.grid_costs import GridCosts
 from agent.learn_log import RunLog
+from agent.mapping import BuiltMap
 from agent.navigation import OccupancyGrid, drive_along, nearest_free
 from agent.resume import ReplayBody, replayed_related, resume_error
 from agent.run_state import ExamResult, Run, StoredExam, room_rng
 from agent.strategies import Choice
 from agent.viewplan import Gaze, execute_gaze, plan_gazes
+from envs.camera import Frame
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose
 from envs.rooms import door_entry
@@ -75,22 +86,49 @@ class RoomLearner:
         self.run, self.log, self.layout, self.room_index = run, log, layout, room_index
         self.catalog, self.kb, self.spec = run.catalog, run.kb, run.spec
         self.prior = list(prior)  # stored examinations to replay
-        self.grid = OccupancyGrid.from_layout(layout, self.spec)
-        self.start_pose = start_pose(layout, self.grid)
+        self.given_grid = OccupancyGrid.from_layout(layout, self.spec)  # the true layout's
+        self.start_pose = start_pose(layout, self.given_grid)
+        self.built = (
+            BuiltMap.for_layout(layout, self.spec, self.start_pose)
+            if run.map_mode == "built"
+            else None
+        )
         self.perception = run.perception_in(layout, rgb=log.recording)
         self.body = self.perception.body
         self.body.reset_pose(self.start_pose)
         self._t0 = self.body.sim_time
         self.rng = room_rng(run.seed, room_index)
         self._gaze_s: dict[int, float] = {}
-        self.costs = GridCosts(self.grid, run.time_model, self._gaze_seconds)
-        self.explorer = Explorer(self, self.start_pose.xy)
+        self._costs = GridCosts(self.grid, run.time_model, self._gaze_seconds)
+        self.explorer: Explorer | FrontierExplorer = (
+            Explorer(self, self.start_pose.xy)
+            if self.built is None
+            else FrontierExplorer(self, self.built, run.time_model, run.frontier_rule)
+        )
         self.examined: set[int] = set()  # line 1
         self.unexamined: dict[int, ObjectInstance] = {}  # line 2
         self.n_room = 0  # examinations made in this room
         self.last_exam_clock = self.clock  # the run clock after the room's last examination
         self.new_since = self.clock  # the run clock when the replay (if any) was over
         self.left_early = False  # the budget ended the room (objects may be left unexamined)
+
+    # ---- the map -----------------------------------------------------------------------------
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The grid the robot plans on: the true layout's, or its own map's as it stands."""
+        return self.given_grid if self.built is None else self.built.grid
+
+    @property
+    def costs(self) -> GridCosts:
+        """The strategies' cost model on the current grid."""
+        if self._costs.grid is not self.grid:
+            self._costs = GridCosts(self.grid, self.run.time_model, self._gaze_seconds)
+        return self._costs
+
+    def _mapped(self, frame: Frame | None) -> None:
+        """Add an image to the robot's own map (nothing on a given map)."""
+        if self.built is not None:
+            self.built.update(frame)
 
     # ---- time and motion ------------------------------------------------------------------
     @property
@@ -116,6 +154,7 @@ class RoomLearner:
     def look(self, purpose: str) -> list[ObjectInstance]:
         """Take an image where the head points; what the perception recognizes in it."""
         frame = self.body.capture(rgb=self.log.recording, depth=True)
+        self._mapped(frame)
         objs = self.perception.see(frame)
         self.log.frame(self, frame, objs, purpose=purpose)
         return objs
@@ -131,6 +170,9 @@ class RoomLearner:
             del self.unexamined[choice.obj.id]  # line 14
             self.examined.add(choice.obj.id)
             gazes = self.plan_examination(choice.obj, self.body.pose())
+            if not gazes and self._defer(choice.obj):  # a built map may still grow
+                self.examined.discard(choice.obj.id)
+                continue
             if not gazes:  # not a trial, no evidence (nor in the store: a replay skips it too)
                 self._unexaminable(choice.obj)
                 continue
@@ -147,6 +189,13 @@ class RoomLearner:
                 f"the store holds {len(self.prior)} examinations "
                 f"of it, the replay left it after {self.n_room}",
             )
+
+    def _defer(self, obj: ObjectInstance) -> bool:
+        """On a built map with frontiers left: put ``obj`` aside until the next look-around."""
+        if not isinstance(self.explorer, FrontierExplorer):
+            return False
+        self.explorer.seen.setdefault(obj.id, obj)  # it may have come from RELATED-OBJECTS
+        return self.explorer.defer(obj.id)
 
     def _unexaminable(self, obj: ObjectInstance) -> None:
         self.log.text(
@@ -184,6 +233,8 @@ class RoomLearner:
 
     def _choose(self) -> Choice:
         """Lines 8-13: the strategy's choice among the UNEXAMINED objects."""
+        if self.built is not None:
+            self.built.refresh()  # plan and cost the choice on the map as it stands
         pose = self.body.pose()
         cands = [self.unexamined[i] for i in sorted(self.unexamined)]
         choice = strat.choose(
@@ -222,14 +273,17 @@ class RoomLearner:
         (a replay) the motions are made, images are not taken, and the stored result is used."""
         self.log.examine_start(self, obj, gazes)
         if stored is not None:
-            replay = ReplayBody(self.body)
+            # A built map needs the depth images (the same clock: World.capture charges what
+            # ReplayBody does); the given map needs none.
+            body = self.body if self.built is not None else ReplayBody(self.body)
             for gaze in gazes:
-                execute_gaze(replay, self.grid, gaze)
+                self._mapped(execute_gaze(body, self.grid, gaze, depth=True))
             return replayed_related(stored, self.layout.objects)
         seen: dict[int, ObjectInstance] = {}
         need_images = not self.perception.reads_truth or self.log.recording
         for gaze in gazes:
             frame = execute_gaze(self.body, self.grid, gaze, rgb=self.log.recording, depth=True)
+            self._mapped(frame)
             self.log.robot(self)
             if need_images:
                 objs = self.perception.see(frame)

@@ -29,7 +29,9 @@ from tqdm import tqdm
 
 from agent import strategies as strat
 from agent.acquisition import RoomLearner
+from agent.frontiers import FRONTIER_RULES
 from agent.learn_log import RunLog
+from agent.mapping import MAP_MODES, default_map_mode
 from agent.perception_modes import PERCEPTION_MODES
 from agent.resume import RunHistory
 from agent.run_state import (
@@ -59,10 +61,18 @@ def room_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0] & 0x7FFFFFFF)
 
 
-def run_id(strategy: str, perception: str, seed: int, room_budget_s: float | None = None) -> str:
-    """The store's run key: runs with another strategy, perception, seed or room budget are
-    separate runs (no budget: the key has no budget part)."""
+def run_id(
+    strategy: str,
+    perception: str,
+    seed: int,
+    room_budget_s: float | None = None,
+    map_mode: str = "given",
+) -> str:
+    """The store's run key: runs with another strategy, perception, seed, room budget or map are
+    separate runs (no budget: the key has no budget part; the given map: no map part)."""
     key = f"{strategy}/{perception}/seed={int(seed)}"
+    if map_mode != "given":
+        key = f"{key}/map={map_mode}"
     return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
 
 
@@ -104,7 +114,11 @@ class LearnConfig:
     ``kb_path`` is the evidence store, created or resumed; ``alpha`` defaults to the store's.
     ``max_examinations`` stops the call after that many new examinations (run it again to go
     on). ``room_budget_s`` limits the simulated seconds spent in each room (None: every room to
-    completion, Figure 2 as published). ``spec`` and ``time_model`` are the robot's.
+    completion, Figure 2 as published; in a house it is the house's budget). ``spec`` and
+    ``time_model`` are the robot's. ``map_mode`` is the grid the robot plans on
+    (agent.mapping.MAP_MODES; None: ``built`` for the camera, ``given`` otherwise); the oracle
+    perception needs ``given``. ``frontier_rule`` picks frontier goals on a built map
+    (agent.frontiers).
     """
 
     style: str
@@ -120,6 +134,13 @@ class LearnConfig:
     room_budget_s: float | None = None
     spec: RobotSpec = field(default_factory=RobotSpec)
     time_model: TimeModel = field(default_factory=TimeModel)
+    map_mode: str | None = None
+    frontier_rule: str = "info"
+
+    @property
+    def map_used(self) -> str:
+        """The map mode the run uses (``map_mode`` or the perception's default)."""
+        return self.map_mode or default_map_mode(self.perception)
 
     def checked(self, own_perception: bool = False) -> LearnConfig:
         """The configuration with the budget as a float; a one-line error for bad values
@@ -145,7 +166,17 @@ class LearnConfig:
                 f"unknown perception mode '{self.perception}' "
                 f"(known: {', '.join(PERCEPTION_MODES)})"
             )
-        return replace(self, room_budget_s=budget)
+        if self.map_used not in MAP_MODES:
+            raise CtxsearchError(
+                f"unknown map mode '{self.map_used}' (known: {', '.join(MAP_MODES)})"
+            )
+        if self.map_used == "built" and self.perception == "oracle":
+            raise CtxsearchError("the oracle perception renders no depth: it needs --map given")
+        if self.frontier_rule not in FRONTIER_RULES:
+            raise CtxsearchError(
+                f"unknown frontier rule '{self.frontier_rule}' (known: {', '.join(FRONTIER_RULES)})"
+            )
+        return replace(self, room_budget_s=budget, map_mode=self.map_used)
 
     def limit_reached(self, examinations: int) -> bool:
         """Whether ``examinations`` new examinations end the call."""
@@ -169,6 +200,7 @@ class Summary:
     files: list[Path] = field(default_factory=list)  # recordings written
     room_budget_s: float | None = None  # simulated seconds per room (None: no limit)
     rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
+    map_mode: str = "given"  # the grid the robot planned on (agent.mapping.MAP_MODES)
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -179,6 +211,7 @@ class Summary:
         """Human-readable summary lines."""
         return [
             f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
+            f"map: {self.map_mode}",
             f"examinations: {self.examinations} now, {self.total_examinations} in the store",
             f"types seen: {self.types_seen}; mean interval width: {self.mean_width:.4f}",
             f"time: {self.wall_s:.1f} s wall, {self.sim_s:.1f} s simulated; "
@@ -223,16 +256,18 @@ def learn(
     style = config.style
     if layouts is None:
         style, layouts = style_layouts(style, catalog)
-    rid = run_id(config.strategy, config.perception, config.seed, config.room_budget_s)
+    map_mode = config.map_used
+    rid = run_id(config.strategy, config.perception, config.seed, config.room_budget_s, map_mode)
     t_wall = time.perf_counter()
-    summary = Summary(rid, room_budget_s=config.room_budget_s)
+    summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode)
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)
         history = RunHistory.load(store, rid, style, kb, strategy)
         run = Run(catalog, kb, store, strategy, config.perception, style, config.seed, rid,
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
-                  on_choice=on_choice, perceive=perceive)  # fmt: skip
+                  on_choice=on_choice, perceive=perceive, map_mode=map_mode,
+                  frontier_rule=config.frontier_rule)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):

@@ -83,6 +83,8 @@ class Run:
     room_budget_s: float | None = None  # simulated seconds per room (None: each to completion)
     on_choice: ChoiceCallback | None = None  # before each examination
     perceive: PerceptionFactory | None = None  # None: the mode ``perception`` names
+    map_mode: str = "given"  # agent.mapping.MAP_MODES: the true layout's grid or the robot's own
+    frontier_rule: str = "info"  # agent.frontiers.FRONTIER_RULES (built maps only)
 
     def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
         """The robot's perception (and body) in the room ``layout``."""

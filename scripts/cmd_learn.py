@@ -90,10 +90,26 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--room-budget",
+        "--world-budget",
+        dest="room_budget",
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP,
+        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
+    )
+    p.add_argument(
+        "--map",
+        choices=("given", "built"),
+        default=None,
+        help="the grid the robot plans on: built = its own map from depth images (camera "
+        "default), given = the true layout's grid (oracle default; an ablation for the camera)",
+    )
+    p.add_argument(
+        "--frontier-rule",
+        choices=("nearest", "info"),
+        default="info",
+        help="built map: which frontier to explore next (nearest by driving distance, or most "
+        "unknown cells per second; default: info)",
     )
 
 
@@ -115,6 +131,8 @@ def run_learn(args: argparse.Namespace) -> int:
             max_examinations=args.max_examinations,
             progress=not args.no_progress,
             room_budget_s=args.room_budget,
+            map_mode=args.map,
+            frontier_rule=args.frontier_rule,
         )
     )
     for line in s.lines():
@@ -169,10 +187,12 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--room-budget",
+        "--world-budget",
+        dest="room_budget",
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP,
+        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
     )
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)

@@ -34,6 +34,19 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--height", type=argtypes.pixels, default=240, help="image height (default: 240)"
     )
+    p.add_argument(
+        "--explore",
+        type=argtypes.non_negative_int,
+        default=1,
+        help="worlds explored fully with the robot's own map, for map_free_recall, "
+        "map_false_free and explore_sim_s (default: 1; 0: none)",
+    )
+    p.add_argument(
+        "--frontier-rule",
+        choices=("nearest", "info"),
+        default="info",
+        help="which frontier the exploration goes to next (default: info)",
+    )
     p.set_defaults(func=run_bench)
 
 
@@ -50,6 +63,8 @@ def run_bench(args: argparse.Namespace) -> int:
         seed=args.seed,
         width=args.width,
         height=args.height,
+        explore=min(args.explore, args.rooms),
+        frontier_rule=args.frontier_rule,
     )
     print(format_table(results))
     print(

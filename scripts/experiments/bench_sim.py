@@ -37,6 +37,7 @@ from envs.layout import RoomLayout
 from envs.task import RoomTask, start_pose
 from envs.world import World, gl_renderer
 from knowledge.catalog import Catalog, load_catalog
+from scripts.experiments.bench_map import explore_results
 
 TARGETS = {"compile_ms": 150.0, "gazes_per_s": 60.0, "overhead_ratio": 1.3}
 WARMUP_GAZES = 5
@@ -107,9 +108,12 @@ def run(
     seed: int = 0,
     width: int = 320,
     height: int = 240,
+    explore: int = 1,
+    frontier_rule: str = "info",
 ) -> dict:
     """Run the benchmark, write ``bench_sim.json``, ``bench_sim.md`` and ``bench_sim.png`` to
-    ``out_dir``, and return the results."""
+    ``out_dir``, and return the results. The first ``explore`` worlds are also explored fully
+    with the robot's own map (scripts.experiments.bench_map; ``map_overview.png``)."""
     load_before = os.getloadavg()[0]
     catalog = load_catalog()
     style_obj = resolve_style(style, catalog)
@@ -130,6 +134,10 @@ def run(
         with world:
             _time_gazes(times, world, lay, catalog, _gaze_targets(rng, gazes, world))
     results = _results(times, gen_ms)
+    if explore:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        results.update(explore_results(layouts[:explore], catalog, out_dir, width=width,
+                                       height=height, rule=frontier_rule))  # fmt: skip
     results.update(
         {
             "style": style,
@@ -284,6 +292,16 @@ def format_table(r: dict) -> str:
         ("bare mujoco.Renderer, seg + depth (ms)", f"{r['bare_render_ms']:.2f}", ""),
         ("overhead ratio (gaze / bare)", f"{r['overhead_ratio']:.2f}", f"<= {t['overhead_ratio']}"),
     ]
+    if "map_free_recall" in r:
+        rows += [
+            (f"map_free_recall, full exploration ({r['frontier_rule']}; median of "
+             f"{r['map_worlds']})", f"{r['map_free_recall']:.3f}", ""),
+            ("map_false_free (cells, summed)", f"{r['map_false_free']}", "0"),
+            ("  within the navigation margin of a bounding box", f"{r['map_false_free_margin']}", ""),
+            ("planned drive segments too near an obstacle", f"{r['map_unsafe_segments']}", "0"),
+            ("explore_sim_s (median, simulated)", f"{r['explore_sim_s']:.0f}", ""),
+            ("  wall seconds (median)", f"{r['explore_wall_s']:.1f}", ""),
+        ]  # fmt: skip
     lines = ["| measure | value | target |", "| --- | ---: | ---: |"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
     return "\n".join(lines)

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from agent import search_space as ss
 from agent.learning import LearnConfig, learn, room_seed, run_id
+from agent.mapping import default_map_mode
 from agent.search import SearchResult, check_target, open_knowledge
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
@@ -109,7 +110,7 @@ def _learning_complete(kb_path: Path, rooms: int, perception: str) -> bool:
         return False
     try:
         with EvidenceStore.open(kb_path, load_catalog(), create=False) as store:
-            rid = run_id(DEMO_STRATEGY, perception, DEMO_SEED)
+            rid = run_id(DEMO_STRATEGY, perception, DEMO_SEED, None, default_map_mode(perception))
             return all(
                 store.room_status(rid, DEMO_STYLE, room_seed(DEMO_SEED, i)) == "done"
                 for i in range(rooms)

@@ -1,0 +1,138 @@
+"""The robot's own map (agent.mapping) and frontier exploration (agent.frontiers): the built map
+never calls an occupied cell free, drives on it never cross furniture or walls, and learning
+runs on it (``--map built``), with ``--map given`` as it was."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent import learning
+from agent.acquisition import start_pose
+from agent.learning import LearnConfig
+from agent.mapping import BuiltMap, default_map_mode, map_quality
+from agent.navigation import OccupancyGrid
+from envs.camera import Frame, camera_at
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from knowledge.errors import CtxsearchError
+
+
+def _plane_frame(pose: RobotPose, spec: RobotSpec, wall_x: float | None = None) -> Frame:
+    """A depth image of an empty floor (z = 0), with an infinite wall at x = ``wall_x``."""
+    cam = camera_at(pose, spec)
+    rays = cam.pixel_rays()  # unit rays
+    fwd = cam.forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(rays[..., 2] < -1e-9, -cam.position[2] / rays[..., 2], np.inf)
+        if wall_x is not None:
+            tw = np.where(rays[..., 0] > 1e-9, (wall_x - cam.position[0]) / rays[..., 0], np.inf)
+            t = np.minimum(t, tw)
+    depth = np.minimum(t, 50.0) * (rays @ fwd)  # along the optical axis
+    ids = np.full(depth.shape, -1, np.int32)
+    return Frame(None, depth.astype(np.float32), ids, cam, pose)
+
+
+def test_an_empty_map_knows_nothing_but_the_robot_and_grows_with_images():
+    spec = RobotSpec()
+    start = RobotPose(0.0, 0.0, 0.0)
+    m = BuiltMap((-3.0, -3.0, 3.0, 3.0), spec, start)
+    assert not m.grid.free.any()  # its own disc is floor, not enough for the clearance
+    assert m.floor.sum() > 0 and not m.occupied.any()
+    for pan in np.radians([-150, -90, -30, 30, 90, 150]):
+        for tilt in (-0.35, -1.0):
+            m.update(_plane_frame(RobotPose(0.0, 0.0, 0.0, pan, tilt), spec, wall_x=2.0))
+    g = m.refresh()
+    assert g.is_free(np.array([0.0, 0.0])) and g.is_free(np.array([1.2, 0.5]))
+    # The wall is occupied, nothing beyond it is known, and no free cell is near it.
+    xs, _ = g.cell_centers()
+    assert m.occupied[:, (xs > 1.95) & (xs < 2.05)].any()
+    assert not m.floor[:, xs > 2.1].any()
+    assert not g.free[:, xs > 2.0 - spec.clearance].any()
+    assert m.seen_voxels.any()
+    assert m.frontier().any()
+
+
+@pytest.mark.render
+@pytest.mark.parametrize(("style", "seeds", "budget"), [("office", range(4), 80.0),
+                                                        ("apartment", [3], 150.0)])  # fmt: skip
+def test_the_built_map_never_calls_an_occupied_cell_free_and_drives_touch_nothing(
+    style, seeds, budget
+):
+    from agent.frontiers import explore_world
+    from envs.floorplan import generate_layout
+    from envs.houses import resolve_style
+    from envs.world import World
+    from knowledge.catalog import load_catalog
+    from scripts.experiments.bench_map import body_grid, unsafe_segments
+
+    cat, spec, tm = load_catalog(), RobotSpec(), TimeModel()
+    st = resolve_style(style, cat)
+    drives = 0
+    for seed in seeds:
+        lay = generate_layout(st, seed, cat)
+        given = OccupancyGrid.from_layout(lay, spec)
+        start = start_pose(lay, given)
+        with World(lay, cat, spec=spec, time_model=tm) as world:
+            world.reset_pose(start)
+            built = BuiltMap.for_layout(lay, spec, start)
+            ex = explore_world(world, built, tm, budget_s=budget)
+        body = body_grid(lay, spec)
+        q = map_quality(built.refresh(), given, body, start.xy)
+        assert q.false_free == 0, (style, seed)
+        assert q.free_recall > 0.2, (style, seed)
+        assert unsafe_segments(ex.paths, body) == 0, (style, seed)
+        drives += len(ex.paths)
+    assert drives > 0
+
+
+def test_map_modes_default_by_perception_and_the_oracle_needs_the_given_map(tmp_path):
+    assert default_map_mode("camera") == "built" and default_map_mode("oracle") == "given"
+    cfg = LearnConfig("office", 1, tmp_path / "k.sqlite", perception="oracle").checked()
+    assert cfg.map_mode == "given"
+    assert LearnConfig("office", 1, tmp_path / "k.sqlite").checked().map_mode == "built"
+    with pytest.raises(CtxsearchError, match="--map given"):
+        LearnConfig(
+            "office", 1, tmp_path / "k.sqlite", perception="oracle", map_mode="built"
+        ).checked()
+    with pytest.raises(CtxsearchError, match="unknown map mode"):
+        LearnConfig("office", 1, tmp_path / "k.sqlite", map_mode="sonar").checked()
+    assert learning.run_id("hif", "camera", 0, None, "built") == "hif/camera/seed=0/map=built"
+    assert learning.run_id("hif", "camera", 0, None, "given") == "hif/camera/seed=0"
+
+
+@pytest.mark.render
+def test_learning_on_the_built_map_resumes_exactly(tmp_path):
+    """A built-map run interrupted and resumed makes the choices, at the clock, of an
+    uninterrupted one (the replay renders depth for the map)."""
+
+    def go(path, **kw):
+        seq = []
+        s = learning.learn(
+            LearnConfig("office", 1, path, progress=False, **kw),
+            on_examination=lambda res, kb: seq.append((res.choice.obj.id, round(res.sim_time, 6))),
+        )
+        return s, seq
+
+    full, seq_full = go(tmp_path / "full.sqlite")
+    assert full.map_mode == "built" and full.run.endswith("/map=built")
+    assert full.examinations >= 5
+    _, seq1 = go(tmp_path / "part.sqlite", max_examinations=4)
+    _, seq2 = go(tmp_path / "part.sqlite")
+    assert seq1 == seq_full[:4]
+    assert seq2 == seq_full
+
+
+def test_learn_says_which_map_and_takes_the_world_budget(tmp_path, capsys):
+    from scripts.cli import main
+
+    kb = tmp_path / "k.sqlite"
+    args = ["learn", "--style", "office", "--rooms", "1", "--kb", str(kb), "--no-progress"]
+    assert main([*args, "--perception", "oracle", "--world-budget", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "map: given" in out and "room budget: 30 s simulated per room" in out
+    assert "run hif/oracle/seed=0/budget=30.0s" in out
+    with pytest.raises(SystemExit) as e:
+        main([*args, "--map", "sonar"])
+    assert e.value.code == 2
+    assert main([*args, "--perception", "oracle", "--map", "built"]) == 2
+    assert "needs --map given" in capsys.readouterr().err
