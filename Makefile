@@ -38,6 +38,7 @@ POLICIES := exhaustive,location,indirect,oracle-prior,oracle
 bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench kb --out results
 	$(VENV)/bin/ctxsearch bench sim --out results
+	$(VENV)/bin/ctxsearch bench sim --style apartment --rooms 3 --gazes 50 --explore 3 --out results/sim_apartment
 	for s in office biology_lab living_room kitchen; do \
 	  $(VENV)/bin/ctxsearch truth --style $$s --samples 200 --out results/truth/$$s.json --no-progress; done
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning
