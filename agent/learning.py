@@ -30,7 +30,7 @@ from tqdm import tqdm
 from agent import strategies as strat
 from agent.acquisition import RoomLearner
 from agent.learn_log import RunLog
-from agent.perception_modes import PERCEPTION_MODES
+from agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
 from agent.resume import RunHistory
 from agent.run_state import (
     ROOM_DONE,
@@ -40,6 +40,7 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
+from envs.detector import DetectorModel, load_detector
 from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
@@ -104,6 +105,9 @@ class LearnConfig:
     ``max_examinations`` stops the call after that many new examinations (run it again to go
     on). ``room_budget_s`` limits the simulated seconds spent in each room (None: every room to
     completion, Figure 2 as published). ``spec`` and ``time_model`` are the robot's.
+    ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
+    ``confirm``: camera mode counts an object as related once that many images of the room
+    detected it (1: at once, Figure 2 as published).
     """
 
     style: str
@@ -119,6 +123,14 @@ class LearnConfig:
     room_budget_s: float | None = None
     spec: RobotSpec = field(default_factory=RobotSpec)
     time_model: TimeModel = field(default_factory=TimeModel)
+    detector: str | None = None
+    confirm: int = 1
+
+    def detector_model(self, catalog: Catalog) -> DetectorModel | None:
+        """The camera mode's preset, loaded and checked (None in oracle mode)."""
+        if self.perception != "camera":
+            return None
+        return load_detector(self.detector or DEFAULT_DETECTOR, catalog)
 
     def checked(self, own_perception: bool = False) -> LearnConfig:
         """The configuration with the budget as a float; a one-line error for bad values
@@ -139,6 +151,8 @@ class LearnConfig:
                 raise CtxsearchError(
                     f"room budget must be a positive number of seconds, got {budget}"
                 )
+        if self.confirm < 1:
+            raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
         if not own_perception and self.perception not in PERCEPTION_MODES:
             raise CtxsearchError(
                 f"unknown perception mode '{self.perception}' "
@@ -168,6 +182,7 @@ class Summary:
     files: list[Path] = field(default_factory=list)  # recordings written
     room_budget_s: float | None = None  # simulated seconds per room (None: no limit)
     rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
+    detector: str | None = None  # camera mode's detector preset (None: the oracle has none)
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -178,6 +193,7 @@ class Summary:
         """Human-readable summary lines."""
         return [
             f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
+            f"detector: {self.detector or 'none (oracle perception reads the layout)'}",
             f"examinations: {self.examinations} now, {self.total_examinations} in the store",
             f"types seen: {self.types_seen}; mean interval width: {self.mean_width:.4f}",
             f"time: {self.wall_s:.1f} s wall, {self.sim_s:.1f} s simulated; "
@@ -222,16 +238,20 @@ def learn(
     style = config.style
     if layouts is None:
         style, layouts = style_layouts(style, catalog)
-    rid = run_id(config.strategy, config.perception, config.seed, config.room_budget_s)
+    detector = config.detector_model(catalog) if perceive is None else None
+    label = perception_label(config.perception, detector, config.confirm)
+    rid = run_id(config.strategy, label, config.seed, config.room_budget_s)
     t_wall = time.perf_counter()
-    summary = Summary(rid, room_budget_s=config.room_budget_s)
+    summary = Summary(rid, room_budget_s=config.room_budget_s,
+                      detector=detector.name if detector is not None else None)  # fmt: skip
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)
         history = RunHistory.load(store, rid, style, kb, strategy)
-        run = Run(catalog, kb, store, strategy, config.perception, style, config.seed, rid,
+        run = Run(catalog, kb, store, strategy, label, style, config.seed, rid,
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
-                  on_choice=on_choice, perceive=perceive)  # fmt: skip
+                  on_choice=on_choice, perceive=perceive, detector=detector,
+                  confirm=config.confirm)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):

@@ -95,6 +95,16 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP,
     )
+    argtypes.add_detector_argument(p)
+    p.add_argument(
+        "--confirm",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="K",
+        help="camera mode: count a related object only once K images of the room detected it "
+        "(default: 1, at once)",
+    )
+    argtypes.add_interval_argument(p)
 
 
 def run_learn(args: argparse.Namespace) -> int:
@@ -115,14 +125,27 @@ def run_learn(args: argparse.Namespace) -> int:
             max_examinations=args.max_examinations,
             progress=not args.no_progress,
             room_budget_s=args.room_budget,
+            detector=args.detector,
+            confirm=args.confirm,
         )
     )
     for line in s.lines():
         print(line)
+    if args.interval != "wilson":
+        print(f"mean interval width ({args.interval}): {_mean_width(args.kb, args.interval):.4f}")
     for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
     return 130 if s.interrupted else 0
+
+
+def _mean_width(kb_path: Path, interval: str) -> float:
+    """The store's mean interval width read with ``interval``."""
+    from knowledge.catalog import load_catalog
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
+        return store.knowledge_base(interval=interval).mean_width()
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
@@ -174,6 +197,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP,
     )
+    argtypes.add_detector_argument(p)
+    argtypes.add_interval_argument(p)
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
 
@@ -199,6 +224,8 @@ def run_bench(args: argparse.Namespace) -> int:
         truth_samples=args.truth_samples,
         alpha=args.alpha,
         room_budget_s=args.room_budget,
+        detector=args.detector,
+        interval=args.interval,
     )
     result = bench_learning(config, args.out, sweep=SweepOptions.from_args(args))
     print(result.table)

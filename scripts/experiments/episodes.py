@@ -23,7 +23,9 @@ import numpy as np
 from agent import search as S
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid
+from agent.perception_modes import DEFAULT_DETECTOR
 from agent.recording import Recorder
+from envs.detector import DetectorModel, load_detector
 from envs.houses import WorldStyle, generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
@@ -48,6 +50,12 @@ class SearchConfig:
         None  # ground-truth JSON of `ctxsearch truth` for the oracle-prior policies
     )
     truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
+    detector: str | None = None  # the detector preset (name or file; None: realistic)
+    interval: str = "wilson"  # how the learned intervals are read: wilson or clustered
+
+    def detector_model(self, catalog: Catalog) -> DetectorModel:
+        """The detector preset, loaded and checked against the catalog (one-line errors)."""
+        return load_detector(self.detector or DEFAULT_DETECTOR, catalog)
 
 
 def split_name(name: str) -> tuple[str, str | None]:
@@ -148,7 +156,7 @@ def load_priors(
     join ``exclude_seeds``), and the ground truth if an oracle-prior policy runs."""
     learned = set(exclude_seeds)
     if kb is None and kb_path is not None:
-        kb, seeds = S.open_knowledge(kb_path, catalog)
+        kb, seeds = S.open_knowledge(kb_path, catalog, interval=config.interval)
         learned |= seeds
     truth = None
     if any(S.POLICIES[split_name(n)[0]].needs == "truth" for n in config.policies):
@@ -167,6 +175,7 @@ class EpisodeRoom:
     world: World
     grid: OccupancyGrid
     seen: ss.SeenMap
+    detector: DetectorModel | None = None  # None: perfect
 
 
 def run_policy(
@@ -191,6 +200,7 @@ def run_policy(
             probs=probs,
             recorder=rec,
             policy=name,
+            detector=room.detector,
         )
         res = S.make_policy(base).run(ctx)
     res.policy = name
@@ -203,13 +213,15 @@ def _search_room(
     catalog: Catalog,
     runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
     progress: Callable[[str], None] | None = None,
+    detector: DetectorModel | None = None,
 ) -> list[S.SearchResult]:
-    """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``."""
+    """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs``
+    with the ``detector`` preset (None: perfect)."""
     layout = generate_layout(style, ep.room_seed, catalog)
     with World(layout, catalog) as world:
         grid = OccupancyGrid.from_layout(layout, world.spec)
         seen = ss.SeenMap.for_room(layout, catalog)
-        room = EpisodeRoom(layout, catalog, world, grid, seen)
+        room = EpisodeRoom(layout, catalog, world, grid, seen, detector)
         out = []
         for name, probs, rec_path in runs:
             res = run_policy(ep, name, room, probs, rec_path)
@@ -226,13 +238,15 @@ def run_episodes(
     style: WorldStyle,
     probs_for: ProbsFor,
     progress: Callable[[str], None] | None = None,
+    detector: DetectorModel | None = None,
 ) -> dict[str, list[S.SearchResult]]:
-    """Run every policy on every episode (one World per episode, shared by the policies)."""
+    """Run every policy on every episode (one World per episode, shared by the policies) with
+    the ``detector`` preset (None: perfect)."""
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
         runs = [(name, probs_for(*split_name(name)), None) for name in policies]
         for name, res in zip(
-            policies, _search_room(ep, style, catalog, runs, progress), strict=True
+            policies, _search_room(ep, style, catalog, runs, progress, detector), strict=True
         ):
             results[name].append(res)
     return results
@@ -276,5 +290,5 @@ def search_once(
         (name, priors.for_policy(*split_name(name)), rec)
         for name, rec in zip(names, records, strict=True)
     ]
-    out = _search_room(ep, style, catalog, runs)
+    out = _search_room(ep, style, catalog, runs, detector=config.detector_model(catalog))
     return OneSearch(ep, out, [Path(p) for p in records if p is not None])
