@@ -40,7 +40,7 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
-from envs.detector import DetectorModel, load_detector
+from envs.detector import DetectorModel, default_or_named
 from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
@@ -130,7 +130,7 @@ class LearnConfig:
         """The camera mode's preset, loaded and checked (None in oracle mode)."""
         if self.perception != "camera":
             return None
-        return load_detector(self.detector or DEFAULT_DETECTOR, catalog)
+        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
 
     def checked(self, own_perception: bool = False) -> LearnConfig:
         """The configuration with the budget as a float; a one-line error for bad values

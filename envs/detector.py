@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from envs.camera import Frame, focal_length
+from envs.camera import Frame, PinholeCamera, focal_length
 from envs.layout import RoomLayout
 from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType
 from knowledge.errors import CtxsearchError
@@ -129,6 +129,15 @@ class DetectorModel:
             if t not in catalog:
                 raise DetectorError(self.path, f"unknown type '{t}'", field="false_positives.types")
         return self
+
+    def restricted_to(self, catalog: Catalog) -> DetectorModel:
+        """The preset without the confusion pairs and false-positive types ``catalog`` lacks
+        (the default preset on a catalog of one's own; a named preset is checked instead)."""
+        return replace(
+            self,
+            confusion=tuple(c for c in self.confusion if c[0] in catalog and c[1] in catalog),
+            fp_types=tuple(t for t in self.fp_types if t in catalog),
+        )
 
     # ---- the model --------------------------------------------------------------------------
     def recall_prob(
@@ -343,6 +352,14 @@ def load_detector(path_or_name: str | Path, catalog: Catalog | None = None) -> D
     return model.check_catalog(catalog) if catalog is not None else model
 
 
+def default_or_named(name: str | Path | None, catalog: Catalog, default: str) -> DetectorModel:
+    """``name``'s preset checked against ``catalog`` (one-line errors), or with None the
+    ``default`` preset restricted to the catalog's types."""
+    if name is None:
+        return load_detector(default).restricted_to(catalog)
+    return load_detector(name, catalog)
+
+
 def detection_rng(seed: int, image_index: int) -> np.random.Generator:
     """The detector's own random stream for one image: the same seed and image, the same draws,
     independent of every other stream of the run."""
@@ -450,6 +467,15 @@ class _Image:
         return (int(cols.min()), int(rows[0]), int(cols.max()), int(rows[-1]))
 
 
+@dataclass(frozen=True)
+class ImageDraws:
+    """What a detector that errs needs for one image: its random stream (``image_rng``) and the
+    camera (an envs.camera.PinholeCamera) to put false positives on surfaces (None: none)."""
+
+    rng: np.random.Generator
+    camera: PinholeCamera | None = None
+
+
 def detect_ids(
     instance_ids: np.ndarray,
     objects: Mapping[int, ObjectInstance],
@@ -459,8 +485,7 @@ def detect_ids(
     camera_position: np.ndarray | None = None,
     fovy_deg: float | None = None,
     model: DetectorModel | None = None,
-    rng: np.random.Generator | None = None,
-    camera: object | None = None,
+    draws: ImageDraws | None = None,
 ) -> list[Detection]:
     """Detections in one segmentation image (H, W) of instance ids (-1: nothing of interest).
 
@@ -468,9 +493,8 @@ def detect_ids(
     is the median ray length of the instance's pixels when ``depth`` (H, W) is given (optical-axis
     depth; with ``fovy_deg`` it is converted to ray length, without it used as is), else the
     distance from ``camera_position`` to the object's bounding box. ``model``: the preset (None:
-    perfect); a model that errs needs its ``rng`` (``image_rng``) and, for false positives, the
-    ``camera`` (an envs.camera.PinholeCamera) and ``depth``. Sorted by pixel count, largest
-    first.
+    perfect); a model that errs needs its ``draws`` (and, for false positives, ``depth`` and the
+    draws' camera). Sorted by pixel count, largest first.
     """
     ids = np.asarray(instance_ids)
     h, w = ids.shape
@@ -485,10 +509,10 @@ def detect_ids(
     if model is None or model.perfect:
         out = _detect_perfect(img, candidates, objects, catalog, camera_position)
     else:
-        if rng is None:
+        if draws is None:
             raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
-        out = _detect_model(img, candidates, objects, catalog, camera_position, model, rng)
-        out += _false_positives(img, model, rng, catalog, camera, depth)
+        out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
+        out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
     out.sort(key=lambda d: (-d.pixels, d.instance_id))
     return out
 
@@ -546,28 +570,32 @@ def _detect_model(
     return out
 
 
+FP_MAX_DEPTH = 10.0  # m: farther pixels (the far plane, through a door into nothing) hold none
+FLOOR_Z = 0.05  # m: a pixel whose point is this low shows the floor
+
+
 def _false_positives(
     img: _Image, model: DetectorModel, rng, catalog: Catalog, camera, depth
 ) -> list[Detection]:
-    """The image's false detections: on a random pixel with valid depth, back-projected with
-    the camera (none without depth or camera). Ids are negative and derived from the stream, so
-    they differ between images."""
+    """The image's false detections, each on a random pixel that shows an object or the floor
+    (clutter stands on surfaces, not on walls), back-projected with the camera (none without
+    depth or camera). Ids are negative and drawn from the stream, so they differ between
+    images."""
     if model.fp_per_image <= 0 or camera is None or depth is None:
         return []
     d = np.asarray(depth, float)
-    valid = np.flatnonzero(np.isfinite(d.ravel()) & (d.ravel() > 0))
+    flat_d = d.ravel()
+    ok = np.isfinite(flat_d) & (flat_d > 0) & (flat_d < FP_MAX_DEPTH)
+    points = np.asarray(camera.backproject(np.where(ok.reshape(d.shape), d, 0.0))).reshape(-1, 3)
+    valid = np.flatnonzero(ok & ((img.flat >= 0) | (points[:, 2] < FLOOR_Z)))
     base = -(1 + 64 * int(rng.integers(1 << 40)))
 
     def sample(r: np.random.Generator):
         if not len(valid):
             return None
         k = int(valid[int(r.integers(len(valid)))])
-        row, col = divmod(k, img.width)
-        f = focal_length(float(camera.fovy_deg), img.height)
-        local = np.array([(col + 0.5 - img.width / 2) / f, -(row + 0.5 - img.height / 2) / f, -1.0])
-        z = float(d.ravel()[k])
-        point = np.asarray(camera.position, float) + (local * z) @ np.asarray(camera.xmat).T
-        return point, z * float(np.linalg.norm(local))
+        dist = float(flat_d[k] * (img.scale[k] if img.scale is not None else 1.0))
+        return points[k], dist
 
     fps = model.false_positives(rng, sample, catalog, base)
     return [Detection(o.id, o.type, o, 0, dist, (0, 0, 0, 0)) for o, dist in fps]
@@ -610,8 +638,7 @@ def detect(
         camera_position=np.asarray(cam.position, float),
         fovy_deg=float(cam.fovy_deg),
         model=model,
-        rng=rng,
-        camera=cam,
+        draws=None if rng is None else ImageDraws(rng, cam),
     )
 
 

@@ -15,7 +15,7 @@ from agent.navigation import OccupancyGrid, nearest_free
 from agent.recording import Recorder
 from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
-from envs.detector import SimDetector, load_detector
+from envs.detector import SimDetector, default_or_named
 from envs.floorplan import layout_dict
 from envs.houses import generate_layout, resolve_style
 from envs.layout import RoomLayout
@@ -268,7 +268,7 @@ class _Viewer:
 
     def __post_init__(self) -> None:
         self.path_xy.append(self.world.pose().xy)
-        model = load_detector(self.config.detector or "realistic", self.catalog)
+        model = default_or_named(self.config.detector, self.catalog, "realistic")
         self.detector = SimDetector(model, self.layout, self.catalog, self.config.seed)
         print(f"detector: {model.name}")
 

@@ -374,6 +374,7 @@ def test_camera_mode_on_the_hand_made_room_with_recording(tmp_path):
     summary, cat = _learn(
         tmp_path,
         perception="camera",
+        detector="perfect",
         record=rrd,
         on_examination=lambda res, kb: order.append((res.choice.obj.type, res.pairs)),
     )
@@ -574,8 +575,8 @@ def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
         base.drive_speed / 2, base.turn_rate / 2, base.pan_rate / 2, base.tilt_rate / 2,
         2 * base.image_cost,
     )  # fmt: skip
-    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera")
-    s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", time_model=slow)
+    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera", detector="perfect")
+    s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", detector="perfect", time_model=slow)
     assert s0.examinations == s1.examinations == 4
     assert s1.sim_s == pytest.approx(2 * s0.sim_s, rel=0.02)
 

@@ -13,6 +13,7 @@ import pytest
 from envs.camera import PinholeCamera, camera_axes
 from envs.detector import (
     Detection,
+    ImageDraws,
     box_distance,
     detect_ids,
     image_rng,
@@ -94,7 +95,7 @@ def test_perfect_preset_is_byte_identical_to_the_old_detector(catalog):
         ][k % 3]
         old = _old_detect_ids(ids, OBJECTS, catalog, **kw)
         for model in (None, perfect):
-            new = detect_ids(ids, OBJECTS, catalog, model=model, camera=_camera(), **kw)
+            new = detect_ids(ids, OBJECTS, catalog, model=model, **kw)
             assert repr(new) == repr(old)  # the same floats to the last bit, the same order
 
 
@@ -106,7 +107,7 @@ def test_perfect_preset_draws_no_random_numbers(catalog):
     ids, depth = _random_image(np.random.default_rng(0))
     perfect = load_detector("perfect", catalog)
     rng = NoDraws(np.random.PCG64(0))
-    detect_ids(ids, OBJECTS, catalog, depth=depth, model=perfect, rng=rng, camera=_camera())
+    detect_ids(ids, OBJECTS, catalog, depth=depth, model=perfect, draws=ImageDraws(rng, _camera()))
 
 
 def _rate(dets_per_image, pred) -> float:
@@ -125,7 +126,7 @@ def test_realistic_recall_rises_with_pixels_and_falls_with_distance(catalog):
         hits = 0
         for i in range(n):
             dets = detect_ids(ids, OBJECTS, catalog, depth=depth, model=model,
-                              rng=image_rng(1, 2, float(i)))  # fmt: skip
+                              draws=ImageDraws(image_rng(1, 2, float(i))))  # fmt: skip
             hits += any(d.instance_id == CUP.id for d in dets)
         return hits / n
 
@@ -152,8 +153,8 @@ def test_confusion_and_false_positives_at_their_rates(catalog):
             catalog,
             depth=depth,
             model=model,
-            rng=image_rng(5, 9, float(i)),
-            camera=_camera(240, 320),
+            draws=ImageDraws(image_rng(5, 9, float(i)), _camera(240, 320)),
+            fovy_deg=45.0,
         )  # fmt: skip
         for i in range(n)
     ]
@@ -166,6 +167,8 @@ def test_confusion_and_false_positives_at_their_rates(catalog):
     assert abs(fp - model.fp_per_image) < 4 * math.sqrt(model.fp_per_image / n)
     fps = [d for dets in images for d in dets if d.instance_id < 0]
     assert {d.type for d in fps} <= set(model.fp_types)
+    # Only on pixels that show an object or the floor (here: the phone's).
+    assert all(d.pose.position[0] > 0 for d in fps)
     assert len({d.instance_id for d in fps}) == len(fps)  # never the same id twice
     # A false positive stands on the surface the image shows: its distance is the pixel's ray.
     cam = _camera(240, 320)
@@ -180,10 +183,8 @@ def test_pose_noise_and_the_same_seed_the_same_detections(catalog):
     ids[0:40, 0:40] = DESK.id
     ids[45:55, 50:60] = CUP.id
     depth = np.full(ids.shape, 1.0, np.float32)
-    a = detect_ids(ids, OBJECTS, catalog, depth=depth, model=model, rng=image_rng(7, 1, 12.5),
-                   camera=_camera())  # fmt: skip
-    b = detect_ids(ids, OBJECTS, catalog, depth=depth, model=model, rng=image_rng(7, 1, 12.5),
-                   camera=_camera())  # fmt: skip
+    a = detect_ids(ids, OBJECTS, catalog, depth=depth, model=model, draws=ImageDraws(image_rng(7, 1, 12.5), _camera()))  # fmt: skip
+    b = detect_ids(ids, OBJECTS, catalog, depth=depth, model=model, draws=ImageDraws(image_rng(7, 1, 12.5), _camera()))  # fmt: skip
     assert repr(a) == repr(b)
     moved = [
         d for d in a if d.instance_id > 0 and d.pose.position != OBJECTS[d.instance_id].position
@@ -196,8 +197,7 @@ def test_pose_noise_and_the_same_seed_the_same_detections(catalog):
             catalog,
             depth=depth,
             model=model,
-            rng=image_rng(7, 1, t),
-            camera=_camera(),
+            draws=ImageDraws(image_rng(7, 1, t), _camera()),
         )  # fmt: skip
         for t in (13.5, 14.5, 15.5)
     ]

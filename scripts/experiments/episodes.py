@@ -25,7 +25,7 @@ from agent import search_space as ss
 from agent.navigation import OccupancyGrid
 from agent.perception_modes import DEFAULT_DETECTOR
 from agent.recording import Recorder
-from envs.detector import DetectorModel, load_detector
+from envs.detector import DetectorModel, default_or_named
 from envs.houses import WorldStyle, generate_layout, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
@@ -55,7 +55,7 @@ class SearchConfig:
 
     def detector_model(self, catalog: Catalog) -> DetectorModel:
         """The detector preset, loaded and checked against the catalog (one-line errors)."""
-        return load_detector(self.detector or DEFAULT_DETECTOR, catalog)
+        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
 
 
 def split_name(name: str) -> tuple[str, str | None]:

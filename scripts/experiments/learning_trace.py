@@ -70,6 +70,7 @@ class TruthTracker:
         if not entries:
             raise CtxsearchError("the ground truth has no entries for this catalog")
         self.alpha = alpha
+        self.entries = entries
         self.p = np.array([float(e["p"]) for e in entries])
         self.key = {(e["relation"], e["type"]): i for i, e in enumerate(entries)}
         refs = sorted({e["ref"] for e in entries})
@@ -168,6 +169,9 @@ class Trace:
     # Under --interval clustered, per such choice: would HIF pick the same type with impact on
     # the effective counts (y/f, n/f)?
     effective_same: list[bool] = field(default_factory=list)
+    # With run_trace(keep_counts=True): the truth entries and their (y, n) after every exam.
+    entries: list[dict] = field(default_factory=list)
+    counts: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
     def at_exam(self, k: int, metric: str) -> float:
         """The metric after examination k (1-based), or NaN past the end."""
@@ -239,8 +243,10 @@ class LearningBenchConfig:
 class _Hooks:
     """``learn``'s callbacks of one traced run: they fill ``trace``."""
 
-    def __init__(self, trace: Trace, tracker: TruthTracker, generate, catalog: Catalog):
-        self.trace, self.tracker, self.generate = trace, tracker, generate
+    def __init__(
+        self, trace: Trace, tracker: TruthTracker, generate, catalog: Catalog, keep: bool = False
+    ):
+        self.trace, self.tracker, self.generate, self.keep = trace, tracker, generate, keep
         self.order = {t: i for i, t in enumerate(catalog.type_names)}
 
     def layouts(self, index, seed):
@@ -286,6 +292,8 @@ class _Hooks:
         tr.sim_s.append(res.sim_time)
         for k, v in self.tracker.metrics().items():
             tr.metrics[k].append(v)
+        if self.keep:
+            tr.counts.append((self.tracker.y.copy(), self.tracker.n.copy()))
 
 
 def run_trace(
@@ -295,14 +303,18 @@ def run_trace(
     truth: dict,
     catalog: Catalog,
     workdir: Path,
+    keep_counts: bool = False,
 ) -> Trace:
-    """One learn run of ``strategy`` in a fresh store, measured after every examination."""
+    """One learn run of ``strategy`` in a fresh store, measured after every examination
+    (``keep_counts``: also the truth entries' counts after every examination, in the trace)."""
     rooms, perception, alpha = config.rooms, config.perception, config.alpha
     room_budget_s = config.room_budget_s
     tracker = TruthTracker(truth, catalog, alpha, config.interval)
     tr = Trace(initial=tracker.metrics())
     style, generate = style_layouts(config.style, catalog)
-    hooks = _Hooks(tr, tracker, generate, catalog)
+    hooks = _Hooks(tr, tracker, generate, catalog, keep_counts)
+    if keep_counts:
+        tr.entries = list(tracker.entries)
     layouts, on_exam, on_choice = hooks.layouts, hooks.on_exam, hooks.on_choice
     t0 = time.perf_counter()
     summary = learn(
