@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,6 +30,16 @@ from knowledge.geometry import ObjectInstance
 
 PERCEPTION_MODES = ("camera", "oracle")
 DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors)
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """Camera mode's detector settings: the preset (None: perfect), the run's seed its stream
+    derives from, and how many images of a room must detect an object before it counts."""
+
+    detector: DetectorModel | None = None
+    seed: int = 0
+    confirm: int = 1
 
 
 def perception_label(mode: str, detector: DetectorModel | None, confirm: int = 1) -> str:
@@ -254,9 +264,7 @@ class CameraPerception:
         width: int = 320,
         height: int = 240,
         rgb: bool = False,
-        detector: DetectorModel | None = None,
-        seed: int = 0,
-        confirm: int = 1,
+        sensing: Sensing | None = None,
     ):
         # Imported here: MuJoCo and dm_control add about 0.3 s to the start of every run (measured:
         # `import envs.world` 1.1 s against 0.8 s for numpy and scipy), which oracle runs never use.
@@ -266,9 +274,10 @@ class CameraPerception:
         self.body = World(
             layout, catalog, width=width, height=height, spec=spec, time_model=time_model
         )
-        model = detector if detector is not None else load_detector("perfect")
-        self.detector = SimDetector(model, layout, catalog, seed)
-        self.confirm = int(confirm)
+        sensing = sensing or Sensing()
+        model = sensing.detector if sensing.detector is not None else load_detector("perfect")
+        self.detector = SimDetector(model, layout, catalog, sensing.seed)
+        self.confirm = int(sensing.confirm)
         self._sightings: dict[int, Counter[str]] = {}
         self.last_detections: Sequence[Detection] = ()
 
@@ -310,17 +319,12 @@ def make_perception(
     spec: RobotSpec,
     time_model: TimeModel,
     rgb: bool = False,
-    detector: DetectorModel | None = None,
-    seed: int = 0,
-    confirm: int = 1,
+    sensing: Sensing | None = None,
 ) -> Perception:
-    """A perception mode by name ('camera' or 'oracle'); ``detector``, ``seed`` and ``confirm``
-    are the camera mode's (CameraPerception; the oracle has no detector)."""
+    """A perception mode by name ('camera' or 'oracle'); ``sensing`` is the camera mode's
+    detector (CameraPerception; the oracle has none)."""
     if mode == "oracle":
         return OraclePerception(layout, catalog, spec, time_model)
     if mode == "camera":
-        return CameraPerception(
-            layout, catalog, spec, time_model, rgb=rgb, detector=detector, seed=seed,
-            confirm=confirm,
-        )  # fmt: skip
+        return CameraPerception(layout, catalog, spec, time_model, rgb=rgb, sensing=sensing)
     raise CtxsearchError(f"unknown perception mode '{mode}' (known: {', '.join(PERCEPTION_MODES)})")

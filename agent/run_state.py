@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.interfaces import Perception
-from agent.perception_modes import make_perception
+from agent.perception_modes import Sensing, make_perception
 from agent.strategies import Choice, Strategy
 from envs.detector import DetectorModel
 from envs.layout import RoomLayout
@@ -93,5 +93,5 @@ class Run:
             return self.perceive(layout, self.catalog, self.spec, self.time_model, rgb)
         mode = self.perception.split("+")[0]
         return make_perception(mode, layout, self.catalog, self.spec, self.time_model, rgb=rgb,
-                               detector=self.detector, seed=self.seed,
-                               confirm=self.confirm)  # fmt: skip
+                               sensing=Sensing(self.detector, self.seed,
+                                               self.confirm))  # fmt: skip

@@ -204,18 +204,20 @@ class _PathMeter(WrappedBody):
 
 @dataclass(frozen=True)
 class RoomMaps:
-    """Maps of a room built once and shared by the policies run in it: the occupancy grid and
-    the seen map's lattice (each policy gets a copy of the seen map)."""
+    """Maps of a room built once and shared by the policies run in it: the occupancy grid, the
+    seen map's lattice (each policy gets a copy of the seen map) and the detector preset its
+    images are read with (None: perfect)."""
 
     grid: OccupancyGrid
     seen: ss.SeenMap
+    detector: DetectorModel | None = None
 
 
 class SearchContext:
     """One policy's run of one episode on a built world: the body (an agent.interfaces ``Body``,
     e.g. an envs.world.World), the map, what has been seen, what is known, the clock, the trace
     and the recording. ``maps`` defaults to the maps of ``layout``; images are read by the
-    simulated detector (envs.detector: the preset ``detector``, None: perfect, its stream seeded
+    simulated detector (envs.detector: the maps' preset, None: perfect, its stream seeded
     by the room and the image's simulated second) against the layout's poses. Success needs the
     detection of a true instance of the target: a false positive or a look-alike reported as
     the target ends the search as a failure."""
@@ -231,7 +233,6 @@ class SearchContext:
         probs: ss.ProbabilitySource | None = None,
         recorder: Recorder | None = None,
         policy: str = "?",
-        detector: DetectorModel | None = None,
     ):
         self.episode, self.layout, self.catalog = episode, layout, catalog
         self.spec: RobotSpec = body.spec
@@ -242,7 +243,8 @@ class SearchContext:
         self.recorder = recorder or Recorder(None)
         self.policy = policy
         self.width, self.height = int(body.width), int(body.height)
-        sim = SimDetector(detector or load_detector("perfect"), layout, catalog, layout.seed)
+        model = maps.detector if maps is not None else None
+        sim = SimDetector(model or load_detector("perfect"), layout, catalog, layout.seed)
         self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: sim(
             frame, float(self.body.sim_time)
         )

@@ -196,11 +196,10 @@ def run_policy(
             layout,
             catalog,
             world,
-            maps=S.RoomMaps(grid, seen),
+            maps=S.RoomMaps(grid, seen, room.detector),
             probs=probs,
             recorder=rec,
             policy=name,
-            detector=room.detector,
         )
         res = S.make_policy(base).run(ctx)
     res.policy = name
