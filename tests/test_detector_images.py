@@ -227,3 +227,26 @@ def test_a_model_needs_its_rng(catalog):
     ids, depth = _random_image(np.random.default_rng(1))
     with pytest.raises(ValueError, match="rng"):
         detect_ids(ids, OBJECTS, catalog, depth=depth, model=model)
+
+
+@pytest.mark.render
+def test_a_resumed_realistic_run_equals_an_uninterrupted_one(tmp_path, catalog):
+    from agent.learning import LearnConfig, learn
+    from knowledge.store import EvidenceStore
+
+    def run(path, limit):
+        cfg = LearnConfig("office", 1, path, perception="camera", progress=False,
+                          max_examinations=limit)  # fmt: skip
+        return learn(cfg, catalog=catalog)
+
+    whole = run(tmp_path / "a.sqlite", 6)
+    assert whole.run == "hif/camera+realistic/seed=0" and whole.detector == "realistic"
+    run(tmp_path / "b.sqlite", 3)
+    resumed = run(tmp_path / "b.sqlite", 3)  # replays 3 (with images), then 3 new
+    assert resumed.examinations == 3
+
+    def rows(path):
+        with EvidenceStore.open(path, catalog, read_only=True) as st:
+            return [(e.object_id, e.type, e.related, e.sim_time) for e in st.examinations()]
+
+    assert rows(tmp_path / "a.sqlite") == rows(tmp_path / "b.sqlite")

@@ -131,3 +131,33 @@ def test_bench_learning_clustered_writes_coverage_informative(tmp_path):
     )
     md = (out / "learning.md").read_text()
     assert md.index("Informative coverage") < md.index("## Coverage")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["learn", "--style", "office", "--rooms", "1", "--kb", "KB"],
+        ["bench", "learning", "--rooms", "1", "--seeds", "1", "--strategies", "hif",
+         "--perception", "camera", "--out", "OUT"],
+        ["search", "--kb", "KB", "--style", "office", "--target", "Cup", "--policy", "exhaustive"],
+        ["bench", "search", "--kb", "KB", "--episodes", "1", "--policies", "exhaustive",
+         "--out", "OUT"],
+        ["room", "--style", "office", "--views", "0", "--out", "OUT"],
+    ],
+)  # fmt: skip
+def test_a_bad_detector_file_gets_the_one_line_error(tmp_path, capsys, argv):
+    from scripts.cli import main
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text('kind = "model"\n[recall]\nmax_recall = 2.0\n')
+    kb = tmp_path / "kb.sqlite"
+    if argv[0] in ("search", "bench"):
+        main(["learn", "--style", "office", "--rooms", "1", "--perception", "oracle",
+              "--kb", str(kb), "--no-progress"])  # fmt: skip
+        capsys.readouterr()
+    argv = [str(kb) if a == "KB" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    assert main([*argv, "--detector", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("ctxsearch: error: ")
+    assert str(bad) in err and "max_recall" in err
+    assert not (argv[0] == "learn" and kb.exists())  # nothing learned, nothing created

@@ -47,6 +47,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from agent.perception_modes import DEFAULT_DETECTOR
+from envs.detector import default_or_named
 from envs.truth import ground_truth
 from knowledge.catalog import Catalog, load_catalog
 from scripts.experiments.learning_report import decision_stats, markdown, plot
@@ -81,6 +83,8 @@ def bench_learning(
     """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png; the
     (strategy, seed) runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
     catalog = load_catalog()
+    if config.perception == "camera":  # a bad preset: the one-line error before any run
+        default_or_named(config.detector, catalog, DEFAULT_DETECTOR)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
