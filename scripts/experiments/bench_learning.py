@@ -51,8 +51,9 @@ from agent.perception_modes import DEFAULT_DETECTOR
 from envs.detector import default_or_named
 from envs.truth import ground_truth
 from knowledge.catalog import Catalog, load_catalog
-from scripts.experiments.learning_report import decision_stats, markdown, plot
+from scripts.experiments.learning_report import decision_stats, fmt, markdown, plot
 from scripts.experiments.learning_trace import (
+    EXAM_MARKS,
     METRICS,
     WILSON_METRICS,
     LearningBenchConfig,
@@ -96,6 +97,8 @@ def bench_learning(
         f"perception{c.budget_note}, detector {c.detector_name}, {c.interval} intervals"
     )
     table = markdown(title, traces, data["truth_samples"], c.alpha, c.room_budget_s)
+    if c.interval == "clustered":
+        table += _wilson_beside(traces)
     files = [out / "learning.json", out / "learning.md", out / "learning.png"]
     files[0].write_text(json.dumps(data, indent=1) + "\n")
     files[1].write_text(table)
@@ -171,6 +174,36 @@ def _data(config: LearningBenchConfig, truth: dict, traces: dict[str, list[Trace
             for s, ts in traces.items()
         },
     }
+
+
+def _wilson_beside(traces: dict[str, list[Trace]]) -> str:
+    """learning.md's section under --interval clustered: clustered against the paper's Wilson on
+    the same evidence at the examination marks, and how often HIF on the effective counts picks
+    what HIF picks."""
+    lines = [
+        "",
+        "## Clustered against Wilson (same evidence)",
+        "",
+        "| strategy | figure | " + " | ".join(f"{k} exams" for k in EXAM_MARKS) + " |",
+        "|---" * (2 + len(EXAM_MARKS)) + "|",
+    ]
+    pairs = (
+        ("coverage_informative", "wilson_coverage_informative"),
+        ("mean_width", "wilson_mean_width"),
+        ("mean_abs_error", "wilson_mean_abs_error"),
+    )
+    for name, ts in traces.items():
+        for clustered, wilson in pairs:
+            for label, key in (
+                (f"{clustered} clustered", clustered),
+                (f"{clustered} wilson", wilson),
+            ):
+                cells = [fmt([t.at_exam(k, key) for t in ts]) for k in EXAM_MARKS]
+                lines.append(f"| {name} | {label} | " + " | ".join(cells) + " |")
+        same = _share([x for t in ts for x in t.effective_same])
+        if same is not None:
+            lines.append(f"| {name} | HIF on effective counts picks the same type | {same:.1%} |")
+    return "\n".join(lines) + "\n"
 
 
 def _share(flags: list[bool]) -> float | None:
