@@ -32,7 +32,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes (about 15 minutes on 2 cores).
+# Regenerates every result the README quotes (about 40 minutes on 2 cores).
 STRATEGIES := hif,random,round-robin,nearest,fewest,expected-hif,cost-hif
 POLICIES := exhaustive,location,indirect,oracle-prior,oracle
 bench: $(STAMP)
@@ -45,8 +45,11 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget
 	rm -f build/kb_office.sqlite && mkdir -p build
 	$(VENV)/bin/ctxsearch learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
-	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --out results/search
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
+	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
+# Detector x interval against the truth, camera mode (about 22 minutes on 2 shared cores).
+	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

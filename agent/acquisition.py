@@ -272,6 +272,8 @@ class RoomLearner:
         """Lines 15-16: execute the planned gazes, detect, decide the relations. With ``stored``
         (a replay) the motions are made, images are not taken, and the stored result is used."""
         self.log.examine_start(self, obj, gazes)
+        if stored is not None and self._replays_by_images():
+            return self._reexamine(obj, stored, gazes)
         if stored is not None:
             # A built map needs the depth images (the same clock: World.capture charges what
             # ReplayBody does); the given map needs none.
@@ -290,6 +292,25 @@ class RoomLearner:
                 seen.update((o.id, o) for o in objs)
                 self.log.frame(self, frame, objs, purpose="examine")
         return self.perception.related(obj, list(seen.values()))
+
+    def _replays_by_images(self) -> bool:
+        """A detector that errs reports poses and objects (false positives, look-alikes) the
+        store does not hold (and ``confirm`` counts sightings): such a replay takes the images
+        again (the same draws: the stream is keyed by the image's simulated second) instead of
+        reading the stored relations."""
+        det, run = self.run.detector, self.run
+        return run.perceive is None and ((det is not None and not det.perfect) or run.confirm > 1)
+
+    def _reexamine(self, obj: ObjectInstance, stored: StoredExam, gazes: Sequence[Gaze]) -> Related:
+        """A replayed examination made again with images, checked against the store."""
+        seen: dict[int, ObjectInstance] = {}
+        for gaze in gazes:
+            frame = execute_gaze(self.body, self.grid, gaze, rgb=self.log.recording, depth=True)
+            seen.update((o.id, o) for o in self.perception.see(frame))
+        related = self.perception.related(obj, list(seen.values()))
+        if sorted({(r, o.type, o.id) for r, o in related}) != sorted(set(stored.related)):
+            raise resume_error(self.layout, f"examination of object {obj.id} saw other objects")
+        return related
 
     def _record(self, choice: Choice, related: Related, stored: StoredExam | None) -> None:
         """Lines 17-20: one store transaction (not for a replayed examination), then the same

@@ -15,8 +15,8 @@ from typing import Protocol
 
 import numpy as np
 
-from agent.perception import Detection
 from envs.camera import Frame
+from envs.detector import Detection
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from knowledge.geometry import ObjectInstance
 

@@ -32,7 +32,7 @@ from agent.acquisition import RoomLearner
 from agent.frontiers import FRONTIER_RULES
 from agent.learn_log import RunLog
 from agent.mapping import MAP_MODES, default_map_mode
-from agent.perception_modes import PERCEPTION_MODES
+from agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
 from agent.resume import RunHistory
 from agent.run_state import (
     ROOM_DONE,
@@ -42,6 +42,7 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
+from envs.detector import DetectorModel, default_or_named
 from envs.floorplan import generate_layout
 from envs.houses import resolve_style
 from envs.layout import RoomLayout
@@ -119,6 +120,9 @@ class LearnConfig:
     (agent.mapping.MAP_MODES; None: ``built`` for the camera, ``given`` otherwise); the oracle
     perception needs ``given``. ``frontier_rule`` picks frontier goals on a built map
     (agent.frontiers).
+    ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
+    ``confirm``: camera mode counts an object as related once that many images of the room
+    detected it (1: at once, Figure 2 as published).
     """
 
     style: str
@@ -136,11 +140,19 @@ class LearnConfig:
     time_model: TimeModel = field(default_factory=TimeModel)
     map_mode: str | None = None
     frontier_rule: str = "info"
+    detector: str | None = None
+    confirm: int = 1
 
     @property
     def map_used(self) -> str:
         """The map mode the run uses (``map_mode`` or the perception's default)."""
         return self.map_mode or default_map_mode(self.perception)
+
+    def detector_model(self, catalog: Catalog) -> DetectorModel | None:
+        """The camera mode's preset, loaded and checked (None in oracle mode)."""
+        if self.perception != "camera":
+            return None
+        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
 
     def checked(self, own_perception: bool = False) -> LearnConfig:
         """The configuration with the budget as a float; a one-line error for bad values
@@ -161,6 +173,8 @@ class LearnConfig:
                 raise CtxsearchError(
                     f"room budget must be a positive number of seconds, got {budget}"
                 )
+        if self.confirm < 1:
+            raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
         if not own_perception and self.perception not in PERCEPTION_MODES:
             raise CtxsearchError(
                 f"unknown perception mode '{self.perception}' "
@@ -201,6 +215,7 @@ class Summary:
     room_budget_s: float | None = None  # simulated seconds per room (None: no limit)
     rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
     map_mode: str = "given"  # the grid the robot planned on (agent.mapping.MAP_MODES)
+    detector: str | None = None  # camera mode's detector preset (None: the oracle has none)
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -212,6 +227,7 @@ class Summary:
         return [
             f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
             f"map: {self.map_mode}",
+            f"detector: {self.detector or 'none (oracle perception reads the layout)'}",
             f"examinations: {self.examinations} now, {self.total_examinations} in the store",
             f"types seen: {self.types_seen}; mean interval width: {self.mean_width:.4f}",
             f"time: {self.wall_s:.1f} s wall, {self.sim_s:.1f} s simulated; "
@@ -257,17 +273,21 @@ def learn(
     if layouts is None:
         style, layouts = style_layouts(style, catalog)
     map_mode = config.map_used
-    rid = run_id(config.strategy, config.perception, config.seed, config.room_budget_s, map_mode)
+    detector = config.detector_model(catalog) if perceive is None else None
+    label = perception_label(config.perception, detector, config.confirm)
+    rid = run_id(config.strategy, label, config.seed, config.room_budget_s, map_mode)
     t_wall = time.perf_counter()
-    summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode)
+    summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode,
+                      detector=detector.name if detector is not None else None)  # fmt: skip
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)
         history = RunHistory.load(store, rid, style, kb, strategy)
-        run = Run(catalog, kb, store, strategy, config.perception, style, config.seed, rid,
+        run = Run(catalog, kb, store, strategy, label, style, config.seed, rid,
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
                   on_choice=on_choice, perceive=perceive, map_mode=map_mode,
-                  frontier_rule=config.frontier_rule)  # fmt: skip
+                  frontier_rule=config.frontier_rule, detector=detector,
+                  confirm=config.confirm)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):

@@ -1,7 +1,9 @@
 """Perception modes of the learning loop (agent.acquisition): what one image recognizes and which
 objects an examined object is related to, and the body whose motions and images are charged.
 
-``camera`` renders segmentation in MuJoCo (envs.world) and runs the detector (agent.perception);
+``camera`` renders segmentation in MuJoCo (envs.world) and runs the detector (envs.detector, a
+preset: ``realistic`` by default, ``perfect`` the exact threshold detector; with ``confirm`` k,
+an object counts as related only once k images of the room detected it);
 ``oracle`` reads relations from the true layout and decides what a look-around recognizes
 geometrically (type's max_range, inside the frustum, clear line of sight past furniture boxes),
 without rendering, on a ``KinematicBody``. Both charge the same ``TimeModel`` seconds for the same
@@ -10,13 +12,15 @@ planned drives, head moves and images, so simulated time is comparable.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from agent.interfaces import Perception
-from agent.perception import Detection, detect, objects_by_id
 from envs.camera import Frame, camera_axes, half_fov_tangents, in_frustum
+from envs.detector import Detection, DetectorModel, SimDetector, load_detector
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from knowledge import geometry
@@ -25,6 +29,27 @@ from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
 
 PERCEPTION_MODES = ("camera", "oracle")
+DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors)
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """Camera mode's detector settings: the preset (None: perfect), the run's seed its stream
+    derives from, and how many images of a room must detect an object before it counts."""
+
+    detector: DetectorModel | None = None
+    seed: int = 0
+    confirm: int = 1
+
+
+def perception_label(mode: str, detector: DetectorModel | None, confirm: int = 1) -> str:
+    """The perception's name in run keys and results: the mode, and in camera mode the detector
+    unless it is the perfect one (so runs made before detector models keep their keys) and the
+    confirmation count if above 1."""
+    if mode != "camera" or detector is None:
+        return mode
+    label = mode if detector.perfect else f"{mode}+{detector.name}"
+    return label if confirm <= 1 else f"{label}+confirm{confirm}"
 
 
 # =========================================================================== the oracle's body
@@ -222,7 +247,10 @@ def _points_in_boxes(pts: np.ndarray, boxes: geometry.BoxArray) -> np.ndarray:
 
 
 class CameraPerception:
-    """Rendered segmentation in MuJoCo and the detector (agent.perception)."""
+    """Rendered segmentation in MuJoCo and the detector (envs.detector): the preset ``detector``
+    (None: perfect) with its stream seeded by the run's ``seed``, the room and the image; with
+    ``confirm`` k > 1, ``related`` counts only objects k images of this room detected, under the
+    type most of them reported."""
 
     name = "camera"
     reads_truth = False
@@ -236,6 +264,7 @@ class CameraPerception:
         width: int = 320,
         height: int = 240,
         rgb: bool = False,
+        sensing: Sensing | None = None,
     ):
         # Imported here: MuJoCo and dm_control add about 0.3 s to the start of every run (measured:
         # `import envs.world` 1.1 s against 0.8 s for numpy and scipy), which oracle runs never use.
@@ -245,21 +274,38 @@ class CameraPerception:
         self.body = World(
             layout, catalog, width=width, height=height, spec=spec, time_model=time_model
         )
-        self._objects = objects_by_id(layout)
+        sensing = sensing or Sensing()
+        model = sensing.detector if sensing.detector is not None else load_detector("perfect")
+        self.detector = SimDetector(model, layout, catalog, sensing.seed)
+        self.confirm = int(sensing.confirm)
+        self._sightings: dict[int, Counter[str]] = {}
         self.last_detections: Sequence[Detection] = ()
 
     def see(self, frame: Frame | None) -> list[ObjectInstance]:
-        """The detector's objects (poses read from the simulator) in a captured frame."""
+        """The detector's objects (their estimated poses) in a captured frame."""
         if frame is None:
             raise CtxsearchError("camera perception needs an image (the body rendered none)")
-        self.last_detections = detect(frame, self._objects, self.catalog)
+        self.last_detections = self.detector(frame, self.body.sim_time)
+        if self.confirm > 1:
+            for d in self.last_detections:
+                self._sightings.setdefault(d.instance_id, Counter())[d.type] += 1
         return [d.pose for d in self.last_detections]
 
     def related(
         self, obj: ObjectInstance, seen: Sequence[ObjectInstance]
     ) -> list[tuple[str, ObjectInstance]]:
-        """RELATED-OBJECTS/-TYPES from the detected poses."""
+        """RELATED-OBJECTS/-TYPES from the detected poses (confirmed ones, with ``confirm``)."""
+        if self.confirm > 1:
+            seen = [c for c in (self._confirmed(o) for o in seen) if c is not None]
         return geometry.related(self.catalog, obj, seen)
+
+    def _confirmed(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """``obj`` under its majority type if ``confirm`` images detected it, else None."""
+        counts = self._sightings.get(obj.id)
+        if counts is None or sum(counts.values()) < self.confirm:
+            return None
+        best = max(sorted(counts), key=counts.__getitem__)
+        return obj if best == obj.type else replace(obj, type=best)
 
     def close(self) -> None:
         """Release the renderer."""
@@ -273,10 +319,12 @@ def make_perception(
     spec: RobotSpec,
     time_model: TimeModel,
     rgb: bool = False,
+    sensing: Sensing | None = None,
 ) -> Perception:
-    """A perception mode by name ('camera' or 'oracle')."""
+    """A perception mode by name ('camera' or 'oracle'); ``sensing`` is the camera mode's
+    detector (CameraPerception; the oracle has none)."""
     if mode == "oracle":
         return OraclePerception(layout, catalog, spec, time_model)
     if mode == "camera":
-        return CameraPerception(layout, catalog, spec, time_model, rgb=rgb)
+        return CameraPerception(layout, catalog, spec, time_model, rgb=rgb, sensing=sensing)
     raise CtxsearchError(f"unknown perception mode '{mode}' (known: {', '.join(PERCEPTION_MODES)})")

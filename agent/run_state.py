@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.interfaces import Perception
-from agent.perception_modes import make_perception
+from agent.perception_modes import Sensing, make_perception
 from agent.strategies import Choice, Strategy
+from envs.detector import DetectorModel
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
@@ -85,10 +86,14 @@ class Run:
     perceive: PerceptionFactory | None = None  # None: the mode ``perception`` names
     map_mode: str = "given"  # agent.mapping.MAP_MODES: the true layout's grid or the robot's own
     frontier_rule: str = "info"  # agent.frontiers.FRONTIER_RULES (built maps only)
+    detector: DetectorModel | None = None  # camera mode's preset (None: perfect)
+    confirm: int = 1  # camera mode: images of a room that must detect an object to count it
 
     def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
         """The robot's perception (and body) in the room ``layout``."""
         if self.perceive is not None:
             return self.perceive(layout, self.catalog, self.spec, self.time_model, rgb)
-        return make_perception(self.perception, layout, self.catalog, self.spec,
-                               self.time_model, rgb=rgb)  # fmt: skip
+        mode = self.perception.split("+")[0]
+        return make_perception(mode, layout, self.catalog, self.spec, self.time_model, rgb=rgb,
+                               sensing=Sensing(self.detector, self.seed,
+                                               self.confirm))  # fmt: skip

@@ -1,7 +1,7 @@
 """Object search with learned context (paper, section 3): the policies and one episode's run.
 
 An *episode* (``Episode``) is a room (style and seed), a start pose, a target type and a time
-budget in simulated seconds. It ends when the detector (agent.perception, on rendered
+budget in simulated seconds. It ends when the detector (envs.detector, on rendered
 segmentation) reports an instance of the target type, or when the budget is spent. Every policy
 drives, moves the head and takes images through the same World, so the seconds are the one
 TimeModel's (envs.robot_spec) and comparable across policies.
@@ -61,10 +61,10 @@ import numpy as np
 from agent import search_space as ss
 from agent.interfaces import Body, WrappedBody
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from agent.perception import Detection, detect, objects_by_id
 from agent.recording import Recorder
 from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
 from envs.camera import Frame, frustum_mask
+from envs.detector import Detection, DetectorModel, SimDetector, load_detector
 from envs.houses import WorldStyle
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
@@ -206,29 +206,40 @@ class _PathMeter(WrappedBody):
 @dataclass(frozen=True)
 class RoomMaps:
     """What the robot is given of a room before it searches it, built once and shared by the
-    policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy)
-    and the furniture poses the location constraint may assume."""
+    policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy),
+    the furniture poses the location constraint may assume, and the detector preset its images
+    are read with (None: perfect)."""
 
     grid: OccupancyGrid
     seen: ss.SeenMap
     furniture: tuple[ObjectInstance, ...] = ()
+    detector: DetectorModel | None = None
 
     @classmethod
-    def given(cls, layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> RoomMaps:
+    def given(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
         """The ``given`` map scenario: the maps of the true layout (walls, furniture poses).
         This, the simulated sensor and the oracle policies are the only places a search reads
         the true layout."""
         furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
         grid = OccupancyGrid.from_layout(layout, spec)
-        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture)
+        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture, detector)
 
 
 class SearchContext:
     """One policy's run of one episode on a built world: the body (an agent.interfaces ``Body``,
     e.g. an envs.world.World), the map, what has been seen, what is known, the clock, the trace
     and the recording. ``maps`` defaults to ``RoomMaps.given(layout, ...)``; ``truth`` (the true
-    layout) is read only by the simulated detector (agent.perception), which renders what the
-    body's images show against the layout's poses, and by the oracle policies."""
+    layout) is read only by the simulated detector (envs.detector: the maps' preset, None:
+    perfect, its stream seeded by the room and the image's simulated second), which reads what
+    the body's images show against the layout's poses, and by the oracle policies. Success needs
+    the detection of a true instance of the target: a false positive or a look-alike reported as
+    the target ends the search as a failure."""
 
     def __init__(
         self,
@@ -252,9 +263,11 @@ class SearchContext:
         self.recorder = recorder or Recorder(None)
         self.policy = policy
         self.width, self.height = int(body.width), int(body.height)
-        objs = objects_by_id(layout)
-        self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: detect(
-            frame, objs, catalog
+        sim = SimDetector(
+            self.maps.detector or load_detector("perfect"), layout, catalog, layout.seed
+        )
+        self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: sim(
+            frame, float(self.body.sim_time)
         )
         self.seen = self.maps.seen.copy()
         self.target = episode.target
@@ -533,11 +546,12 @@ class SearchContext:
         """The episode's outcome so far."""
         found = self.found_id is not None
         t = self.found_at if found else self.elapsed
+        true_ids = {o.id for o in self.truth.objects if o.type == self.target}  # the sensor's truth
         return SearchResult(
             self.policy,
             self.episode.index,
             self.target,
-            found,
+            found and self.found_id in true_ids,
             self.found_id,
             float(t),
             len(self.trace),
@@ -874,8 +888,9 @@ def nearest_free_start(grid: OccupancyGrid, pose: RobotPose) -> RobotPose:
 
 
 # =========================================================================== knowledge and truth
-def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
-    """The knowledge base of the evidence store at ``path`` and the room seeds it learned in.
+def open_knowledge(path, catalog: Catalog, alpha: float | None = None, interval: str = "wilson"):
+    """The knowledge base of the evidence store at ``path`` and the room seeds it learned in
+    (its intervals read with ``interval``: wilson or clustered).
 
     One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
     from the store), a store without examinations."""
@@ -885,7 +900,7 @@ def open_knowledge(path, catalog: Catalog, alpha: float | None = None):
             f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
         )
     with EvidenceStore.open(p, catalog, alpha=alpha, read_only=True) as store:
-        kb = store.knowledge_base()
+        kb = store.knowledge_base(interval=interval)
         learned = _learned_seeds(store)
     if kb.total_examinations == 0:
         raise CtxsearchError(

@@ -66,9 +66,9 @@ import numpy as np
 from scipy import sparse
 
 from agent.navigation import OccupancyGrid, nearest_free
-from agent.perception import min_pixels_at
 from agent.viewplan import facing_for
 from envs.camera import PinholeCamera, focal_length, frustum_mask
+from envs.detector import min_pixels_at
 from envs.layout import RoomLayout
 from envs.parts import world_parts_array
 from envs.robot_spec import RobotSpec, TimeModel, wrap_angle

@@ -26,14 +26,17 @@ DetectorError naming the file and the field.
 
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from envs.camera import Frame, PinholeCamera, focal_length
+from envs.layout import RoomLayout
 from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
@@ -125,6 +128,15 @@ class DetectorModel:
             if t not in catalog:
                 raise DetectorError(self.path, f"unknown type '{t}'", field="false_positives.types")
         return self
+
+    def restricted_to(self, catalog: Catalog) -> DetectorModel:
+        """The preset without the confusion pairs and false-positive types ``catalog`` lacks
+        (the default preset on a catalog of one's own; a named preset is checked instead)."""
+        return replace(
+            self,
+            confusion=tuple(c for c in self.confusion if c[0] in catalog and c[1] in catalog),
+            fp_types=tuple(t for t in self.fp_types if t in catalog),
+        )
 
     # ---- the model --------------------------------------------------------------------------
     def recall_prob(
@@ -339,6 +351,14 @@ def load_detector(path_or_name: str | Path, catalog: Catalog | None = None) -> D
     return model.check_catalog(catalog) if catalog is not None else model
 
 
+def default_or_named(name: str | Path | None, catalog: Catalog, default: str) -> DetectorModel:
+    """``name``'s preset checked against ``catalog`` (one-line errors), or with None the
+    ``default`` preset restricted to the catalog's types."""
+    if name is None:
+        return load_detector(default).restricted_to(catalog)
+    return load_detector(name, catalog)
+
+
 def detection_rng(seed: int, image_index: int) -> np.random.Generator:
     """The detector's own random stream for one image: the same seed and image, the same draws,
     independent of every other stream of the run."""
@@ -368,3 +388,277 @@ def keep(
     if rng is None:
         raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
     return rng.random(len(probs)) < probs
+
+
+# ============================================================================= detection
+# From a segmentation frame to detections (paper, section 4: recognition and pose estimation
+# are assumed; what the robot cannot assume is *seeing* an object). The renderer labels every
+# pixel with the instance id of the object it shows (-1: wall, floor, robot, nothing); occlusion
+# comes from the rendering. An instance's distance is the median, over its visible pixels, of the
+# Euclidean camera-to-surface distance (the depth image holds distance along the optical axis;
+# each pixel's ray length follows from the intrinsics); without a depth image, the distance from
+# the camera to the nearest point of its bounding box. The preset then decides what is reported:
+# the perfect one keeps an instance iff it has its type's min_pixels within max_range, with the
+# simulator's pose; a model keeps it with its recall, may report a look-alike type, perturbs its
+# pose and adds false positives on surfaces the image shows.
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detection: instance id (negative: a false positive), the reported type, the estimated
+    pose (the simulator's for the perfect detector), visible pixels, distance (m) from the camera,
+    and the pixel bounding box (x0, y0, x1, y1), inclusive."""
+
+    instance_id: int
+    type: str
+    pose: ObjectInstance
+    pixels: int
+    distance: float
+    bbox: tuple[int, int, int, int]
+
+
+@functools.lru_cache(maxsize=8)
+def ray_scale(width: int, height: int, fovy_deg: float) -> np.ndarray:
+    """(H, W) factor turning optical-axis depth into ray length for a centred pinhole camera
+    (cached; read-only)."""
+    f = focal_length(fovy_deg, height)
+    u = (np.arange(width) + 0.5 - width / 2) / f
+    v = (np.arange(height) + 0.5 - height / 2) / f
+    out = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2)
+    out.flags.writeable = False
+    return out
+
+
+def box_distance(point: np.ndarray, obj: ObjectInstance) -> float:
+    """Euclidean distance from ``point`` (3,) to the nearest point of ``obj``'s bounding box."""
+    d = np.asarray(point, float) - np.asarray(obj.position, float)
+    c, s = math.cos(obj.yaw), math.sin(obj.yaw)
+    local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]])
+    out = np.maximum(np.abs(local) - np.asarray(obj.size, float) / 2, 0.0)
+    return float(np.linalg.norm(out))
+
+
+@dataclass(frozen=True)
+class _Image:
+    """One segmentation image prepared for detection."""
+
+    flat: np.ndarray  # instance ids, raveled
+    width: int
+    height: int
+    counts: np.ndarray  # pixels per id + 1
+    depth_flat: np.ndarray | None
+    scale: np.ndarray | None  # ray scale, raveled (None: depth used as is)
+
+    def distance(self, oid: int, idx: np.ndarray, obj: ObjectInstance, camera_position) -> float:
+        """The instance's distance (module comment above)."""
+        if self.depth_flat is not None:
+            d = self.depth_flat[idx]
+            if self.scale is not None:
+                d = d * self.scale[idx]
+            return float(np.median(d))
+        if camera_position is not None:
+            return box_distance(camera_position, obj)
+        raise ValueError("detect_ids needs depth or camera_position to measure distance")
+
+    def bbox(self, idx: np.ndarray) -> tuple[int, int, int, int]:
+        """The inclusive pixel bounding box of the pixels ``idx``."""
+        rows, cols = np.divmod(idx, self.width)
+        return (int(cols.min()), int(rows[0]), int(cols.max()), int(rows[-1]))
+
+
+@dataclass(frozen=True)
+class ImageDraws:
+    """What a detector that errs needs for one image: its random stream (``image_rng``) and the
+    camera (an envs.camera.PinholeCamera) to put false positives on surfaces (None: none)."""
+
+    rng: np.random.Generator
+    camera: PinholeCamera | None = None
+
+
+def detect_ids(
+    instance_ids: np.ndarray,
+    objects: Mapping[int, ObjectInstance],
+    catalog: Catalog,
+    *,
+    depth: np.ndarray | None = None,
+    camera_position: np.ndarray | None = None,
+    fovy_deg: float | None = None,
+    model: DetectorModel | None = None,
+    draws: ImageDraws | None = None,
+) -> list[Detection]:
+    """Detections in one segmentation image (H, W) of instance ids (-1: nothing of interest).
+
+    ``objects`` maps instance ids to their (simulator) poses; ids not in it are ignored. Distance
+    is the median ray length of the instance's pixels when ``depth`` (H, W) is given (optical-axis
+    depth; with ``fovy_deg`` it is converted to ray length, without it used as is), else the
+    distance from ``camera_position`` to the object's bounding box. ``model``: the preset (None:
+    perfect); a model that errs needs its ``draws`` (and, for false positives, ``depth`` and the
+    draws' camera). Sorted by pixel count, largest first.
+    """
+    ids = np.asarray(instance_ids)
+    h, w = ids.shape
+    flat = ids.ravel()
+    depth_flat = None if depth is None else np.asarray(depth).ravel()
+    scale = None
+    if depth is not None and fovy_deg is not None:
+        scale = ray_scale(w, h, float(fovy_deg)).ravel()
+    counts = np.bincount((flat.astype(np.int64) + 1).clip(0))
+    img = _Image(flat, w, h, counts, depth_flat, scale)
+    candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
+    if model is None or model.perfect:
+        out = _detect_perfect(img, candidates, objects, catalog, camera_position)
+    else:
+        if draws is None:
+            raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
+        out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
+        out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
+    out.sort(key=lambda d: (-d.pixels, d.instance_id))
+    return out
+
+
+def _detect_perfect(img: _Image, candidates, objects, catalog, camera_position) -> list[Detection]:
+    """The threshold detector (no random numbers; the pixel test before any distance)."""
+    out: list[Detection] = []
+    for oid in candidates:
+        oid = int(oid)
+        obj = objects.get(oid)
+        if obj is None:
+            continue
+        typ = catalog.type(obj.type)
+        n = int(img.counts[oid + 1])
+        if n < min_pixels_at(typ.min_pixels, img.width, img.height):
+            continue
+        idx = np.flatnonzero(img.flat == oid)
+        dist = img.distance(oid, idx, obj, camera_position)
+        if dist > typ.max_range:
+            continue
+        out.append(Detection(oid, obj.type, obj, n, dist, img.bbox(idx)))
+    return out
+
+
+def _detect_model(
+    img: _Image, candidates, objects, catalog, camera_position, model: DetectorModel, rng
+) -> list[Detection]:
+    """A detector that errs: every visible instance kept with its recall (one uniform each, in
+    id order), then per kept instance in order: its reported type (one uniform if it has
+    look-alikes) and its pose noise (three normals)."""
+    found = []
+    for oid in candidates:
+        oid = int(oid)
+        obj = objects.get(oid)
+        if obj is None:
+            continue
+        idx = np.flatnonzero(img.flat == oid)
+        dist = img.distance(oid, idx, obj, camera_position)
+        found.append((oid, obj, idx, dist))
+    if not found:
+        return []
+    types = [catalog.type(o.type) for _, o, _, _ in found]
+    pixels = np.array([len(idx) for _, _, idx, _ in found])
+    dists = np.array([d for _, _, _, d in found])
+    mask = keep(model, types, pixels, dists, (img.width, img.height), rng)
+    out: list[Detection] = []
+    for (oid, obj, idx, dist), kept in zip(found, mask, strict=True):
+        if not kept:
+            continue
+        reported = model.reported_type(obj.type, rng)
+        pose = model.noisy_pose(obj, dist, rng)
+        if reported != obj.type:
+            pose = replace(pose, type=reported)
+        out.append(Detection(oid, reported, pose, len(idx), dist, img.bbox(idx)))
+    return out
+
+
+FP_MAX_DEPTH = 10.0  # m: farther pixels (the far plane, through a door into nothing) hold none
+FLOOR_Z = 0.05  # m: a pixel whose point is this low shows the floor
+
+
+def _false_positives(
+    img: _Image, model: DetectorModel, rng, catalog: Catalog, camera, depth
+) -> list[Detection]:
+    """The image's false detections, each on a random pixel that shows an object or the floor
+    (clutter stands on surfaces, not on walls), back-projected with the camera (none without
+    depth or camera). Ids are negative and drawn from the stream, so they differ between
+    images."""
+    if model.fp_per_image <= 0 or camera is None or depth is None:
+        return []
+    d = np.asarray(depth, float)
+    flat_d = d.ravel()
+    ok = np.isfinite(flat_d) & (flat_d > 0) & (flat_d < FP_MAX_DEPTH)
+    points = np.asarray(camera.backproject(np.where(ok.reshape(d.shape), d, 0.0))).reshape(-1, 3)
+    valid = np.flatnonzero(ok & ((img.flat >= 0) | (points[:, 2] < FLOOR_Z)))
+    base = -(1 + 64 * int(rng.integers(1 << 40)))
+
+    def sample(r: np.random.Generator):
+        if not len(valid):
+            return None
+        k = int(valid[int(r.integers(len(valid)))])
+        dist = float(flat_d[k] * (img.scale[k] if img.scale is not None else 1.0))
+        return points[k], dist
+
+    fps = model.false_positives(rng, sample, catalog, base)
+    return [Detection(o.id, o.type, o, 0, dist, (0, 0, 0, 0)) for o, dist in fps]
+
+
+def image_rng(seed: int, room_seed: int, sim_time: float) -> np.random.Generator:
+    """The detector's stream for the image a body took at simulated second ``sim_time`` in room
+    ``room_seed`` of a run seeded ``seed``: ``detection_rng`` with an image index made of the room
+    and the image's time in whole microseconds (the same in a resumed run, whose replay charges
+    the same seconds: rounding makes it immune to the last bits of float sums taken in another
+    order)."""
+    micros = int(round(float(sim_time) * 1e6)) & 0xFFFFFFFFFFFFFFFF
+    return detection_rng(seed, (int(room_seed) & 0xFFFFFFFF) << 64 | micros)
+
+
+def objects_by_id(
+    layout_or_objects: RoomLayout | Iterable[ObjectInstance] | Mapping[int, ObjectInstance],
+) -> dict[int, ObjectInstance]:
+    """An id -> instance map from a layout, a sequence of instances or such a map."""
+    if isinstance(layout_or_objects, RoomLayout):
+        return {o.id: o for o in layout_or_objects.objects}
+    if isinstance(layout_or_objects, Mapping):
+        return dict(layout_or_objects)
+    return {o.id: o for o in layout_or_objects}
+
+
+def detect(
+    frame: Frame,
+    layout_or_objects: RoomLayout | Iterable[ObjectInstance] | Mapping[int, ObjectInstance],
+    catalog: Catalog,
+    model: DetectorModel | None = None,
+    rng: np.random.Generator | None = None,
+) -> list[Detection]:
+    """Detections in a rendered ``Frame`` (its ``instance_ids``, ``depth`` if present, and the
+    camera it came from) by the preset ``model`` (None: perfect; one that errs needs ``rng``)."""
+    cam = frame.camera
+    return detect_ids(
+        frame.instance_ids,
+        objects_by_id(layout_or_objects),
+        catalog,
+        depth=frame.depth,
+        camera_position=np.asarray(cam.position, float),
+        fovy_deg=float(cam.fovy_deg),
+        model=model,
+        draws=None if rng is None else ImageDraws(rng, cam),
+    )
+
+
+class SimDetector:
+    """The simulated detector of one room: a preset, the room's objects and the run's seed; called
+    with a frame and the body's simulated second after it, it gives the detections."""
+
+    def __init__(
+        self,
+        model: DetectorModel,
+        layout: RoomLayout,
+        catalog: Catalog,
+        seed: int = 0,
+    ):
+        self.model, self.catalog, self.seed = model, catalog, int(seed)
+        self.room_seed = int(layout.seed)
+        self.objects = objects_by_id(layout)
+
+    def __call__(self, frame: Frame, sim_time: float) -> list[Detection]:
+        """The detections in ``frame`` (taken at ``sim_time``)."""
+        rng = None if self.model.perfect else image_rng(self.seed, self.room_seed, sim_time)
+        return detect(frame, self.objects, self.catalog, self.model, rng)

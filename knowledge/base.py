@@ -30,6 +30,7 @@ import numpy as np
 
 from knowledge import intervals
 from knowledge.catalog import Catalog
+from knowledge.clustered import ClusteredIntervals
 from knowledge.errors import CtxsearchError
 
 # (y, n, alpha) -> per-pair score, vectorised like intervals.impact.
@@ -163,6 +164,25 @@ class KnowledgeBase:
         # Per reference type (catalog order): its nonzero y, or None while it has none.
         self._counts: list[_Counts | None] = [None] * self._T
         self._score_cache: dict[int, dict[object, float]] = {}  # type index -> {score fn: score}
+        # The interval reads (interval, rows, mean_width): None is the paper's Wilson; else the
+        # clustered intervals on effective counts (knowledge.clustered). HIF reads raw counts.
+        self.clustered: ClusteredIntervals | None = None
+
+    def use_clustered(self, clustered: ClusteredIntervals | None) -> None:
+        """Read intervals with ``clustered`` (its per-room counts must be this KB's evidence), or
+        with Wilson again (None). The counts and the HIF choice are unchanged."""
+        self.clustered = clustered
+
+    @property
+    def interval_method(self) -> str:
+        """'wilson' or 'clustered': how ``interval``, ``rows`` and ``mean_width`` read."""
+        return "wilson" if self.clustered is None else "clustered"
+
+    def _shrink(self, ref: str, relation: str, type_names: Sequence[str]) -> np.ndarray:
+        """n / n_effective of the entries (ref, relation, t) (ones under Wilson)."""
+        if self.clustered is None:
+            return np.ones(len(type_names))
+        return np.array([self.clustered.shrink(ref, (relation, t)) for t in type_names])
 
     # ---- counts -------------------------------------------------------------------------------
     def n(self, ref_type: str) -> int:
@@ -291,7 +311,10 @@ class KnowledgeBase:
     def interval(self, relation: str, type_name: str) -> tuple[float, float]:
         """INT(rel, B) = p0 -/+ d from the current counts; [0, 1] before any data."""
         a, _ = self._rel(relation)
-        lo, hi = intervals.interval(self.y(relation, type_name), int(self._n[a]), self.alpha)
+        y, n = self.y(relation, type_name), int(self._n[a])
+        if self.clustered is not None:
+            return self.clustered.interval(self._names[a], (relation, type_name), y, n)
+        lo, hi = intervals.interval(y, n, self.alpha)
         return float(lo), float(hi)
 
     def rows(self, ref_type: str | None = None, include_zero: bool = True) -> list[IntervalRow]:
@@ -326,6 +349,9 @@ class KnowledgeBase:
                 )
             yf = yv.astype(float)
             nf = np.full_like(yf, n)
+            if self.clustered is not None and n:
+                f = self._shrink_entries(a, r_idx, b_idx)
+                yf, nf = yf / f, nf / f
             centre = np.atleast_1d(intervals.p0(yf, nf, self.alpha))
             lo, hi = (np.atleast_1d(v) for v in intervals.interval(yf, nf, self.alpha))
             out.extend(
@@ -337,8 +363,31 @@ class KnowledgeBase:
         out.sort(key=lambda row: (-row.low, row.relation, row.type))
         return out
 
+    def _shrink_entries(self, a: int, r_idx: np.ndarray, b_idx: np.ndarray) -> np.ndarray:
+        """Shrink factors of reference type a's entries (relation index, type index); the
+        entries with y = 0 share one factor (knowledge.clustered)."""
+        cl = self.clustered
+        assert cl is not None
+        ref, rels = self._names[a], self.catalog.types[a].relation_names
+        zero = cl.shrink(ref, ("", ""))  # no per-room y: the type's pooled correlation
+        out = np.full(len(r_idx), zero)
+        counts = cl.counts.get(ref)
+        if counts is None:
+            return out
+        pos = {
+            (rels[int(r)], self._names[int(b)]): i
+            for i, (r, b) in enumerate(zip(r_idx, b_idx, strict=True))
+        }
+        for key in counts.y_room:
+            i = pos.get(key)
+            if i is not None:
+                out[i] = cl.shrink(ref, key)
+        return out
+
     def mean_width(self) -> float:
         """Mean interval width over every (A, rel, B) of the catalog (O(nonzero), not O(T^2))."""
+        if self.clustered is not None:
+            return self._mean_width_clustered()
         total, count = 0.0, 0
         z = intervals.z_value(self.alpha)
         for a in range(self._T):
@@ -358,6 +407,51 @@ class KnowledgeBase:
                 total += s_nz + (m - nnz) * w0
             count += m
         return total / count if count else 0.0
+
+    def _mean_width_clustered(self) -> float:
+        """``mean_width`` on the clustered intervals' effective counts."""
+        cl = self.clustered
+        assert cl is not None
+        total, count = 0.0, 0
+        for a in range(self._T):
+            m = int(self._n_rel[a]) * self._T
+            if m == 0:
+                continue
+            n = int(self._n[a])
+            c = self._counts[a]
+            nnz = 0 if c is None else len(c.ys)
+            if n == 0:
+                total += m * 1.0
+            else:
+                f0 = cl.shrink(self._names[a], ("", ""))
+                lo, hi = intervals.interval(0.0, n / f0, self.alpha)
+                total += (m - nnz) * float(hi - lo)
+                if nnz:
+                    r_idx, b_idx = c.relation_of_entries(), c.types.astype(np.int64)
+                    f = self._shrink_entries(a, r_idx, b_idx)
+                    lo, hi = intervals.interval(c.ys.astype(float) / f, n / f, self.alpha)
+                    total += float(np.sum(np.asarray(hi) - np.asarray(lo)))
+            count += m
+        return total / count if count else 0.0
+
+    def type_score_effective(self, ref_type: str, fn: ScoreFn = intervals.impact) -> float:
+        """``type_score`` with impact on the clustered intervals' effective counts (y/f, n/f)
+        (Wilson: the same as ``type_score``). Not cached: a measurement, not the HIF path."""
+        if self.clustered is None:
+            return self.type_score(ref_type, fn)
+        a = self._idx(ref_type)
+        m = int(self._n_rel[a]) * self._T
+        n = int(self._n[a])
+        if m == 0:
+            return 0.0
+        c = self._counts[a]
+        f0 = self.clustered.shrink(ref_type, ("", ""))
+        nnz = 0 if c is None else len(c.ys)
+        total = (m - nnz) * float(fn(0.0, n / f0, self.alpha))
+        if nnz:
+            f = self._shrink_entries(a, c.relation_of_entries(), c.types.astype(np.int64))
+            total += float(np.sum(fn(c.ys.astype(float) / f, n / f, self.alpha)))
+        return total / m
 
     # ---- Highest Impact First -----------------------------------------------------------------
     def type_score(self, ref_type: str, fn: ScoreFn = intervals.impact) -> float:

@@ -68,6 +68,12 @@ from pathlib import Path
 from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
+from knowledge.clustered import (
+    INTERVAL_METHODS,
+    ClusteredIntervals,
+    RoomCounts,
+    room_counts_from_rows,
+)
 from knowledge.errors import CtxsearchError, StoreError
 
 SCHEMA_VERSION = 3
@@ -695,15 +701,53 @@ class EvidenceStore:
                 )
         return out
 
+    def room_counts(self, run: str | None = None) -> dict[str, RoomCounts]:
+        """Per reference type, its examinations and y counts per room (of one run, or all): the
+        input of the clustered interval (knowledge.clustered). A room is (style, room seed):
+        runs that visit the same room share its cluster. Read-only."""
+        where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
+        obs = (
+            "SELECT DISTINCT o.examination_id, e.type, e.style, e.room_seed, o.relation, o.type "
+            "FROM observations o JOIN examinations e ON e.id = o.examination_id"
+            + ("" if run is None else " WHERE e.run = ?")
+        )
+        with self._reading():
+            exam_rows = [
+                (self._name(t, "type"), (str(st), int(seed)))
+                for t, st, seed in self.conn.execute(
+                    f"SELECT type, style, room_seed FROM examinations{where} ORDER BY id", args
+                )
+            ]
+            obs_rows = [
+                (self._name(t, "type"), (str(st), int(seed)), str(rel), str(b))
+                for _eid, t, st, seed, rel, b in self.conn.execute(obs, args)
+            ]
+        for _ref, _room, rel, b in obs_rows:
+            if not self.catalog.has_relation(rel) or b not in self.catalog:
+                raise self._bad(f"observation ({rel!r}, {b!r}) is not in the catalog")
+        return room_counts_from_rows(exam_rows, obs_rows)
+
     def knowledge_base(
-        self, alpha: float | None = None, *, run: str | None = None
+        self,
+        alpha: float | None = None,
+        *,
+        run: str | None = None,
+        interval: str = "wilson",
     ) -> KnowledgeBase:
         """The counts rebuilt from the log (of one run, or all), as a KnowledgeBase.
 
         n_A = examinations of type A; y_{rel,B} = examinations with at least one observation row
-        (rel, B). ``alpha`` defaults to the store's.
+        (rel, B). ``alpha`` defaults to the store's. ``interval``: 'wilson' (the paper's) or
+        'clustered' (its intervals on the room-level effective counts of ``room_counts``; the
+        counts and HIF are the same).
         """
+        if interval not in INTERVAL_METHODS:
+            raise CtxsearchError(
+                f"unknown interval method '{interval}' (known: {', '.join(INTERVAL_METHODS)})"
+            )
         kb = KnowledgeBase(self.catalog, self.alpha if alpha is None else _check_alpha(alpha))
+        if interval == "clustered":
+            kb.use_clustered(ClusteredIntervals(self.room_counts(run), kb.alpha))
         where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
         if run is None:
             sql = "SELECT relation, type, COUNT(DISTINCT examination_id) FROM observations GROUP BY relation, type"

@@ -97,3 +97,25 @@ def out_file(text: str) -> Path:
     if p.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: is a directory, expected a file")
     return p
+
+
+DETECTOR_HELP = (
+    "camera mode's detector: a preset of assets/detectors (perfect, realistic) or a TOML file "
+    "(default: realistic; the oracle perception has none)"
+)
+INTERVAL_HELP = (
+    "interval method: wilson (the paper's eq. 1-2, default) or clustered (Wilson on a room-level "
+    "effective sample size: examinations in one room are correlated)"
+)
+
+
+def add_detector_argument(p: argparse.ArgumentParser) -> None:
+    """``--detector NAME|FILE`` (checked by the handler: a bad file gets the one-line error)."""
+    p.add_argument("--detector", default=None, metavar="NAME|FILE", help=DETECTOR_HELP)
+
+
+def add_interval_argument(p: argparse.ArgumentParser) -> None:
+    """``--interval wilson|clustered``."""
+    p.add_argument(
+        "--interval", default="wilson", choices=("wilson", "clustered"), help=INTERVAL_HELP
+    )

@@ -11,7 +11,7 @@ import textwrap
 from pathlib import Path
 
 from knowledge.catalog import load_catalog
-from knowledge.errors import CatalogError, StoreError
+from knowledge.errors import CatalogError, CtxsearchError, StoreError
 from knowledge.pooling import PooledCounts, interval_rows
 from knowledge.store import EvidenceStore, merge_stores
 from scripts import argtypes
@@ -129,6 +129,7 @@ def _register_show(kb_sub: argparse._SubParsersAction) -> None:
         default=None,
         help="alpha of the intervals (default: the store's)",
     )
+    argtypes.add_interval_argument(show)
     _add_catalog_arg(show)
     show.set_defaults(func=run_show)
 
@@ -154,6 +155,7 @@ def _register_stats(kb_sub: argparse._SubParsersAction) -> None:
         default=None,
         help="alpha of the intervals (default: the store's)",
     )
+    argtypes.add_interval_argument(stats)
     _add_catalog_arg(stats)
     stats.set_defaults(func=run_stats)
 
@@ -224,7 +226,7 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
     catalog = load_catalog(args.catalog)
     try:
         with EvidenceStore.open(args.path, catalog, read_only=True) as store:
-            kb = store.knowledge_base(args.alpha)
+            kb = store.knowledge_base(args.alpha, interval=args.interval)
             pc = PooledCounts.from_store(store) if pooled else None
             info = {
                 "path": str(args.path),
@@ -284,6 +286,11 @@ def run_show(args: argparse.Namespace) -> int:
                 catalog.path, f"unknown type or class '{name}' (types: {known}; classes: {kinds})"
             )
     pooled = args.backoff or args.ref_type in classes or args.related in classes
+    if pooled and args.interval != "wilson":
+        raise CtxsearchError(
+            f"--interval {args.interval} reads types' own evidence: it does not combine with "
+            "classes or --backoff"
+        )
     info, kb, pc = _open_kb(args, pooled=pooled)
     if pooled:
         rows = interval_rows(
@@ -313,6 +320,7 @@ def run_show(args: argparse.Namespace) -> int:
     out = [
         f"{info['path']}: {info['examinations']} examinations, alpha {kb.alpha:g}, "
         f"catalog {info['catalog_fingerprint']}"
+        + ("" if args.interval == "wilson" else f", {args.interval} intervals")
     ]
     if rows:
         out.append(format_rows(rows))

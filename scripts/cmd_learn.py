@@ -111,6 +111,16 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         help="built map: which frontier to explore next (nearest by driving distance, or most "
         "unknown cells per second; default: info)",
     )
+    argtypes.add_detector_argument(p)
+    p.add_argument(
+        "--confirm",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="K",
+        help="camera mode: count a related object only once K images of the room detected it "
+        "(default: 1, at once)",
+    )
+    argtypes.add_interval_argument(p)
 
 
 def run_learn(args: argparse.Namespace) -> int:
@@ -133,14 +143,27 @@ def run_learn(args: argparse.Namespace) -> int:
             room_budget_s=args.room_budget,
             map_mode=args.map,
             frontier_rule=args.frontier_rule,
+            detector=args.detector,
+            confirm=args.confirm,
         )
     )
     for line in s.lines():
         print(line)
+    if args.interval != "wilson":
+        print(f"mean interval width ({args.interval}): {_mean_width(args.kb, args.interval):.4f}")
     for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
     return 130 if s.interrupted else 0
+
+
+def _mean_width(kb_path: Path, interval: str) -> float:
+    """The store's mean interval width read with ``interval``."""
+    from knowledge.catalog import load_catalog
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
+        return store.knowledge_base(interval=interval).mean_width()
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
@@ -194,8 +217,71 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
     )
+    argtypes.add_detector_argument(p)
+    argtypes.add_interval_argument(p)
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
+    register_intervals(bench_sub)
+
+
+def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench intervals``."""
+    p = bench_sub.add_parser(
+        "intervals",
+        help="detector (perfect, realistic) x interval (wilson, clustered) against the ground "
+        "truth: informative coverage, mean |p0 - p_true|, mean width, bias per type",
+        description="HIF learns in camera mode with each detector setting over the same rooms "
+        "and seeds; after the given room counts, the intervals (wilson and clustered, on the same "
+        "evidence) are measured against the ground truth. Writes DIR/intervals.json and "
+        "DIR/intervals.md.",
+    )
+    p.add_argument("--styles", default="office,apartment", help="comma-separated styles")
+    p.add_argument("--rooms", default="10,30", help="comma-separated room marks (default: 10,30)")
+    p.add_argument("--seeds", type=argtypes.positive_int, default=3, help="seeds (default: 3)")
+    p.add_argument(
+        "--settings",
+        default="perfect,realistic,realistic+confirm2",
+        help="detector settings (default: perfect,realistic,realistic+confirm2)",
+    )
+    p.add_argument(
+        "--truth-samples", type=argtypes.positive_int, default=200, help="ground-truth rooms"
+    )
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    p.set_defaults(func=run_intervals)
+
+
+def run_intervals(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench intervals``."""
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from scripts.experiments.bench_intervals import (
+        SETTINGS,
+        IntervalsBenchConfig,
+        bench_intervals,
+        markdown,
+    )
+
+    try:
+        marks = tuple(argtypes.positive_int(x) for x in args.rooms.split(",") if x.strip())
+    except argparse.ArgumentTypeError as exc:
+        raise CtxsearchError(f"--rooms: {exc}") from None
+    settings = tuple(x.strip() for x in args.settings.split(",") if x.strip())
+    known = [s[0] for s in SETTINGS]
+    for s in settings:
+        if s not in known:
+            raise CtxsearchError(f"--settings: unknown setting '{s}' (known: {', '.join(known)})")
+    if not marks:
+        raise CtxsearchError("--rooms: give at least one room count")
+    config = IntervalsBenchConfig(
+        styles=tuple(x.strip() for x in args.styles.split(",") if x.strip()),
+        room_marks=marks,
+        seeds=args.seeds,
+        truth_samples=args.truth_samples,
+        settings=settings,
+    )
+    doc = bench_intervals(config, args.out)
+    print(markdown(doc))
+    print(f"wrote {args.out / 'intervals.json'} and {args.out / 'intervals.md'}")
+    return 0
 
 
 def run_bench(args: argparse.Namespace) -> int:
@@ -219,6 +305,8 @@ def run_bench(args: argparse.Namespace) -> int:
         truth_samples=args.truth_samples,
         alpha=args.alpha,
         room_budget_s=args.room_budget,
+        detector=args.detector,
+        interval=args.interval,
     )
     result = bench_learning(config, args.out, sweep=SweepOptions.from_args(args))
     print(result.table)

@@ -41,6 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="object-type catalog (default: assets/types.toml)",
     )
+    argtypes.add_detector_argument(p)
     p.set_defaults(func=run)
 
 
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         width=args.width,
         height=args.height,
         catalog=args.catalog,
+        detector=args.detector,
     )
     for p in show_room(config):
         print(f"wrote {p}")

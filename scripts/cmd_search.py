@@ -71,6 +71,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default=200,
         help="rooms sampled for the ground truth when --truth is not given (default: 200)",
     )
+    argtypes.add_detector_argument(p)
+    argtypes.add_interval_argument(p)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -123,12 +125,15 @@ def _config_fields(args: argparse.Namespace) -> dict:
         "truth_samples": args.truth_samples,
         "estimate": args.estimate,
         "min_evidence": args.min_evidence,
+        "detector": args.detector,
+        "interval": args.interval,
     }
 
 
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
+    from knowledge.catalog import load_catalog
     from scripts.experiments.episodes import SearchConfig, search_once
 
     config = SearchConfig(policies=(args.policy,), **_config_fields(args))
@@ -140,6 +145,7 @@ def run_search(args: argparse.Namespace) -> int:
         f"{s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
     )
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
+    print(f"detector: {config.detector_model(load_catalog()).name}; intervals: {config.interval}")
     if args.record is not None:
         print(f"recording: {args.record} (open with: rerun {args.record})")
     return 0

@@ -12,10 +12,10 @@ import cv2
 import numpy as np
 
 from agent.navigation import OccupancyGrid, nearest_free
-from agent.perception import detect
 from agent.recording import Recorder
 from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
+from envs.detector import SimDetector, default_or_named
 from envs.floorplan import generate_layout, layout_dict
 from envs.houses import resolve_style
 from envs.layout import RoomLayout
@@ -171,6 +171,7 @@ class RoomViewConfig:
     width: int = 320
     height: int = 240
     catalog: Path | None = None  # object-type catalog (None: assets/types.toml)
+    detector: str | None = None  # detector preset, name or file (None: realistic)
 
     def check(self) -> None:
         """A one-line error for a negative view count or an image size MuJoCo cannot render."""
@@ -267,11 +268,14 @@ class _Viewer:
 
     def __post_init__(self) -> None:
         self.path_xy.append(self.world.pose().xy)
+        model = default_or_named(self.config.detector, self.catalog, "realistic")
+        self.detector = SimDetector(model, self.layout, self.catalog, self.config.seed)
+        print(f"detector: {model.name}")
 
     def take(self, i: int, target) -> None:
         """Drive to a viewpoint that sees ``target``, look, detect, write view_<i>.png."""
         world, grid, rec, cfg = self.world, self.grid, self.rec, self.config
-        layout, catalog, spec = self.layout, self.catalog, world.spec
+        catalog, spec = self.catalog, world.spec
         gazes = plan_gazes(
             grid,
             target.box(),
@@ -298,7 +302,7 @@ class _Viewer:
             self.path_xy.extend(gaze.path)
         self.path_xy.append(frame.pose.xy)
         self.views.append((i, frame.pose))
-        dets = detect(frame, layout, catalog)
+        dets = self.detector(frame, world.sim_time)
         p = cfg.out / f"view_{i}.png"
         cv2.imwrite(str(p), draw_detections(frame.rgb, dets, catalog))
         self.written.append(p)

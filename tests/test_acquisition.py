@@ -374,6 +374,7 @@ def test_camera_mode_on_the_hand_made_room_with_recording(tmp_path):
     summary, cat = _learn(
         tmp_path,
         perception="camera",
+        detector="perfect",
         record=rrd,
         on_examination=lambda res, kb: order.append((res.choice.obj.type, res.pairs)),
     )
@@ -576,8 +577,15 @@ def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
     )  # fmt: skip
     # (On the given map: on a built map the drives depend on the images, and the images on the
     # servos' motions, which the time model paces, so the paths may differ a little.)
-    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera", map_mode="given")
-    s1, _ = _learn(tmp_path, "b.sqlite", perception="camera", time_model=slow, map_mode="given")
+    s0, _ = _learn(tmp_path, "a.sqlite", perception="camera", map_mode="given", detector="perfect")
+    s1, _ = _learn(
+        tmp_path,
+        "b.sqlite",
+        perception="camera",
+        time_model=slow,
+        map_mode="given",
+        detector="perfect",
+    )
     assert s0.examinations == s1.examinations == 4
     assert s1.sim_s == pytest.approx(2 * s0.sim_s, rel=0.02)
 

@@ -99,7 +99,7 @@ def test_room_without_record_or_views(tmp_path):
 
 
 def test_draw_detections_enlarges_and_labels(catalog):
-    from agent.perception import Detection
+    from envs.detector import Detection
     from knowledge.geometry import ObjectInstance
 
     desk = ObjectInstance("Desk", 1, (0, 0, 0.37), 0.0, (0.7, 1.4, 0.74))

@@ -8,9 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from agent.perception import detect_ids
 from agent.recording import Recorder, wall_boxes
 from envs.camera import camera_at
+from envs.detector import detect_ids
 from envs.layout import Door, RoomLayout
 from envs.robot_spec import RobotPose
 from knowledge.geometry import ObjectInstance, relation_volume

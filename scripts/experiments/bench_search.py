@@ -236,7 +236,10 @@ def bench_search(
     eps = make_episodes(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
     )
-    results = run_episodes(eps, names, catalog, style, priors.for_policy, progress=progress)
+    detector = config.detector_model(catalog)
+    results = run_episodes(
+        eps, names, catalog, style, priors.for_policy, progress=progress, detector=detector
+    )
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
@@ -276,6 +279,8 @@ def _write_files(
         "budget_s": config.budget_s,
         "seed": config.seed,
         "rank": config.rank,
+        "detector": config.detector_model(load_catalog()).name,
+        "interval": config.interval,
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
@@ -292,13 +297,15 @@ def _write_files(
         else ""
     )
     files[1].write_text(
-        f"# Object search: {style}\n\n{kb_line}ranking by the interval's `{config.rank}`"
+        f"# Object search: {style}\n\n{kb_line}ranking by the {config.interval} interval's "
+        f"`{config.rank}`"
         + (
-            f" (backoff for types with < {config.min_evidence} examinations), "
+            f" (backoff for types with < {config.min_evidence} examinations)"
             if config.estimate == "backoff"
-            else ", "
+            else ""
         )
-        + f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
+        + f", detector `{doc['detector']}`, "
+        f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
     )
     title = f"time to find ({style}, {len(eps)} paired episodes)"
     plot_cdf(results, config.budget_s, files[2], title)

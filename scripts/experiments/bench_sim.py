@@ -5,7 +5,7 @@
   (``initialize_episode_mjcf``) and ``mjcf.Physics.from_mjcf_model``; also the per-episode part
   alone (room MJCF + compile, the robot and arena reused) and a whole ``World`` (no renderer);
 - gazes per second at the World's image size: ``move_head`` (servos stepped in MuJoCo),
-  ``capture`` (segmentation + depth) and ``agent.perception.detect``;
+  ``capture`` (segmentation + depth) and ``envs.detector.detect``;
 - the same images with a bare ``mujoco.Renderer`` on the same model and scene options: head
   joints written to qpos, ``mj_forward``, a segmentation render and a depth render. The overhead
   ratio is our gaze time over that bare time.
@@ -30,7 +30,7 @@ import numpy as np
 from dm_control import mjcf
 from matplotlib.figure import Figure
 
-from agent.perception import detect
+from envs.detector import detect
 from envs.floorplan import generate_layout
 from envs.houses import resolve_style
 from envs.layout import RoomLayout
@@ -213,7 +213,7 @@ def _results(times: _Times, gen_ms: list[float]) -> dict:
         "capture_ms": med(times.capture),
         "detect_ms": med(times.detect),
         "bare_render_ms": med(times.bare),
-        "detector": "agent.perception.detect",
+        "detector": "envs.detector.detect",
     }
 
 

@@ -28,7 +28,9 @@ from pathlib import Path
 from agent import search_space as ss
 from agent.learning import LearnConfig, learn, room_seed, run_id
 from agent.mapping import default_map_mode
+from agent.perception_modes import perception_label
 from agent.search import SearchResult, check_target, open_knowledge
+from envs.detector import DetectorModel
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
@@ -104,13 +106,19 @@ class _Searched:
         return math.nan
 
 
+def _demo_detector(perception: str) -> DetectorModel | None:
+    """The detector the demo learns with (camera mode's default; None for the oracle)."""
+    return LearnConfig(DEMO_STYLE, 0, "", perception=perception).detector_model(load_catalog())
+
+
 def _learning_complete(kb_path: Path, rooms: int, perception: str) -> bool:
     """True if the store at ``kb_path`` holds the demo's run with ``rooms`` rooms done."""
     if not kb_path.is_file():
         return False
     try:
         with EvidenceStore.open(kb_path, load_catalog(), create=False) as store:
-            rid = run_id(DEMO_STRATEGY, perception, DEMO_SEED, None, default_map_mode(perception))
+            label = perception_label(perception, _demo_detector(perception))
+            rid = run_id(DEMO_STRATEGY, label, DEMO_SEED, None, default_map_mode(perception))
             return all(
                 store.room_status(rid, DEMO_STYLE, room_seed(DEMO_SEED, i)) == "done"
                 for i in range(rooms)

@@ -23,7 +23,9 @@ import numpy as np
 from agent import search as S
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid
+from agent.perception_modes import DEFAULT_DETECTOR
 from agent.recording import Recorder
+from envs.detector import DetectorModel, default_or_named
 from envs.floorplan import generate_layout
 from envs.houses import WorldStyle, resolve_style
 from envs.layout import RoomLayout
@@ -54,6 +56,12 @@ class SearchConfig:
     # fewer than ``min_evidence`` examinations: knowledge.ranking.BackoffProbabilities)
     estimate: str = ss.DEFAULT_ESTIMATE
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
+    detector: str | None = None  # the detector preset (name or file; None: realistic)
+    interval: str = "wilson"  # how the learned intervals are read: wilson or clustered
+
+    def detector_model(self, catalog: Catalog) -> DetectorModel:
+        """The detector preset, loaded and checked against the catalog (one-line errors)."""
+        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
 
 
 def split_name(name: str) -> tuple[str, str | None]:
@@ -168,7 +176,7 @@ def load_priors(
     learned = set(exclude_seeds)
     pooled = None
     if kb is None and kb_path is not None:
-        kb, seeds = S.open_knowledge(kb_path, catalog)
+        kb, seeds = S.open_knowledge(kb_path, catalog, interval=config.interval)
         learned |= seeds
         if config.estimate == "backoff":
             pooled = S.open_pooled(kb_path, catalog)
@@ -189,7 +197,7 @@ class EpisodeRoom:
     layout: RoomLayout
     catalog: Catalog
     world: World
-    maps: S.RoomMaps  # the given map scenario
+    maps: S.RoomMaps  # the given map scenario, with the detector preset (None: perfect)
 
 
 def run_policy(
@@ -226,12 +234,15 @@ def search_room(
     catalog: Catalog,
     runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
     progress: Callable[[str], None] | None = None,
+    detector: DetectorModel | None = None,
 ) -> list[S.SearchResult]:
     """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs`` (a
-    policy may appear twice with other probabilities: results are in ``runs``' order)."""
+    policy may appear twice with other probabilities: results are in ``runs``' order) with the
+    ``detector`` preset (None: perfect)."""
     layout = generate_layout(style, ep.room_seed, catalog)
     with World(layout, catalog) as world:
-        room = EpisodeRoom(layout, catalog, world, S.RoomMaps.given(layout, catalog, world.spec))
+        maps = S.RoomMaps.given(layout, catalog, world.spec, detector)
+        room = EpisodeRoom(layout, catalog, world, maps)
         out = []
         for name, probs, rec_path in runs:
             res = run_policy(ep, name, room, probs, rec_path)
@@ -248,13 +259,15 @@ def run_episodes(
     style: WorldStyle,
     probs_for: ProbsFor,
     progress: Callable[[str], None] | None = None,
+    detector: DetectorModel | None = None,
 ) -> dict[str, list[S.SearchResult]]:
-    """Run every policy on every episode (one World per episode, shared by the policies)."""
+    """Run every policy on every episode (one World per episode, shared by the policies) with
+    the ``detector`` preset (None: perfect)."""
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
         runs = [(name, probs_for(*split_name(name)), None) for name in policies]
         for name, res in zip(
-            policies, search_room(ep, style, catalog, runs, progress), strict=True
+            policies, search_room(ep, style, catalog, runs, progress, detector), strict=True
         ):
             results[name].append(res)
     return results
@@ -298,5 +311,5 @@ def search_once(
         (name, priors.for_policy(*split_name(name)), rec)
         for name, rec in zip(names, records, strict=True)
     ]
-    out = search_room(ep, style, catalog, runs)
+    out = search_room(ep, style, catalog, runs, detector=config.detector_model(catalog))
     return OneSearch(ep, out, [Path(p) for p in records if p is not None])

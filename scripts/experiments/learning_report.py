@@ -26,7 +26,10 @@ TITLES = {
     "mean_width": "Mean interval width",
     "max_width": "Max interval width",
     "mean_abs_error": "Mean |p0 - p_true|",
-    "coverage": "Coverage (share of intervals holding p_true)",
+    "coverage_informative": "Informative coverage (share of intervals holding p_true, over the "
+    "entries with n_A >= 1 and 0.02 <= p_true <= 0.98)",
+    "coverage": "Coverage (share of all intervals holding p_true; entries with p_true 0 or "
+    "never examined cannot miss)",
 }
 DECISIONS_TEXT = (
     "Choices among at least two candidate types (all seeds). 'Same as X': the share of "

@@ -9,6 +9,7 @@ strategy's pick relates to what hif, expected-hif and fewest would have picked.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,20 +18,50 @@ import numpy as np
 from agent.learning import LearnConfig, learn, style_layouts
 from knowledge import intervals
 from knowledge.catalog import Catalog
+from knowledge.clustered import ClusteredIntervals, RoomCounts
 from knowledge.errors import CtxsearchError
 
-METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage")
+METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage_informative", "coverage")
+# Under --interval clustered, the paper's Wilson figures beside the clustered ones.
+WILSON_METRICS = tuple(
+    f"wilson_{m}" for m in ("mean_width", "mean_abs_error", "coverage_informative")
+)
+INFORMATIVE_P = (0.02, 0.98)  # p_true range of the entries coverage_informative counts
 EXAM_MARKS = (10, 25, 50, 100, 200, 400)
 TIME_FRACTIONS = (0.25, 0.5, 1.0)  # of the shortest run's simulated time
 WIDTH_GOALS = (0.6, 0.5, 0.4, 0.3)  # mean widths whose first simulated second is tabulated
 TIME_GRID = 400  # points of the simulated-time grid for time averages
 
 
+def informative(p_true: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(E,) bool: the entries coverage_informative counts: their A examined (n_A >= 1) and
+    0.02 <= p_true <= 0.98 (an entry with p_true 0 or 1, or never examined, cannot miss)."""
+    lo, hi = INFORMATIVE_P
+    return (np.asarray(n) >= 1) & (np.asarray(p_true) >= lo) & (np.asarray(p_true) <= hi)
+
+
+def interval_metrics(lo, hi, centre, p_true, n) -> dict[str, float]:
+    """mean/max width, mean |p0 - p_true|, coverage over all entries and over the informative
+    ones (NaN where there are none)."""
+    w = hi - lo
+    held = (lo <= p_true + 1e-12) & (p_true <= hi + 1e-12)
+    inf = informative(p_true, n)
+    return {
+        "mean_width": float(w.mean()),
+        "max_width": float(w.max()),
+        "mean_abs_error": float(np.abs(centre - p_true).mean()),
+        "coverage": float(held.mean()),
+        "coverage_informative": float(held[inf].mean()) if inf.any() else float("nan"),
+    }
+
+
 class TruthTracker:
     """Counts for the (A, rel, B) entries that have ground truth, updated per examination, and the
-    metrics of their intervals against p_true (vectorised over the entries)."""
+    metrics of their intervals against p_true (vectorised over the entries). With ``interval``
+    'clustered' it also keeps every type's per-room counts (all pairs, as the evidence log
+    would give them) and measures the clustered intervals, the Wilson figures beside them."""
 
-    def __init__(self, truth: dict, catalog: Catalog, alpha: float):
+    def __init__(self, truth: dict, catalog: Catalog, alpha: float, interval: str = "wilson"):
         entries = [
             e
             for e in truth["entries"]
@@ -39,6 +70,7 @@ class TruthTracker:
         if not entries:
             raise CtxsearchError("the ground truth has no entries for this catalog")
         self.alpha = alpha
+        self.entries = entries
         self.p = np.array([float(e["p"]) for e in entries])
         self.key = {(e["relation"], e["type"]): i for i, e in enumerate(entries)}
         refs = sorted({e["ref"] for e in entries})
@@ -47,9 +79,16 @@ class TruthTracker:
         }
         self.n = np.zeros(len(entries))
         self.y = np.zeros(len(entries))
+        self.interval = interval
+        self.refs = [e["ref"] for e in entries]
+        self.pairs = [(e["relation"], e["type"]) for e in entries]
+        # Per reference type: examinations per room, and per pair the examinations per room.
+        self.n_room: dict[str, dict[int, int]] = {}
+        self.y_room: dict[str, dict[tuple[str, str], dict[int, int]]] = {}
 
-    def record(self, ref_type: str, pairs) -> None:
-        """One examination of a ``ref_type`` object that saw ``pairs`` (relation, type)."""
+    def record(self, ref_type: str, pairs, room: int = 0) -> None:
+        """One examination of a ``ref_type`` object in room ``room`` that saw ``pairs``
+        (relation, type)."""
         idx = self.by_ref.get(ref_type)
         if idx is not None:
             self.n[idx] += 1
@@ -57,18 +96,55 @@ class TruthTracker:
             i = self.key.get(pair)
             if i is not None:
                 self.y[i] += 1
+        if self.interval == "clustered":
+            per = self.n_room.setdefault(ref_type, {})
+            per[room] = per.get(room, 0) + 1
+            ys = self.y_room.setdefault(ref_type, {})
+            for pair in set(pairs):
+                cell = ys.setdefault(pair, {})
+                cell[room] = cell.get(room, 0) + 1
+
+    def clustered(self) -> ClusteredIntervals:
+        """The clustered intervals of the evidence so far (knowledge.clustered)."""
+        counts = {}
+        for ref, per in self.n_room.items():
+            rooms = sorted(per)
+            col = {r: j for j, r in enumerate(rooms)}
+            ys = {}
+            for pair, cell in self.y_room.get(ref, {}).items():
+                arr = np.zeros(len(rooms), np.int64)
+                for r, v in cell.items():
+                    arr[col[r]] = v
+                ys[pair] = arr
+            counts[ref] = RoomCounts(np.array([per[r] for r in rooms], np.int64), ys)
+        return ClusteredIntervals(counts, self.alpha)
 
     def metrics(self) -> dict[str, float]:
-        """mean/max width, mean |p0 - p_true| and coverage over the entries."""
+        """The interval's metrics over the entries (``interval_metrics``); under 'clustered',
+        the Wilson figures beside them (``WILSON_METRICS``)."""
         lo, hi = intervals.interval(self.y, self.n, self.alpha)
         c = intervals.p0(self.y, self.n, self.alpha)
-        w = hi - lo
-        return {
-            "mean_width": float(w.mean()),
-            "max_width": float(w.max()),
-            "mean_abs_error": float(np.abs(c - self.p).mean()),
-            "coverage": float(((lo <= self.p + 1e-12) & (self.p <= hi + 1e-12)).mean()),
-        }
+        wilson = interval_metrics(lo, hi, c, self.p, self.n)
+        if self.interval != "clustered":
+            return wilson
+        cl = self.clustered()
+        f = np.array(
+            [
+                cl.shrink(a, k) if n else 1.0
+                for a, k, n in zip(self.refs, self.pairs, self.n, strict=True)
+            ]
+        )
+        ye, ne = self.y / f, self.n / f
+        lo, hi = intervals.interval(ye, ne, self.alpha)
+        c = intervals.p0(ye, ne, self.alpha)
+        out = interval_metrics(lo, hi, c, self.p, self.n)
+        out.update(
+            {
+                f"wilson_{k}": wilson[k]
+                for k in ("mean_width", "mean_abs_error", "coverage_informative")
+            }
+        )
+        return out
 
 
 @dataclass
@@ -76,7 +152,9 @@ class Trace:
     """One (strategy, seed) run: metrics after every examination."""
 
     sim_s: list[float] = field(default_factory=list)
-    metrics: dict[str, list[float]] = field(default_factory=lambda: {m: [] for m in METRICS})
+    metrics: dict[str, list[float]] = field(
+        default_factory=lambda: {m: [] for m in METRICS + WILSON_METRICS}
+    )
     wall_s: float = 0.0
     initial: dict[str, float] = field(default_factory=dict)  # before any examination
     room_objects: list[int] = field(default_factory=list)  # objects in room i
@@ -88,6 +166,12 @@ class Trace:
     # candidate's, yet impact(0, n) - the term that dominates the average, most y being 0 -
     # is larger for it (eq. 3 is not monotonic in n).
     decisions: list[tuple[bool, bool, bool, bool, bool]] = field(default_factory=list)
+    # Under --interval clustered, per such choice: would HIF pick the same type with impact on
+    # the effective counts (y/f, n/f)?
+    effective_same: list[bool] = field(default_factory=list)
+    # With run_trace(keep_counts=True): the truth entries and their (y, n) after every exam.
+    entries: list[dict] = field(default_factory=list)
+    counts: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
     def at_exam(self, k: int, metric: str) -> float:
         """The metric after examination k (1-based), or NaN past the end."""
@@ -137,6 +221,18 @@ class LearningBenchConfig:
     room_budget_s: float | None = (
         None  # simulated seconds per room (None: every room to completion)
     )
+    detector: str | None = None  # camera mode's preset (None: realistic; oracle: none)
+    interval: str = "wilson"  # the intervals measured: wilson or clustered
+    confirm: int = 1  # camera mode: images that must detect a related object
+
+    @property
+    def detector_name(self) -> str:
+        """The detector the results were made with ('none' for the oracle perception)."""
+        if self.perception != "camera":
+            return "none"
+        from envs.detector import load_detector
+
+        return load_detector(self.detector or "realistic").name
 
     @property
     def budget_note(self) -> str:
@@ -147,8 +243,10 @@ class LearningBenchConfig:
 class _Hooks:
     """``learn``'s callbacks of one traced run: they fill ``trace``."""
 
-    def __init__(self, trace: Trace, tracker: TruthTracker, generate, catalog: Catalog):
-        self.trace, self.tracker, self.generate = trace, tracker, generate
+    def __init__(
+        self, trace: Trace, tracker: TruthTracker, generate, catalog: Catalog, keep: bool = False
+    ):
+        self.trace, self.tracker, self.generate, self.keep = trace, tracker, generate, keep
         self.order = {t: i for i, t in enumerate(catalog.type_names)}
 
     def layouts(self, index, seed):
@@ -178,15 +276,24 @@ class _Hooks:
             intervals.impact(0, n_min, kb.alpha)
         )
         self.trace.decisions.append((c == hif, c == exp, c == few, better_known, quirk))
+        if self.tracker.interval == "clustered":
+            kb.use_clustered(self.tracker.clustered())
+            try:
+                scores = [kb.type_score_effective(t) for t in types]
+            finally:
+                kb.use_clustered(None)
+            self.trace.effective_same.append(types[int(np.argmax(scores))] == hif)
 
     def on_exam(self, res, kb) -> None:
         """Record one examination and the metrics after it."""
         tr = self.trace
         tr.room_exams[res.room_index] += 1
-        self.tracker.record(res.choice.obj.type, res.pairs)
+        self.tracker.record(res.choice.obj.type, res.pairs, res.room_index)
         tr.sim_s.append(res.sim_time)
         for k, v in self.tracker.metrics().items():
             tr.metrics[k].append(v)
+        if self.keep:
+            tr.counts.append((self.tracker.y.copy(), self.tracker.n.copy()))
 
 
 def run_trace(
@@ -196,14 +303,18 @@ def run_trace(
     truth: dict,
     catalog: Catalog,
     workdir: Path,
+    keep_counts: bool = False,
 ) -> Trace:
-    """One learn run of ``strategy`` in a fresh store, measured after every examination."""
+    """One learn run of ``strategy`` in a fresh store, measured after every examination
+    (``keep_counts``: also the truth entries' counts after every examination, in the trace)."""
     rooms, perception, alpha = config.rooms, config.perception, config.alpha
     room_budget_s = config.room_budget_s
-    tracker = TruthTracker(truth, catalog, alpha)
+    tracker = TruthTracker(truth, catalog, alpha, config.interval)
     tr = Trace(initial=tracker.metrics())
     style, generate = style_layouts(config.style, catalog)
-    hooks = _Hooks(tr, tracker, generate, catalog)
+    hooks = _Hooks(tr, tracker, generate, catalog, keep_counts)
+    if keep_counts:
+        tr.entries = list(tracker.entries)
     layouts, on_exam, on_choice = hooks.layouts, hooks.on_exam, hooks.on_choice
     t0 = time.perf_counter()
     summary = learn(
@@ -217,6 +328,8 @@ def run_trace(
             seed=seed,
             progress=False,
             room_budget_s=room_budget_s,
+            detector=config.detector,
+            confirm=config.confirm,
         ),
         catalog=catalog,
         layouts=layouts,
@@ -235,4 +348,9 @@ def median_curve(traces: list[Trace], metric: str) -> list[float]:
         arr = np.array([t.sim_s[:k] for t in traces])
     else:
         arr = np.array([t.metrics[metric][:k] for t in traces])
-    return [float(v) for v in np.median(arr, axis=0)] if k else []
+    if not k:
+        return []
+    with warnings.catch_warnings():  # all-NaN columns (no informative entry yet) stay NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med = np.nanmedian(arr, axis=0)
+    return [None if not np.isfinite(v) else float(v) for v in med]

@@ -1,0 +1,171 @@
+"""``ctxsearch bench intervals``: what detector errors and room correlation do to the intervals.
+
+For every style and every detector setting (``perfect``, ``realistic``, and ``realistic`` with
+a related object counted only once two images of the room detected it), HIF learns in camera
+mode over the same rooms for every seed (``learning_trace.run_trace`` with clustered intervals,
+so the paper's Wilson figures are measured beside them on the same evidence). After the last
+examination of room r for every r in ``room_marks``, against the ground truth (``envs.truth``):
+
+- coverage_informative: the share of entries with n_A >= 1 and 0.02 <= p_true <= 0.98 whose
+  interval holds p_true (nominal: 1 - alpha),
+- mean |p0 - p_true| over every entry with ground truth,
+- mean interval width over every entry with ground truth,
+
+for ``wilson`` and ``clustered``; and the bias per reference type: the mean of p0 - p_true over
+its informative entries (the detector's misses pull it down, its false positives and
+confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json and
+DIR/intervals.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from envs.truth import ground_truth
+from knowledge import intervals
+from knowledge.catalog import load_catalog
+from scripts.experiments.bench_learning import TRUTH_SEED
+from scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
+
+# (label, detector preset, confirm): the detector settings compared.
+SETTINGS = (("perfect", "perfect", 1), ("realistic", "realistic", 1),
+            ("realistic+confirm2", "realistic", 2))  # fmt: skip
+CELLS = (
+    ("coverage_informative", "wilson_coverage_informative"),
+    ("mean_abs_error", "wilson_mean_abs_error"),
+    ("mean_width", "wilson_mean_width"),
+)
+
+
+@dataclass(frozen=True)
+class IntervalsBenchConfig:
+    """What ``bench intervals`` runs."""
+
+    styles: tuple[str, ...] = ("office", "apartment")
+    room_marks: tuple[int, ...] = (10, 30)
+    seeds: int = 3
+    truth_samples: int = 200
+    alpha: float = 0.10
+    settings: tuple[str, ...] = tuple(s[0] for s in SETTINGS)
+
+
+def _run(style: str, setting: tuple[str, str, int], rooms: int, seed: int, truth, catalog, alpha):
+    """One HIF camera run; its trace and the per-type bias at the end of every room."""
+    _, detector, confirm = setting
+    config = LearningBenchConfig(
+        style, rooms, 1, ("hif",), perception="camera", alpha=alpha, detector=detector,
+        interval="clustered", confirm=confirm,
+    )  # fmt: skip
+    shm = Path("/dev/shm")
+    tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
+    with tempfile.TemporaryDirectory(prefix="ctxsearch-intervals-", dir=tmp_root) as tmp:
+        return run_trace(config, seed, "hif", truth, catalog, Path(tmp), keep_counts=True)
+
+
+def _at_room(tr: Trace, room: int) -> int:
+    """Examinations made by the end of room ``room`` (1-based; all if the run was shorter)."""
+    return int(sum(tr.room_exams[:room]))
+
+
+def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float) -> dict:
+    """Mean p0 - p_true per reference type over its informative entries after examination k."""
+    y, n = tr.counts[k - 1]
+    p0 = intervals.p0(y, n, alpha)
+    inf = (n >= 1) & (truth_p >= 0.02) & (truth_p <= 0.98)
+    out = {}
+    for r in sorted(set(refs)):
+        m = inf & (np.array(refs) == r)
+        if m.any():
+            out[r] = float(np.mean(p0[m] - truth_p[m]))
+    return out
+
+
+def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: bool = True) -> dict:
+    """Run the benchmark; write DIR/intervals.json and DIR/intervals.md; the JSON document."""
+    catalog = load_catalog()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    settings = [s for s in SETTINGS if s[0] in config.settings]
+    rooms = max(config.room_marks)
+    doc: dict = {
+        "alpha": config.alpha,
+        "seeds": config.seeds,
+        "room_marks": list(config.room_marks),
+        "truth_samples": config.truth_samples,
+        "strategy": "hif",
+        "perception": "camera",
+        "rows": [],
+    }
+    for style in config.styles:
+        truth = ground_truth(style, config.truth_samples, TRUTH_SEED, catalog)
+        for setting in settings:
+            t0 = time.perf_counter()
+            traces = [
+                _run(style, setting, rooms, s, truth, catalog, config.alpha)
+                for s in range(config.seeds)
+            ]
+            refs = [e["ref"] for e in traces[0].entries]
+            truth_p = np.array([e["p"] for e in traces[0].entries])
+            for mark in config.room_marks:
+                ks = [_at_room(t, mark) for t in traces]
+                row = {"style": style, "detector": setting[0], "rooms": mark,
+                       "examinations": float(np.median(ks))}  # fmt: skip
+                for clustered_key, wilson_key in CELLS:
+                    for name, key in (("clustered", clustered_key), ("wilson", wilson_key)):
+                        vals = [t.at_exam(k, key) for t, k in zip(traces, ks, strict=True)]
+                        row[f"{name}_{clustered_key}"] = float(np.nanmedian(vals))
+                biases = [
+                    _bias(t, k, truth_p, refs, config.alpha)
+                    for t, k in zip(traces, ks, strict=True)
+                ]
+                types = sorted({r for b in biases for r in b})
+                row["bias_by_type"] = {
+                    r: float(np.median([b[r] for b in biases if r in b])) for r in types
+                }
+                doc["rows"].append(row)
+            if progress:
+                print(f"{style} {setting[0]}: {time.perf_counter() - t0:.0f} s wall", flush=True)
+    (out / "intervals.json").write_text(json.dumps(doc, indent=1) + "\n")
+    (out / "intervals.md").write_text(markdown(doc))
+    return doc
+
+
+def markdown(doc: dict) -> str:
+    """intervals.md: the table of coverage_informative, mean |p0 - p_true| and mean width."""
+    lines = [
+        "# Intervals against the ground truth: detector x interval method",
+        "",
+        f"HIF in camera mode, {doc['seeds']} seeds (medians), alpha {doc['alpha']} (nominal "
+        f"coverage {1 - doc['alpha']:.2f}), ground truth from {doc['truth_samples']} rooms. "
+        "Coverage is over the informative entries (n_A >= 1, 0.02 <= p_true <= 0.98); error and "
+        "width over every entry with ground truth.",
+        "",
+        "| style | detector | rooms | exams | coverage_informative wilson | clustered | "
+        "mean abs(p0 - p_true) wilson | clustered | mean width wilson | clustered |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        lines.append(
+            f"| {r['style']} | {r['detector']} | {r['rooms']} | {r['examinations']:.0f} | "
+            f"{r['wilson_coverage_informative']:.3f} | {r['clustered_coverage_informative']:.3f} | "
+            f"{r['wilson_mean_abs_error']:.4f} | {r['clustered_mean_abs_error']:.4f} | "
+            f"{r['wilson_mean_width']:.3f} | {r['clustered_mean_width']:.3f} |"
+        )
+    lines += ["", "## Bias of p0 (Wilson centre) per reference type: mean p0 - p_true over its "
+              "informative entries, at the last room mark", ""]  # fmt: skip
+    last = max(doc["room_marks"])
+    rows = [r for r in doc["rows"] if r["rooms"] == last]
+    types = sorted({t for r in rows for t in r["bias_by_type"]})
+    lines.append("| style | detector | " + " | ".join(types) + " |")
+    lines.append("|---" * (2 + len(types)) + "|")
+    for r in rows:
+        cells = [f"{r['bias_by_type'][t]:+.3f}" if t in r["bias_by_type"] else "-" for t in types]
+        lines.append(f"| {r['style']} | {r['detector']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
