@@ -133,7 +133,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         description="Run every strategy on the same rooms and seeds and measure, after every "
         "examination, the intervals against the ground truth of `ctxsearch truth`: mean and max "
         "width, mean |p0 - p_true|, coverage, simulated seconds. Writes DIR/learning.json, "
-        "DIR/learning.md and DIR/learning.png.",
+        "DIR/learning.md, DIR/learning.png and DIR/learning.csv (one row per examination).",
     )
     p.add_argument(
         "--style",

@@ -80,6 +80,8 @@ def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
     a = json.loads((tmp_path / "serial" / "learning.json").read_text())
     b = json.loads((tmp_path / "ray" / "learning.json").read_text())
     assert _strip_timing(a) == _strip_timing(b)
+    csv_a = (tmp_path / "serial" / "learning.csv").read_text()
+    assert csv_a == (tmp_path / "ray" / "learning.csv").read_text()
 
 
 @pytest.mark.slow
@@ -90,3 +92,36 @@ def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
     assert main([*args, "--out", str(tmp_path / "a.json")]) == 0
     assert main([*args, "--out", str(tmp_path / "b.json"), "--workers", "2"]) == 0
     assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+
+
+@pytest.mark.slow
+def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path):
+    import json
+
+    from knowledge.catalog import load_catalog
+    from knowledge.store import EvidenceStore
+    from scripts.cli import main
+
+    kb = tmp_path / "kb.sqlite"
+    with EvidenceStore.open(kb, load_catalog(), create=True) as s:
+        for i in range(3):
+            s.record(
+                run="t",
+                style="office",
+                room_seed=i,
+                object_id=1,
+                ref_type="Desk",
+                sim_time=0.0,
+                strategy="t",
+                related=[("ON-TOP-OF-DESK", "Cup", 2)],
+            )
+    args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "3"]
+    args += ["--policies", "exhaustive,location", "--budget-seconds", "20", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
+    a = json.loads((tmp_path / "serial" / "search.json").read_text())
+    b = json.loads((tmp_path / "ray" / "search.json").read_text())
+    assert len(a["episode_list"]) == 3
+    assert _strip_timing(a) == _strip_timing(b)
+    csv_a = (tmp_path / "serial" / "search.csv").read_text()
+    assert csv_a == (tmp_path / "ray" / "search.csv").read_text()

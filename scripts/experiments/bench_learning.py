@@ -48,6 +48,7 @@ from scripts.experiments.learning_trace import (
     median_curve,
     run_trace,
 )
+from scripts.experiments.tables import write_csv
 from scripts.sweep import SweepOptions, run_units
 
 TRUTH_SEED = 10_000_019  # first room seed of the ground truth (no learning run uses it)
@@ -68,8 +69,9 @@ def bench_learning(
     progress: bool = True,
     sweep: SweepOptions | None = None,
 ) -> BenchResult:
-    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png; the
-    (strategy, seed) runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
+    """Run the benchmark and write DIR/learning.json, DIR/learning.md, DIR/learning.png and
+    DIR/learning.csv (one row per examination of every run, ``exam_rows``); the (strategy, seed)
+    runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
     catalog = load_catalog()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -87,7 +89,39 @@ def bench_learning(
     files[1].write_text(table)
     plot_title = f"{c.style}: {c.rooms} rooms x {c.seeds} seeds ({c.perception}{c.budget_note})"
     plot(files[2], traces, plot_title)
+    files.append(write_csv(out / "learning.csv", EXAM_COLUMNS, exam_rows(config, traces)))
     return BenchResult(data, table, files)
+
+
+# learning.csv: one row per examination of every (strategy, seed) run.
+EXAM_COLUMNS = (
+    "style",
+    "perception",
+    "strategy",
+    "seed",
+    "examination",  # 1-based, over the run
+    "room",  # 0-based index of the room it was made in
+    "sim_s",  # the run clock after it, simulated seconds
+    *METRICS,  # of the intervals against the ground truth after it
+)
+
+
+def exam_rows(config: LearningBenchConfig, traces: dict[str, list[Trace]]):
+    """The rows of learning.csv (``EXAM_COLUMNS``), strategy by strategy, seed by seed."""
+    for strategy, ts in traces.items():
+        for seed, tr in enumerate(ts):
+            rooms = [i for i, n in enumerate(tr.room_exams) for _ in range(n)]
+            for k, t in enumerate(tr.sim_s):
+                yield {
+                    "style": config.style,
+                    "perception": config.perception,
+                    "strategy": strategy,
+                    "seed": seed,
+                    "examination": k + 1,
+                    "room": rooms[k],
+                    "sim_s": float(t),
+                    **{m: float(tr.metrics[m][k]) for m in METRICS},
+                }
 
 
 def _run_all(

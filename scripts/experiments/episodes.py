@@ -230,12 +230,24 @@ def run_episodes(
     """Run every policy on every episode (one World per episode, shared by the policies)."""
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
-        runs = [(name, probs_for(*split_name(name)), None) for name in policies]
         for name, res in zip(
-            policies, _search_room(ep, style, catalog, runs, progress), strict=True
+            policies, run_episode(ep, policies, catalog, style, probs_for, progress), strict=True
         ):
             results[name].append(res)
     return results
+
+
+def run_episode(
+    ep: S.Episode,
+    policies: Sequence[str],
+    catalog: Catalog,
+    style: WorldStyle,
+    probs_for: ProbsFor,
+    progress: Callable[[str], None] | None = None,
+) -> list[S.SearchResult]:
+    """Every policy on episode ``ep`` (one World, shared by the policies), in ``policies`` order."""
+    runs = [(name, probs_for(*split_name(name)), None) for name in policies]
+    return _search_room(ep, style, catalog, runs, progress)
 
 
 @dataclass
