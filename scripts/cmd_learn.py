@@ -79,7 +79,8 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="FILE.rrd",
-        help="write a rerun recording (one file per room: FILE.rrd, FILE.room<i>.rrd)",
+        help="write a rerun recording of the whole run (one file, room after room, laid out by "
+        "its blueprint)",
     )
     p.add_argument(
         "--max-examinations",
