@@ -153,6 +153,7 @@ class RunLog:
             relation_boxes(L.catalog, obj),
             labels=[r.name for r in rels],
             color=(1.0, 0.85, 0.1),
+            show_labels=False,  # on hover: the examined object's label says what is examined
         )
         self.rec.log_volumes(
             "world/volumes/examined_object",

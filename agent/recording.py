@@ -15,7 +15,8 @@ Entity tree (under ``root``; world frame: x east, y north, z up, metres)::
     world/robot                                 base pose (Transform3D), with base/mast/head
     world/robot_path                            the path driven so far (line strip)
     world/camera                                camera pose (Transform3D, RDF)
-    world/camera/image                          Pinhole; rgb, segmentation, depth, detections
+    world/camera/image                          Pinhole; rgb (JPEG), segmentation, detections
+    world/camera/depth                          Pinhole at half resolution; image (depth, mm)
     log                                         text messages
     <any path>                                  scalars (log_scalar)
 
@@ -55,6 +56,8 @@ from knowledge.geometry import Box
 
 WALL_THICKNESS = 0.1  # m, drawn outside the room's boundary
 RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
+JPEG_QUALITY = 85  # camera images are stored as JPEG (a tenth of the raw size)
+DEPTH_STRIDE = 2  # depth images are stored at half resolution, in millimetres
 
 
 def rgb255(color: Sequence[float]) -> list[int]:
@@ -382,7 +385,8 @@ class Recorder:
             ),
         )
         if frame.rgb is not None:
-            rec.log(e("world/camera/image/rgb"), rr.Image(frame.rgb))
+            rgb = rr.Image(np.ascontiguousarray(frame.rgb))
+            rec.log(e("world/camera/image/rgb"), rgb.compress(jpeg_quality=JPEG_QUALITY))
         if frame.instance_ids is not None:
             seg = (
                 (np.asarray(frame.instance_ids).astype(np.int64) + 1)
@@ -391,16 +395,11 @@ class Recorder:
             )
             rec.log(e("world/camera/image/segmentation"), rr.SegmentationImage(seg, opacity=0.35))
         if frame.depth is not None:
-            rec.log(
-                e("world/camera/image/depth"),
-                rr.DepthImage(np.asarray(frame.depth, np.float32), meter=1.0),
-            )
+            self._log_depth(cam, np.asarray(frame.depth, np.float32))
         if detections:
             mins = [[d.bbox[0], d.bbox[1]] for d in detections]
             sizes = [[d.bbox[2] - d.bbox[0] + 1, d.bbox[3] - d.bbox[1] + 1] for d in detections]
-            labels = [
-                f"{d.type} #{d.instance_id} ({d.pixels} px, {d.distance:.1f} m)" for d in detections
-            ]
+            labels = [d.type for d in detections]  # id, pixels and distance: in the log
             rec.log(
                 e("world/camera/image/detections"),
                 rr.Boxes2D(
@@ -412,6 +411,26 @@ class Recorder:
             )
         else:
             rec.log(e("world/camera/image/detections"), rr.Clear(recursive=False))
+
+    def _log_depth(self, cam: PinholeCamera, depth: np.ndarray) -> None:
+        """The depth image, every ``DEPTH_STRIDE``-th pixel in millimetres, under a pinhole of
+        its own (``world/camera/depth``: its own view, not drawn over the RGB image)."""
+        import rerun as rr
+
+        k = DEPTH_STRIDE
+        d = depth[::k, ::k]
+        h, w = d.shape
+        mm = np.clip(np.nan_to_num(d * 1000.0, nan=0.0, posinf=0.0), 0, 65535).astype(np.uint16)
+        self._rec.log(
+            self.entity("world/camera/depth"),
+            rr.Pinhole(
+                image_from_camera=intrinsics(float(cam.fovy_deg), w, h),
+                resolution=[w, h],
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=0.2,
+            ),
+        )
+        self._rec.log(self.entity("world/camera/depth/image"), rr.DepthImage(mm, meter=1000.0))
 
     # ----------------------------------------------------------------- text and numbers
     def log_text(self, msg: str, level: str = "INFO") -> None:

@@ -46,15 +46,12 @@ def _camera_views(root: str, title: str = "") -> list[Any]:
     """The head camera (images, segmentation, detections) and its depth, each in its own view."""
     import rerun.blueprint as rrb
 
-    image = _p(root, "world/camera/image")
     pre = f"{title}: " if title else ""
     return [
         rrb.Spatial2DView(
-            name=f"{pre}head camera, detections",
-            origin=image,
-            contents=["+ $origin/**", "- $origin/depth"],
+            name=f"{pre}head camera, detections", origin=_p(root, "world/camera/image")
         ),
-        rrb.Spatial2DView(name=f"{pre}depth", origin=image, contents=["+ $origin/depth"]),
+        rrb.Spatial2DView(name=f"{pre}depth", origin=_p(root, "world/camera/depth")),
     ]
 
 
@@ -64,7 +61,7 @@ def _room_view(root: str, eye: Any, name: str) -> Any:
     return rrb.Spatial3DView(
         name=name,
         origin=_p(root, "world"),
-        contents=["+ $origin/**", "- $origin/camera/image/depth"],
+        contents=["+ $origin/**", "- $origin/camera/depth/**"],
         eye_controls=eye,
     )
 

@@ -498,8 +498,8 @@ class SearchContext:
     def _log_candidates(
         self, ranked: Sequence[ss.Region], show: int = 12, labelled: int = 3
     ) -> None:
-        """The best ``show`` candidate regions; only the best ``labelled`` carry a label (rank,
-        region, P, rate), the next one in red."""
+        """The best ``show`` candidate regions; only the best ``labelled`` carry a short label
+        (the next one, in red: its region and P; the others: rank and P)."""
         rec = self.recorder
         if not rec.enabled:
             return
@@ -513,13 +513,13 @@ class SearchContext:
         rec.log_volumes(
             "world/search/top",
             [r.box for r in best[1:]],
-            [f"#{i + 2} {r.label} P={r.score:.2f}" for i, r in enumerate(best[1:])],
+            [f"#{i + 2} P={r.score:.2f}" for i, r in enumerate(best[1:])],
             color=(0.95, 0.75, 0.1),
         )
         rec.log_volumes(
             "world/search/best",
             [r.box for r in best[:1]],
-            [f"next: #1 {r.label} P={r.score:.2f} {r.rate:.3f}/s" for r in best[:1]],
+            [f"next: {r.label} P={r.score:.2f}" for r in best[:1]],
             color=(0.95, 0.2, 0.1),
         )
 
