@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def square_with_pid(x: int) -> dict:
     import os
 
-    return {"x": x, "y": x * x, "pid": os.getpid()}
+    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0)}
 
 
 def refuse_three(x: int) -> int:
@@ -29,10 +29,11 @@ def refuse_three(x: int) -> int:
 
 def test_one_worker_is_a_loop_without_ray():
     code = (
-        "import sys; from scripts.sweep import run_units; "
+        "import sys; from scripts.sweep import SweepOptions, run_units, session; "
         "from tests.test_sweep import square_with_pid as f; "
+        "s = session(SweepOptions()); s.__enter__(); "
         "r = run_units(f, [1, 2, 3], progress=False); assert [u['y'] for u in r] == [1, 4, 9]; "
-        "assert 'ray' not in sys.modules"
+        "s.__exit__(None, None, None); assert 'ray' not in sys.modules"
     )
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -44,10 +45,26 @@ def test_two_workers_give_the_serial_results_in_order():
     serial = run_units(square_with_pid, units, progress=False)
     parallel = run_units(square_with_pid, units, workers=2, progress=False)
     strip = [{k: v for k, v in d.items() if k != "pid"} for d in parallel]
-    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]
+    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]  # nice too:
+    # the workers run at the driver's priority, not Ray's default nice 15
     assert {d["pid"] for d in parallel}.isdisjoint({d["pid"] for d in serial})  # other processes
     with pytest.raises(CtxsearchError, match="unit 3: bad input"):
         run_units(refuse_three, units, workers=2, progress=False)
+
+
+@pytest.mark.slow
+def test_a_session_keeps_one_ray_for_several_sweeps():
+    import ray
+
+    from scripts.sweep import SweepOptions, session
+
+    with session(SweepOptions(workers=2)):
+        a = run_units(square_with_pid, [1, 2], workers=2, progress=False)
+        assert ray.is_initialized()
+        b = run_units(square_with_pid, [3, 4], workers=2, progress=False)
+        assert ray.is_initialized()  # the sweeps did not shut the session's Ray down
+    assert not ray.is_initialized()
+    assert [d["y"] for d in a + b] == [1, 4, 9, 16]
 
 
 def test_bad_worker_count():

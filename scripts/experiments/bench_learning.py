@@ -38,7 +38,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from envs.truth import ground_truth
+from envs.houses import resolve_style
+from envs.truth import sample_counts, truth_document
 from knowledge.catalog import Catalog, load_catalog
 from scripts.experiments.learning_report import decision_stats, markdown, plot
 from scripts.experiments.learning_trace import (
@@ -49,9 +50,10 @@ from scripts.experiments.learning_trace import (
     run_trace,
 )
 from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units
+from scripts.sweep import SweepOptions, run_units, session
 
 TRUTH_SEED = 10_000_019  # first room seed of the ground truth (no learning run uses it)
+TRUTH_ROOMS_PER_UNIT = 10  # rooms of the ground truth per sweep unit
 
 
 @dataclass
@@ -75,8 +77,10 @@ def bench_learning(
     catalog = load_catalog()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
-    traces = _run_all(config, truth, catalog, progress, sweep or SweepOptions())
+    sweep = sweep or SweepOptions()
+    with session(sweep):  # one Ray for both sweeps
+        truth = _ground_truth(config, catalog, progress, sweep)
+        traces = _run_all(config, truth, catalog, progress, sweep)
     data = _data(config, truth, traces)
     c = config
     title = (
@@ -122,6 +126,28 @@ def exam_rows(config: LearningBenchConfig, traces: dict[str, list[Trace]]):
                     "sim_s": float(t),
                     **{m: float(tr.metrics[m][k]) for m in METRICS},
                 }
+
+
+def _ground_truth(
+    config: LearningBenchConfig, catalog: Catalog, progress: bool, sweep: SweepOptions
+) -> dict:
+    """``envs.truth.ground_truth`` of the benchmark's style, its rooms counted in sweep units of
+    ``TRUTH_ROOMS_PER_UNIT`` (the same document as the serial call)."""
+    style = resolve_style(config.style, catalog)
+    seeds = list(range(TRUTH_SEED, TRUTH_SEED + config.truth_samples))
+    chunks = [
+        seeds[i : i + TRUTH_ROOMS_PER_UNIT] for i in range(0, len(seeds), TRUTH_ROOMS_PER_UNIT)
+    ]
+    parts = run_units(
+        functools.partial(sample_counts, style, catalog=catalog),
+        chunks,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc=f"ground truth {style.name}",
+        progress=progress,
+    )
+    rooms = [c for part in parts for c in part]
+    return truth_document(style, config.truth_samples, TRUTH_SEED, catalog, rooms)
 
 
 def _run_all(
