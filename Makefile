@@ -32,7 +32,10 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes (about 40 minutes on 2 cores).
+# Regenerates every result the README quotes (about 40 minutes on 2 cores). The sweeps (truth,
+# bench learning, bench search) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray);
+# the results are the same for any WORKERS.
+WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
 STRATEGIES := hif,random,round-robin,nearest,fewest,expected-hif,cost-hif
 POLICIES := exhaustive,location,indirect,oracle-prior,oracle
 bench: $(STAMP)
@@ -40,12 +43,12 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench sim --out results
 	$(VENV)/bin/ctxsearch bench sim --style apartment --rooms 3 --gazes 50 --explore 3 --out results/sim_apartment
 	for s in office biology_lab living_room kitchen; do \
-	  $(VENV)/bin/ctxsearch truth --style $$s --samples 200 --out results/truth/$$s.json --no-progress; done
-	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning
-	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget
+	  $(VENV)/bin/ctxsearch truth --style $$s --samples 200 --out results/truth/$$s.json --no-progress --workers $(WORKERS); done
+	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 	rm -f build/kb_office.sqlite && mkdir -p build
 	$(VENV)/bin/ctxsearch learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
-	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 # Detector x interval against the truth, camera mode (about 22 minutes on 2 shared cores).

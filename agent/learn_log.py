@@ -1,4 +1,4 @@
-"""The rerun recording of a learning run (agent.acquisition): one recording per room."""
+"""The rerun recording of a learning run (agent.acquisition): one recording for the whole run."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Protocol
 from agent.exam_volumes import relation_boxes
 from agent.interfaces import Body, Perception
 from agent.recording import Recorder, Shot
+from agent.rr_layout import LEARN_APP, learn_blueprint
 from agent.run_state import ExamResult, Run
 from agent.strategies import Choice
 from agent.viewplan import Gaze
@@ -41,44 +42,44 @@ class LoggedRoom(Protocol):
 
 
 class RunLog:
-    """What a run writes to rerun (agent.recording.Recorder), one recording per room.
+    """What a run writes to rerun (agent.recording.Recorder): one file, one named recording,
+    laid out by agent.rr_layout's ``learn_blueprint``.
 
-    Per room: the room in 3D (labelled boxes), the robot's path and head (camera pose) over the
-    run clock, the camera as a pinhole with its RGB and segmentation images for every gaze, the
-    examined object's relation volumes highlighted, a text log of every choice with each
-    candidate type's score, and time series of the mean interval width and of n per type.
-
-    A recording holds one room (the Recorder's room entities are static), so a run of several
-    rooms writes ``FILE.rrd`` for the first room of the call and ``FILE.room<i>.rrd`` for room i
-    after it; ``rerun FILE*.rrd`` opens them together. Without a path nothing is recorded.
+    Every room in turn, on the run clock (``sim_time``): the room in 3D (furniture labelled),
+    logged when the robot enters it and replacing the last one, the robot's path and head
+    (camera pose), the camera as a pinhole with its RGB, segmentation and depth images and the
+    detections for every gaze, the examined object's relation volumes highlighted, a text log of
+    every choice with each candidate type's score, and time series of the mean interval width
+    and of n for every type present in the rooms so far. Without a path nothing is recorded.
     """
 
     def __init__(self, path: str | Path | None):
         self.path = Path(path) if path is not None else None
-        self.rec = None
+        self.rec: Recorder | None = None
         self.files: list[Path] = []
-        self._step = 0
+        self._types: set[str] = set()
+        self._in_room = False
 
     @property
     def recording(self) -> bool:
         """True while a room's recording is open: render RGB and look at every image."""
-        return self.rec is not None
+        return self.rec is not None and self._in_room
 
     def start_room(self, L: LoggedRoom) -> None:
-        """Open the room's recording and log the room, its start and the knowledge so far."""
+        """Open the run's recording (the first room) and log the room, its start and the
+        knowledge so far."""
         if self.path is None:
             return
-        path = (
-            self.path
-            if not self.files
-            else self.path.with_name(
-                f"{self.path.stem}.room{L.room_index}{self.path.suffix or '.rrd'}"
+        if self.rec is None:
+            name = f"learn: {L.layout.style}, strategy {L.run.strategy.name}, run {L.run.run}"
+            self.rec = Recorder(
+                self.path, LEARN_APP, name=name, blueprint=learn_blueprint(L.layout)
             )
-        )
-        self.rec = Recorder(path)
-        self.files.append(path)
-        self.rec.set_time(L.clock, self._step)
-        self.rec.log_room(L.layout, L.catalog)
+            self.files.append(self.path)
+        self._in_room = True
+        self.rec.set_time(L.clock)
+        self.rec.log_room(L.layout, L.catalog, static=False)
+        self._types |= {o.type for o in L.layout.objects}
         self.rec.log_text(
             f"room {L.room_index} (style {L.layout.style}, seed {L.layout.seed}): "
             f"{len(L.layout.objects)} objects; run {L.run.run}"
@@ -87,24 +88,24 @@ class RunLog:
         self.knowledge(L)
 
     def end_room(self, L: LoggedRoom, n_exams: int) -> None:
-        """Close the room's recording."""
+        """The room's last line; the recording stays open for the next room."""
         if self.rec is None:
             return
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         self.rec.log_text(
             f"room {L.room_index} done: {n_exams} examinations, "
             f"{L.clock - L.run.clock_offset:.1f} s simulated"
             + (" (time budget spent: leaving)" if L.left_early else "")
         )
-        self.rec.close()
-        self.rec = None
+        self.rec.flush()
+        self._in_room = False
 
     def robot(self, L: LoggedRoom) -> None:
         """The robot's base pose and path, and where the head points (camera pose)."""
         if self.rec is None:
             return
         pose = L.body.pose()
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         self.rec.log_robot(pose, L.spec)
         self.rec.log_camera(Shot(camera_at(pose, L.spec)))
 
@@ -114,12 +115,14 @@ class RunLog:
         """One image: the camera pinhole, RGB and segmentation (camera mode), detections."""
         if self.rec is None:
             return
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         self.rec.log_robot(L.body.pose(), L.spec)
         if frame is None:  # oracle: the pose of the camera, no pixels
             self.rec.log_camera(Shot(camera_at(L.body.pose(), L.spec)))
-        else:  # RGB and segmentation; depth is left out (it would double the file's size)
-            shot = Shot(frame.camera, rgb=frame.rgb, instance_ids=frame.instance_ids)
+        else:
+            shot = Shot(
+                frame.camera, rgb=frame.rgb, depth=frame.depth, instance_ids=frame.instance_ids
+            )
             self.rec.log_camera(shot, L.perception.last_detections)
         if purpose == "look" and objs:
             self.rec.log_text(
@@ -131,8 +134,7 @@ class RunLog:
         """The decision of lines 8-13 with every candidate type's score."""
         if self.rec is None:
             return
-        self._step += 1
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         ranked = sorted(choice.scores.items(), key=lambda kv: -kv[1])
         scores = ", ".join(f"{t} {s:.4f}" for t, s in ranked)
         n_unex = len(L.unexamined)
@@ -151,6 +153,7 @@ class RunLog:
             relation_boxes(L.catalog, obj),
             labels=[r.name for r in rels],
             color=(1.0, 0.85, 0.1),
+            show_labels=False,  # on hover: the examined object's label says what is examined
         )
         self.rec.log_volumes(
             "world/volumes/examined_object",
@@ -168,7 +171,7 @@ class RunLog:
         """The examination's outcome and the knowledge's new state."""
         if self.rec is None:
             return
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         found = ", ".join(f"{r}({o.type} #{o.id})" for r, o in res.related) or "nothing"
         self.rec.log_text(f"{res.choice.obj.type} #{res.choice.obj.id}: {found}")
         self.knowledge(L)
@@ -177,16 +180,17 @@ class RunLog:
         """A line in the text log."""
         if self.rec is None:
             return
-        self.rec.set_time(L.clock, self._step)
+        self.rec.set_time(L.clock)
         self.rec.log_text(msg, level="WARN")
 
     def knowledge(self, L: LoggedRoom) -> None:
-        """Time series: mean interval width and n per type."""
+        """Time series: mean interval width and n of every type present in the rooms so far."""
         if self.rec is None:
             return
         self.rec.log_scalar("knowledge/mean_width", L.kb.mean_width())
         for t in L.catalog.type_names:
-            self.rec.log_scalar(f"knowledge/n/{t}", L.kb.n(t))
+            if t in self._types:
+                self.rec.log_scalar(f"knowledge/n/{t}", L.kb.n(t))
 
     def __enter__(self) -> RunLog:
         return self
@@ -195,7 +199,8 @@ class RunLog:
         self.close()
 
     def close(self) -> None:
-        """Close an open recording (interrupted runs keep what was logged)."""
+        """Close the recording (interrupted runs keep what was logged)."""
         if self.rec is not None:
             self.rec.close()
             self.rec = None
+        self._in_room = False

@@ -1,9 +1,12 @@
 """Rerun recordings of what the robot does: the room, relation volumes, the robot and its camera.
 
-``Recorder(path)`` writes a ``.rrd`` file (open it with ``rerun FILE.rrd``); ``Recorder(None)``
-records nothing and every method returns at once, so callers log unconditionally.
+``Recorder(path, name=..., blueprint=...)`` writes a ``.rrd`` file (open it with
+``rerun FILE.rrd``) holding one named recording and the blueprint the viewer lays it out by
+(agent.rr_layout); ``Recorder(None)`` records nothing and every method returns at once, so
+callers log unconditionally. ``Recorder(stream=..., root="a")`` logs into an open stream
+(``open_stream``) under the entity ``a/``: several searches side by side in one recording.
 
-Entity tree (world frame: x east, y north, z up, metres)::
+Entity tree (under ``root``; world frame: x east, y north, z up, metres)::
 
     world/room/floor, world/room/walls          static boxes
     world/objects/<Type>_<id>                   static: labelled bounding box (wireframe)
@@ -12,12 +15,16 @@ Entity tree (world frame: x east, y north, z up, metres)::
     world/robot                                 base pose (Transform3D), with base/mast/head
     world/robot_path                            the path driven so far (line strip)
     world/camera                                camera pose (Transform3D, RDF)
-    world/camera/image                          Pinhole; rgb, segmentation, depth, detections
+    world/camera/image                          Pinhole; rgb (JPEG), segmentation, detections
+    world/camera/depth                          Pinhole at half resolution; image (depth, mm)
     log                                         text messages
     <any path>                                  scalars (log_scalar)
 
-Everything that changes is logged on the ``sim_time`` timeline (simulated seconds; set it with
-``set_time``) and, where given, a ``step`` sequence.
+Everything is logged on the one ``sim_time`` timeline (simulated seconds; set it with
+``set_time``; it starts at 0): rerun's automatic ``log_time`` is switched off, so every entity
+and log line is where the viewer's time cursor expects it. A room is static, or, for a run over
+several rooms in one recording (``log_room(static=False)``), logged at the second the robot
+enters it, replacing the last room.
 
 Cameras: MuJoCo's look along their -z with +y up; rerun's pinhole is RDF (x right, y down, z
 forward), so the camera's world rotation is ``xmat @ diag(1, -1, -1)``. Segmentation images hold
@@ -31,6 +38,7 @@ recording) never needs it.
 from __future__ import annotations
 
 import math
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +56,8 @@ from knowledge.geometry import Box
 
 WALL_THICKNESS = 0.1  # m, drawn outside the room's boundary
 RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
+JPEG_QUALITY = 85  # camera images are stored as JPEG (a tenth of the raw size)
+DEPTH_STRIDE = 2  # depth images are stored at half resolution, in millimetres
 
 
 def rgb255(color: Sequence[float]) -> list[int]:
@@ -117,81 +127,127 @@ def _boxes3d(boxes: Sequence[Box], **kwargs: Any) -> Any:
     )
 
 
-class Recorder:
-    """Logs the robot's world to a rerun ``.rrd`` file; a no-op when ``path`` is None."""
+def open_stream(
+    path: str | Path, app_id: str, name: str | None = None, blueprint: Any = None
+) -> Any:
+    """A rerun RecordingStream saving to ``path``: a fresh recording id, the recording named
+    ``name``, ``blueprint`` (a ``rerun.blueprint.Blueprint``) stored as the active and default
+    layout of ``app_id``, no ``log_time``, the time at sim_time 0."""
+    import rerun as rr
 
-    def __init__(self, path: str | Path | None, app_id: str = "ctxsearch") -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(app_id, recording_id=uuid.uuid4())
+    rec.save(path)
+    if blueprint is not None:  # active, not only default: the viewer may remember another layout
+        rec.send_blueprint(blueprint, make_active=True, make_default=True)
+    rr.set_log_time_enabled(False, recording=rec)
+    if name:
+        rec.send_recording_name(name)
+    rec.set_time("sim_time", duration=0.0)
+    return rec
+
+
+class Recorder:
+    """Logs the robot's world to rerun: a ``.rrd`` file of its own (``path``), or entities under
+    ``root`` of an open stream; a no-op when neither is given."""
+
+    def __init__(
+        self,
+        path: str | Path | None = None,
+        app_id: str = "ctxsearch",
+        *,
+        name: str | None = None,
+        blueprint: Any = None,
+        stream: Any = None,
+        root: str = "",
+    ) -> None:
         self.path = Path(path) if path is not None else None
+        self.root = root.strip("/")
         self._rec: Any = None
+        self._owns = False
         self._path_xy: list[list[float]] = []
         self._robot_logged = False
-        if self.path is None:
+        if self.path is not None:
+            self._rec, self._owns = open_stream(self.path, app_id, name, blueprint), True
+        elif stream is not None:
+            self._rec = stream
+            self._rec.set_time("sim_time", duration=0.0)
+        else:
             return
         import rerun as rr
 
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._rec = rr.RecordingStream(app_id)
-        self._rec.save(self.path)
-        self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self._rec.log(self.entity("world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     @property
     def enabled(self) -> bool:
         """True if this recorder writes a file."""
         return self._rec is not None
 
+    def entity(self, path: str) -> str:
+        """The entity path ``path`` under this recorder's root."""
+        return f"{self.root}/{path}" if self.root else path
+
     # ----------------------------------------------------------------- time
-    def set_time(self, sim_time: float, step: int | None = None) -> None:
-        """Set the ``sim_time`` timeline (simulated seconds) and, if given, the ``step`` sequence."""
+    def set_time(self, sim_time: float) -> None:
+        """Set the ``sim_time`` timeline (simulated seconds) for what is logged next."""
         if self._rec is None:
             return
         self._rec.set_time("sim_time", duration=float(sim_time))
-        if step is not None:
-            self._rec.set_time("step", sequence=int(step))
 
     # ----------------------------------------------------------------- the room
-    def log_room(self, layout: RoomLayout, catalog: Catalog) -> None:
-        """Static: floor, walls, and every object's parts (filled) and labelled bounding box."""
+    def log_room(self, layout: RoomLayout, catalog: Catalog, static: bool = True) -> None:
+        """Floor, walls (wireframes: the inside stays visible), every object's parts (filled) and
+        bounding box (labelled on screen for furniture, by hover for small objects). Static, or
+        (``static=False``) at the current time, clearing the previous room, its volumes, plans
+        and path."""
         if self._rec is None:
             return
         import rerun as rr
 
-        rec = self._rec
+        rec, e = self._rec, self.entity
+        if not static:
+            for ent in ("world/room", "world/objects", "world/volumes", "world/search"):
+                rec.log(e(ent), rr.Clear(recursive=True))
+            for ent in ("world/robot_path", "world/plan"):
+                rec.log(e(ent), rr.Clear(recursive=False))
+            self._path_xy = []
         w, d = layout.width, layout.depth
         rec.log(
-            "world/room/floor",
+            e("world/room/floor"),
             rr.Boxes3D(
                 centers=[[0, 0, -0.005]],
                 half_sizes=[[w / 2, d / 2, 0.005]],
                 colors=[[200, 200, 195]],
                 fill_mode=rr.components.FillMode.Solid,
             ),
-            static=True,
+            static=static,
         )
         rec.log(
-            "world/room/walls",
+            e("world/room/walls"),
             _boxes3d(
                 wall_boxes(layout),
-                colors=[[225, 225, 220, 90]],
-                fill_mode=rr.components.FillMode.Solid,
+                colors=[[150, 150, 145]],
+                fill_mode=rr.components.FillMode.MajorWireframe,
             ),
-            static=True,
+            static=static,
         )
         infos = []
         for o in layout.objects:
             typ = catalog.type(o.type)
             color = rgb255(typ.color)
             infos.append(rr.AnnotationInfo(id=o.id + 1, label=f"{o.type} #{o.id}", color=color))
-            entity = f"world/objects/{o.type}_{o.id}"
+            entity = e(f"world/objects/{o.type}_{o.id}")
             rec.log(
                 entity,
                 _boxes3d(
                     [o.box()],
                     labels=[o.type],
                     colors=[color],
-                    show_labels=True,
+                    show_labels=typ.is_furniture,
                     fill_mode=rr.components.FillMode.MajorWireframe,
                 ),
-                static=True,
+                static=static,
             )
             parts = world_parts(o, catalog)
             if parts:
@@ -200,10 +256,10 @@ class Recorder:
                     _boxes3d(
                         parts, colors=[color] * len(parts), fill_mode=rr.components.FillMode.Solid
                     ),
-                    static=True,
+                    static=static,
                 )
         infos.append(rr.AnnotationInfo(id=0, label="background", color=[0, 0, 0]))
-        rec.log("world", rr.AnnotationContext(infos), static=True)
+        rec.log(e("world"), rr.AnnotationContext(infos), static=static)
 
     def log_volumes(
         self,
@@ -212,8 +268,10 @@ class Recorder:
         labels: Sequence[str] | None = None,
         color: Sequence[float] | None = None,
         static: bool = False,
+        show_labels: bool = True,
     ) -> None:
-        """Boxes (relation volumes, search regions) as labelled wireframes at ``entity``."""
+        """Boxes (relation volumes, search regions) as labelled wireframes at ``entity`` (with
+        ``show_labels=False`` the labels show on hover only)."""
         if self._rec is None:
             return
         import rerun as rr
@@ -221,13 +279,13 @@ class Recorder:
         kwargs: dict[str, Any] = {"fill_mode": rr.components.FillMode.MajorWireframe}
         if labels is not None:
             kwargs["labels"] = list(labels)
-            kwargs["show_labels"] = True
+            kwargs["show_labels"] = show_labels
         if color is not None:
             kwargs["colors"] = [rgb255(color)] * len(boxes)
         if not boxes:
-            self._rec.log(entity, rr.Clear(recursive=False), static=static)
+            self._rec.log(self.entity(entity), rr.Clear(recursive=False), static=static)
             return
-        self._rec.log(entity, _boxes3d(list(boxes), **kwargs), static=static)
+        self._rec.log(self.entity(entity), _boxes3d(list(boxes), **kwargs), static=static)
 
     # ----------------------------------------------------------------- the robot
     def log_robot(
@@ -240,11 +298,11 @@ class Recorder:
         import rerun as rr
 
         spec = spec or RobotSpec()
-        rec = self._rec
+        rec, e = self._rec, self.entity
         if not self._robot_logged:
             r, hb, hc = spec.base_radius, spec.base_height, spec.camera_height
             rec.log(
-                "world/robot/body",
+                e("world/robot/body"),
                 rr.Cylinders3D(
                     lengths=[hb, hc - hb],
                     radii=[r, spec.mast_radius],
@@ -255,7 +313,7 @@ class Recorder:
                 static=True,
             )
             rec.log(
-                "world/robot/nose",
+                e("world/robot/nose"),
                 rr.Arrows3D(
                     origins=[[0, 0, hb + 0.01]], vectors=[[r * 1.2, 0, 0]], colors=[[230, 128, 25]]
                 ),
@@ -263,7 +321,7 @@ class Recorder:
             )
             self._robot_logged = True
         rec.log(
-            "world/robot",
+            e("world/robot"),
             rr.Transform3D(
                 translation=[pose.x, pose.y, 0.0],
                 rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(pose.yaw)),
@@ -283,7 +341,7 @@ class Recorder:
             self._path_xy.append(xy)
         if len(self._path_xy) >= 2:
             rec.log(
-                "world/robot_path",
+                e("world/robot_path"),
                 rr.LineStrips3D(
                     [[[x, y, 0.02] for x, y in self._path_xy]],
                     colors=[[230, 128, 25]],
@@ -298,7 +356,9 @@ class Recorder:
         import rerun as rr
 
         pts = [[float(x), float(y), 0.03] for x, y in np.asarray(path, float).reshape(-1, 2)]
-        self._rec.log(entity, rr.LineStrips3D([pts], colors=[[40, 120, 230]], radii=[0.01]))
+        self._rec.log(
+            self.entity(entity), rr.LineStrips3D([pts], colors=[[40, 120, 230]], radii=[0.01])
+        )
 
     # ----------------------------------------------------------------- the camera
     def log_camera(self, frame: Frame | Shot, detections: Sequence[Any] = ()) -> None:
@@ -307,15 +367,16 @@ class Recorder:
             return
         import rerun as rr
 
-        rec = self._rec
+        rec, e = self._rec, self.entity
         cam = frame.camera
         width, height = int(cam.width), int(cam.height)
         rot = np.asarray(cam.xmat, float).reshape(3, 3) @ RDF_FROM_MUJOCO
         rec.log(
-            "world/camera", rr.Transform3D(translation=np.asarray(cam.position, float), mat3x3=rot)
+            e("world/camera"),
+            rr.Transform3D(translation=np.asarray(cam.position, float), mat3x3=rot),
         )
         rec.log(
-            "world/camera/image",
+            e("world/camera/image"),
             rr.Pinhole(
                 image_from_camera=intrinsics(float(cam.fovy_deg), width, height),
                 resolution=[width, height],
@@ -324,36 +385,53 @@ class Recorder:
             ),
         )
         if frame.rgb is not None:
-            rec.log("world/camera/image/rgb", rr.Image(frame.rgb))
+            rgb = rr.Image(np.ascontiguousarray(frame.rgb))
+            rec.log(e("world/camera/image/rgb"), rgb.compress(jpeg_quality=JPEG_QUALITY))
         if frame.instance_ids is not None:
             seg = (
                 (np.asarray(frame.instance_ids).astype(np.int64) + 1)
                 .clip(0, 65535)
                 .astype(np.uint16)
             )
-            rec.log("world/camera/image/segmentation", rr.SegmentationImage(seg, opacity=0.35))
+            rec.log(e("world/camera/image/segmentation"), rr.SegmentationImage(seg, opacity=0.35))
         if frame.depth is not None:
-            rec.log(
-                "world/camera/image/depth",
-                rr.DepthImage(np.asarray(frame.depth, np.float32), meter=1.0),
-            )
+            self._log_depth(cam, np.asarray(frame.depth, np.float32))
         if detections:
             mins = [[d.bbox[0], d.bbox[1]] for d in detections]
             sizes = [[d.bbox[2] - d.bbox[0] + 1, d.bbox[3] - d.bbox[1] + 1] for d in detections]
-            labels = [
-                f"{d.type} #{d.instance_id} ({d.pixels} px, {d.distance:.1f} m)" for d in detections
-            ]
+            labels = [d.type for d in detections]  # id, pixels and distance: in the log
             rec.log(
-                "world/camera/image/detections",
+                e("world/camera/image/detections"),
                 rr.Boxes2D(
                     mins=mins,
                     sizes=sizes,
                     labels=labels,
-                    class_ids=[d.instance_id + 1 for d in detections],
+                    # A false detection (negative id) gets class 0, the segmentation's nothing.
+                    class_ids=[max(0, d.instance_id + 1) for d in detections],
                 ),
             )
         else:
-            rec.log("world/camera/image/detections", rr.Clear(recursive=False))
+            rec.log(e("world/camera/image/detections"), rr.Clear(recursive=False))
+
+    def _log_depth(self, cam: PinholeCamera, depth: np.ndarray) -> None:
+        """The depth image, every ``DEPTH_STRIDE``-th pixel in millimetres, under a pinhole of
+        its own (``world/camera/depth``: its own view, not drawn over the RGB image)."""
+        import rerun as rr
+
+        k = DEPTH_STRIDE
+        d = depth[::k, ::k]
+        h, w = d.shape
+        mm = np.clip(np.nan_to_num(d * 1000.0, nan=0.0, posinf=0.0), 0, 65535).astype(np.uint16)
+        self._rec.log(
+            self.entity("world/camera/depth"),
+            rr.Pinhole(
+                image_from_camera=intrinsics(float(cam.fovy_deg), w, h),
+                resolution=[w, h],
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=0.2,
+            ),
+        )
+        self._rec.log(self.entity("world/camera/depth/image"), rr.DepthImage(mm, meter=1000.0))
 
     # ----------------------------------------------------------------- text and numbers
     def log_text(self, msg: str, level: str = "INFO") -> None:
@@ -362,7 +440,7 @@ class Recorder:
             return
         import rerun as rr
 
-        self._rec.log("log", rr.TextLog(msg, level=level))
+        self._rec.log(self.entity("log"), rr.TextLog(msg, level=level))
 
     def log_scalar(self, path: str, value: float) -> None:
         """One value of a time series at entity ``path``."""
@@ -370,7 +448,7 @@ class Recorder:
             return
         import rerun as rr
 
-        self._rec.log(path, rr.Scalars(float(value)))
+        self._rec.log(self.entity(path), rr.Scalars(float(value)))
 
     # ----------------------------------------------------------------- lifetime
     def flush(self) -> None:
@@ -379,11 +457,12 @@ class Recorder:
             self._rec.flush()
 
     def close(self) -> None:
-        """Flush and close the file; later calls are no-ops."""
+        """Flush and close the file (a stream it was given stays open); later calls are no-ops."""
         if self._rec is None:
             return
         self._rec.flush()
-        self._rec.disconnect()
+        if self._owns:
+            self._rec.disconnect()
         self._rec = None
 
     def __enter__(self) -> Recorder:

@@ -282,7 +282,6 @@ class SearchContext:
         self.found_at: float | None = None
         body.reset_pose(episode.start)
         self.t0 = float(body.sim_time)
-        self._step = 0
         self._range_cache: dict[str, float] = {}
         self._mean_drive: float | None = None
         self._visited: set[tuple] = set()  # candidate regions already looked into
@@ -313,6 +312,7 @@ class SearchContext:
     def note(self, msg: str) -> None:
         """A line in the result's log and the recording's text log."""
         self.log.append(f"[{self.elapsed:7.1f} s] {msg}")
+        self.recorder.set_time(self.elapsed)
         self.recorder.log_text(f"{self.policy}: {msg}")
 
     # ----------------------------------------------------------------- acting
@@ -325,18 +325,17 @@ class SearchContext:
         for d in dets:
             self.known.setdefault(d.instance_id, d.pose)
         hit = next((d for d in dets if d.type == self.target), None)
-        self._step += 1
         pose = self.body.pose()
         self.trace.append(
             GazeRecord(self.elapsed, pose, purpose, tuple((d.type, d.instance_id) for d in dets))
         )
         rec = self.recorder
         if rec.enabled:
-            rec.set_time(self.elapsed, step=self._step)
+            rec.set_time(self.elapsed)
             rec.log_robot(pose, self.spec)
             rec.log_camera(frame, dets)
             rec.log_scalar(
-                f"search/{self.policy}/seen_fraction", self.seen.seen_fraction(self.target_range)
+                f"search/seen_fraction/{self.policy}", self.seen.seen_fraction(self.target_range)
             )
         if hit is not None and self.found_id is None:
             self.found_id, self.found_at = hit.instance_id, self.elapsed
@@ -523,22 +522,31 @@ class SearchContext:
             for g in gazes:
                 self.look_gaze(g, f"region {best.label}")
 
-    def _log_candidates(self, ranked: Sequence[ss.Region], top: int = 12) -> None:
+    def _log_candidates(
+        self, ranked: Sequence[ss.Region], show: int = 12, labelled: int = 3
+    ) -> None:
+        """The best ``show`` candidate regions; only the best ``labelled`` carry a short label
+        (the next one, in red: its region and P; the others: rank and P)."""
         rec = self.recorder
         if not rec.enabled:
             return
-        rec.set_time(self.elapsed, step=self._step)
-        show = list(ranked[:top])
+        rec.set_time(self.elapsed)
+        best = list(ranked[:labelled])
         rec.log_volumes(
             "world/search/candidates",
-            [r.box for r in show],
-            [f"#{i + 1} {r.label} P={r.score:.2f} {r.rate:.3f}/s" for i, r in enumerate(show)],
+            [r.box for r in ranked[labelled:show]],
+            color=(0.85, 0.7, 0.3),
+        )
+        rec.log_volumes(
+            "world/search/top",
+            [r.box for r in best[1:]],
+            [f"#{i + 2} P={r.score:.2f}" for i, r in enumerate(best[1:])],
             color=(0.95, 0.75, 0.1),
         )
         rec.log_volumes(
             "world/search/best",
-            [r.box for r in show[:1]],
-            [f"next: {r.label}" for r in show[:1]],
+            [r.box for r in best[:1]],
+            [f"next: {r.label} P={r.score:.2f}" for r in best[:1]],
             color=(0.95, 0.2, 0.1),
         )
 
@@ -572,9 +580,7 @@ class SearchPolicy:
     def run(self, ctx: SearchContext) -> SearchResult:
         """Run the episode until found or out of time; the result."""
         ctx.policy = self.name
-        ctx.note(
-            f"{self.name}: looking for {ctx.target} (detection range {ctx.target_range:.1f} m)"
-        )
+        ctx.note(f"looking for {ctx.target} (detection range {ctx.target_range:.1f} m)")
         try:
             self.search(ctx)
             ctx.note("nothing left to look at")

@@ -79,7 +79,8 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="FILE.rrd",
-        help="write a rerun recording (one file per room: FILE.rrd, FILE.room<i>.rrd)",
+        help="write a rerun recording of the whole run (one file, room after room, laid out by "
+        "its blueprint)",
     )
     p.add_argument(
         "--max-examinations",
@@ -174,7 +175,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         description="Run every strategy on the same rooms and seeds and measure, after every "
         "examination, the intervals against the ground truth of `ctxsearch truth`: mean and max "
         "width, mean |p0 - p_true|, coverage, simulated seconds. Writes DIR/learning.json, "
-        "DIR/learning.md and DIR/learning.png.",
+        "DIR/learning.md, DIR/learning.png and DIR/learning.csv (one row per examination).",
     )
     p.add_argument(
         "--style",

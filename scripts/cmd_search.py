@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from scripts import argtypes
+from scripts.sweep import add_sweep_arguments
 
 # Copies of agent.search.POLICIES' names, agent.search.DEFAULT_BUDGET_S and agent.search_space's
 # RANK_MODES / DEFAULT_RANK, so building the parser (``ctxsearch --help``, ``kb show``) does not
@@ -160,8 +161,10 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "type present in the room) and run every policy on each. Reports per policy the success rate "
         "within the budget, median and mean simulated seconds to find (failures counted at the "
         "budget) with bootstrap 95%% intervals, gazes, path length and the ratios of the median to "
-        "exhaustive and to oracle. Writes DIR/search.json, DIR/search.md and DIR/search.png. A policy "
-        "name may carry a rank: location@low,location@p0,location@high.",
+        "exhaustive and to oracle. Writes DIR/search.json, DIR/search.md, DIR/search.png and "
+        "DIR/search.csv (one row per episode and policy). A policy name may carry a rank: "
+        "location@low,location@p0,location@high. With --workers N the episodes run in batches "
+        "as Ray tasks (same files).",
     )
     p.add_argument(
         "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
@@ -181,8 +184,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     p.add_argument("--seed", type=argtypes.seed, default=0, help="episode seed (default: 0)")
-    p.add_argument("--quiet", action="store_true", help="no line per episode")
+    p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
     _add_common(p)
+    add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
 
 
@@ -191,12 +195,19 @@ def run_bench(args: argparse.Namespace) -> int:
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
     from agent.search import parse_policies
     from scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    from scripts.sweep import SweepOptions
 
     names = parse_policies(args.policies)
     config = SearchBenchConfig(
         policies=tuple(names), kb=args.kb, episodes=args.episodes, **_config_fields(args)
     )
-    res = bench_search(config, args.out, progress=None if args.quiet else print)
+    res = bench_search(
+        config,
+        args.out,
+        progress=None if args.quiet else print,
+        sweep=SweepOptions.from_args(args),
+        bar=not args.quiet,
+    )
     print(res.table)
     for f in res.files:
         print(f"wrote {f}")

@@ -13,6 +13,7 @@ import numpy as np
 
 from agent.navigation import OccupancyGrid, nearest_free
 from agent.recording import Recorder
+from agent.rr_layout import ROOM_APP, room_blueprint
 from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
 from envs.arena import MAX_IMAGE_SIZE
 from envs.detector import SimDetector, default_or_named
@@ -191,7 +192,12 @@ def show_room(config: RoomViewConfig) -> list[Path]:
     style = resolve_style(config.style, catalog)
     layout = generate_layout(style, config.seed, catalog)
     config.out.mkdir(parents=True, exist_ok=True)
-    rec = Recorder(config.record)
+    rec = Recorder(
+        config.record,
+        ROOM_APP,
+        name=f"room: {layout.style}, seed {layout.seed}",
+        blueprint=room_blueprint(layout) if config.record is not None else None,
+    )
     with World(layout, catalog, width=config.width, height=config.height) as world:
         viewer = _Viewer(config, layout, catalog, world, _start_grid(world, layout), rec)
         _print_room(layout, catalog)
@@ -247,8 +253,9 @@ def _log_scene(rec: Recorder, world: World, layout: RoomLayout, catalog: Catalog
                 labels=list(typ.relation_names),
                 color=typ.color,
                 static=True,
+                show_labels=False,
             )
-    rec.set_time(world.sim_time, step=0)
+    rec.set_time(world.sim_time)
     rec.log_robot(world.pose(), world.spec)
 
 
@@ -306,7 +313,7 @@ class _Viewer:
         p = cfg.out / f"view_{i}.png"
         cv2.imwrite(str(p), draw_detections(frame.rgb, dets, catalog))
         self.written.append(p)
-        rec.set_time(world.sim_time, step=i + 1)
+        rec.set_time(world.sim_time)
         rec.log_robot(frame.pose, spec, path=gaze.path)
         rec.log_camera(frame, dets)
         seen = ", ".join(f"{d.type}#{d.instance_id}" for d in dets) or "nothing"

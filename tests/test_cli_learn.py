@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 
 import pytest
@@ -127,7 +128,7 @@ def test_learn_with_a_room_budget(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("budget", [None, "60"])
-def test_bench_learning_writes_its_three_files(tmp_path, capsys, budget):
+def test_bench_learning_writes_its_four_files(tmp_path, capsys, budget):
     out = tmp_path / "bench"
     argv = [
         "bench",
@@ -167,6 +168,22 @@ def test_bench_learning_writes_its_three_files(tmp_path, capsys, budget):
         assert all(0.0 <= c <= 1.0 for c in s["coverage"])
     assert "Mean interval width" in (out / "learning.md").read_text()
     assert (out / "learning.png").stat().st_size > 10_000
+    with (out / "learning.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert set(rows[0]) >= {"strategy", "seed", "examination", "room", "sim_s", "mean_width"}
+    for name in ("hif", "random"):
+        runs = {
+            seed: [r for r in rows if r["strategy"] == name and r["seed"] == seed] for seed in "01"
+        }
+        k = len(data["strategies"][name]["examinations"])
+        assert min(len(v) for v in runs.values()) == k  # the JSON's curves end at the shortest run
+        for v in runs.values():
+            assert [int(r["examination"]) for r in v] == list(range(1, len(v) + 1))
+            assert {r["room"] for r in v} == {"0"}
+            sim = [float(r["sim_s"]) for r in v]
+            assert sim == sorted(sim) and sim[0] > 0
+        first = sorted(float(v[0]["mean_width"]) for v in runs.values())
+        assert data["strategies"][name]["mean_width"][0] == pytest.approx(sum(first) / 2)
 
 
 def test_bench_learning_bad_strategy_list(tmp_path, capsys):

@@ -87,6 +87,18 @@ def test_room_writes_overview_views_and_recording(tmp_path, capsys):
     } <= entities
     assert any(e.startswith("/world/objects/Desk_") for e in entities)
     assert any(e.startswith("/world/volumes/Desk_") for e in entities)
+    from tests.rrd_files import read_rrd
+
+    f = read_rrd(rrd)
+    assert f.name == "room: office, seed 1" and f.timelines == {("sim_time",)}
+    assert f.recordings[0].application_id == "ctxsearch-room"
+    assert {
+        ("3D", "world"),
+        ("2D", "world/camera/image"),
+        ("2D", "world/camera/depth"),
+        ("TextLog", "log"),
+    } == {(v["class"], v["origin"]) for v in f.views}
+    assert [t for t, x in f.texts if x.startswith("view 1:")] > [0]  # views at their sim_time
 
 
 @pytest.mark.render

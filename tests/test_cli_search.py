@@ -3,6 +3,7 @@ for unknown targets, missing, empty or foreign stores; a small run writes its fi
 
 from __future__ import annotations
 
+import csv
 import json
 import tomllib
 
@@ -149,7 +150,7 @@ def test_search_prints_the_outcome_and_records(store, tmp_path, capsys):
 
 
 @pytest.mark.render
-def test_bench_search_writes_its_three_files(store, tmp_path, capsys):
+def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
     out_dir = tmp_path / "bench"
     code = main(
         [
@@ -189,6 +190,19 @@ def test_bench_search_writes_its_three_files(store, tmp_path, capsys):
     assert doc["policies"]["exhaustive"]["ratio_to_exhaustive"] == 1.0
     assert "| location |" in (out_dir / "search.md").read_text()
     assert (out_dir / "search.png").stat().st_size > 1000
+    with (out_dir / "search.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 2 * 3  # episodes x policies
+    assert {r["policy"] for r in rows} == {"exhaustive", "location", "oracle"}
+    by_ep = {(int(r["episode"]), r["policy"]): r for r in rows}
+    for ep in doc["episode_list"]:
+        for name, got in ep["results"].items():
+            row = by_ep[(ep["index"], name)]
+            assert row["target"] == ep["target"] and int(row["room_seed"]) == ep["room_seed"]
+            assert row["found"] == ("true" if got["found"] else "false")
+            assert float(row["sim_s"]) == pytest.approx(got["t"], abs=1e-3)
+            assert int(row["gazes"]) == got["gazes"]
+            assert float(row["time_to_find_s"]) <= float(row["budget_s"]) == 30.0
 
 
 def test_parser_constants_match_the_search_stack():

@@ -13,8 +13,9 @@ def test_demo_writes_its_files_and_reruns(tmp_path):
     lines: list[str] = []
     config = DemoConfig(out, rooms=1, quick=True, perception="oracle", progress=False)
     res = run_demo(config, echo=lines.append)
-    for name in ("kb.sqlite", "learn.rrd", "search.rrd", "search_exhaustive.rrd", "report.md"):
+    for name in ("kb.sqlite", "learn.rrd", "search.rrd", "report.md"):
         assert (out / name).is_file(), name
+    assert sorted(p.name for p in out.glob("*.rrd")) == ["learn.rrd", "search.rrd"]
     assert res.learned_now
     report = (out / "report.md").read_text()
     assert "## 1. Learning" in report and "## 2. Search" in report and "rerun " in report

@@ -44,7 +44,7 @@ def test_disabled_recorder_is_a_no_op(catalog, tmp_path):
     rec = Recorder(None)
     assert not rec.enabled
     rec.log_room(LAYOUT, catalog)
-    rec.set_time(1.0, step=1)
+    rec.set_time(1.0)
     rec.log_robot(RobotPose(0, 0, 0))
     rec.log_camera(_frame(RobotPose(0, 0, 0)), [])
     rec.log_volumes("world/volumes/x", [OBJECTS[0].box()])
@@ -86,7 +86,7 @@ def test_recording_round_trip(catalog, tmp_path):
         for i, pose in enumerate(
             [RobotPose(-2.0, -1.5, 0.5), RobotPose(-1.0, -1.5, 0.8, 0.2, -0.3)]
         ):
-            rec.set_time(1.5 * i, step=i)
+            rec.set_time(1.5 * i)
             rec.log_robot(pose, path=np.array([[-2.0, -1.5], [-1.5, -1.6]]) if i else None)
             frame = _frame(pose)
             dets = detect_ids(
@@ -112,7 +112,7 @@ def test_recording_round_trip(catalog, tmp_path):
         "/world/camera/image",
         "/world/camera/image/rgb",
         "/world/camera/image/segmentation",
-        "/world/camera/image/depth",
+        "/world/camera/depth/image",
         "/world/camera/image/detections",
         "/log",
         "/metrics/coverage",
@@ -121,12 +121,11 @@ def test_recording_round_trip(catalog, tmp_path):
     by_entity: dict[str, list] = {}
     for c in chunks:
         by_entity.setdefault(c.entity_path, []).append(c)
-    # The room is static; what moves is on the sim_time and step timelines.
+    # The room is static; what moves is on the sim_time timeline, and on no other.
     assert all(c.is_static for c in by_entity["/world/objects/Desk_1"])
     for ent in ("/world/camera", "/world/robot", "/world/camera/image/rgb", "/metrics/coverage"):
-        assert any(
-            "sim_time" in c.timeline_names and "step" in c.timeline_names for c in by_entity[ent]
-        ), ent
+        assert all(c.timeline_names == ["sim_time"] for c in by_entity[ent]), ent
+    assert {tuple(c.timeline_names) for c in chunks if not c.is_static} == {("sim_time",)}
     # Labels of the room's boxes carry the type names.
     table = next(c for c in by_entity["/world/objects/Desk_1"]).to_record_batch()
     text = str(table.to_pydict())
@@ -166,3 +165,89 @@ def test_recording_a_rendered_frame(catalog, tmp_path):
         rec.set_time(world.sim_time)
         rec.log_camera(frame, [])
     assert "/world/camera/image/rgb" in {c.entity_path for c in _chunks(tmp_path / "r.rrd")}
+
+
+def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog, tmp_path):
+    from agent.learning import LearnConfig, learn, room_seed, style_layouts
+    from tests.rrd_files import read_rrd
+
+    rrd = tmp_path / "run.rrd"
+    config = LearnConfig(
+        "office", 2, tmp_path / "kb.sqlite", perception="oracle", record=rrd, progress=False
+    )
+    summary = learn(config)
+    assert summary.files == [rrd]
+    assert sorted(p.name for p in tmp_path.glob("*.rrd")) == ["run.rrd"]
+    f = read_rrd(rrd)
+    assert [r.application_id for r in f.recordings] == ["ctxsearch-learn"]
+    assert f.name is not None and f.name.startswith("learn: office, strategy hif")
+    # Every entity and log line is on sim_time, and only there.
+    assert f.timelines == {("sim_time",)}
+    assert f.static <= {"/__properties", "/world", "/world/robot/body", "/world/robot/nose"}
+    # Both rooms are in it, one after the other on the run clock.
+    floor = sorted(f.times["/world/room/floor"])
+    assert len(floor) == 2 and floor[0] == 0 < floor[1]
+    starts = [t for t, text in f.texts if text.startswith("room ") and "objects" in text]
+    assert starts == floor
+    assert f.texts[-1][1].startswith("room 1 done")
+    assert all(t <= f.texts[-1][0] for t, _ in f.texts)
+    # n is plotted for the types present in the rooms, not for every type of the catalog.
+    _, generate = style_layouts("office", catalog)
+    present = {o.type for i in range(2) for o in generate(i, room_seed(0, i)).objects}
+    plotted = {e.rsplit("/", 1)[1] for e in f.entities if e.startswith("/knowledge/n/")}
+    assert plotted == present and len(plotted) < len(catalog.type_names)
+    assert "/knowledge/mean_width" in f.entities
+    # The blueprint: a 3-D view of the world, the camera and its depth apart, two plots, a log.
+    assert len(f.blueprints) == 1 and f.blueprint_timeline == "sim_time"
+    views = {(v["class"], v["origin"]) for v in f.views}
+    assert views == {
+        ("3D", "world"),
+        ("2D", "world/camera/image"),
+        ("2D", "world/camera/depth"),
+        ("TimeSeries", "knowledge/n"),
+        ("TimeSeries", "knowledge/mean_width"),
+        ("TextLog", "log"),
+    }
+
+
+@pytest.mark.render
+def test_searches_side_by_side_in_one_recording(catalog, tmp_path):
+    from knowledge.store import EvidenceStore
+    from scripts.experiments.episodes import SearchConfig, search_once
+    from tests.rrd_files import read_rrd
+
+    kb = tmp_path / "kb.sqlite"
+    with EvidenceStore.open(kb, catalog, create=True) as s:
+        for i in range(5):
+            s.record(
+                run="t",
+                style="office",
+                room_seed=i,
+                object_id=1,
+                ref_type="Desk",
+                sim_time=0.0,
+                strategy="t",
+                related=[("ON-TOP-OF-DESK", "Cup", 2)],
+            )
+    rrd = tmp_path / "search.rrd"
+    config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0)
+    one = search_once(config, "Cup", kb_path=kb, record=rrd, catalog=catalog)
+    assert one.files == [rrd]
+    f = read_rrd(rrd)
+    assert len(f.recordings) == 1 and f.recordings[0].application_id == "ctxsearch-search"
+    assert f.name is not None and "location vs exhaustive" in f.name
+    assert f.timelines == {("sim_time",)}
+    for root in ("location", "exhaustive"):
+        assert {f"/{root}/world/room/walls", f"/{root}/world/camera/depth/image"} <= f.entities
+        assert f"/{root}/world/camera/image/rgb" in f.entities
+        lines = [(t, x) for t, x in f.texts if x.startswith(f"{root}: ")]
+        assert lines[0][0] == 0 and lines[0][1].startswith(f"{root}: looking for Cup (")
+        assert not any(x.startswith(f"{root}: {root}:") for _, x in lines)  # no doubled prefix
+    # Only the best three candidate regions carry a label on screen.
+    assert "/location/world/search/best" in f.entities
+    views = [(v["class"], v["origin"]) for v in f.views]
+    for root in ("location", "exhaustive"):
+        assert ("3D", f"{root}/world") in views
+        assert ("2D", f"{root}/world/camera/image") in views
+        assert ("2D", f"{root}/world/camera/depth") in views
+    assert ("TextLog", "/") in views and f.blueprint_timeline == "sim_time"

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def square_with_pid(x: int) -> dict:
     import os
 
-    return {"x": x, "y": x * x, "pid": os.getpid()}
+    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0)}
 
 
 def refuse_three(x: int) -> int:
@@ -29,10 +29,11 @@ def refuse_three(x: int) -> int:
 
 def test_one_worker_is_a_loop_without_ray():
     code = (
-        "import sys; from scripts.sweep import run_units; "
+        "import sys; from scripts.sweep import SweepOptions, run_units, session; "
         "from tests.test_sweep import square_with_pid as f; "
+        "s = session(SweepOptions()); s.__enter__(); "
         "r = run_units(f, [1, 2, 3], progress=False); assert [u['y'] for u in r] == [1, 4, 9]; "
-        "assert 'ray' not in sys.modules"
+        "s.__exit__(None, None, None); assert 'ray' not in sys.modules"
     )
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -44,10 +45,26 @@ def test_two_workers_give_the_serial_results_in_order():
     serial = run_units(square_with_pid, units, progress=False)
     parallel = run_units(square_with_pid, units, workers=2, progress=False)
     strip = [{k: v for k, v in d.items() if k != "pid"} for d in parallel]
-    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]
+    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]  # nice too:
+    # the workers run at the driver's priority, not Ray's default nice 15
     assert {d["pid"] for d in parallel}.isdisjoint({d["pid"] for d in serial})  # other processes
     with pytest.raises(CtxsearchError, match="unit 3: bad input"):
         run_units(refuse_three, units, workers=2, progress=False)
+
+
+@pytest.mark.slow
+def test_a_session_keeps_one_ray_for_several_sweeps():
+    import ray
+
+    from scripts.sweep import SweepOptions, session
+
+    with session(SweepOptions(workers=2)):
+        a = run_units(square_with_pid, [1, 2], workers=2, progress=False)
+        assert ray.is_initialized()
+        b = run_units(square_with_pid, [3, 4], workers=2, progress=False)
+        assert ray.is_initialized()  # the sweeps did not shut the session's Ray down
+    assert not ray.is_initialized()
+    assert [d["y"] for d in a + b] == [1, 4, 9, 16]
 
 
 def test_bad_worker_count():
@@ -80,6 +97,8 @@ def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
     a = json.loads((tmp_path / "serial" / "learning.json").read_text())
     b = json.loads((tmp_path / "ray" / "learning.json").read_text())
     assert _strip_timing(a) == _strip_timing(b)
+    csv_a = (tmp_path / "serial" / "learning.csv").read_text()
+    assert csv_a == (tmp_path / "ray" / "learning.csv").read_text()
 
 
 @pytest.mark.slow
@@ -90,3 +109,36 @@ def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
     assert main([*args, "--out", str(tmp_path / "a.json")]) == 0
     assert main([*args, "--out", str(tmp_path / "b.json"), "--workers", "2"]) == 0
     assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+
+
+@pytest.mark.slow
+def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path):
+    import json
+
+    from knowledge.catalog import load_catalog
+    from knowledge.store import EvidenceStore
+    from scripts.cli import main
+
+    kb = tmp_path / "kb.sqlite"
+    with EvidenceStore.open(kb, load_catalog(), create=True) as s:
+        for i in range(3):
+            s.record(
+                run="t",
+                style="office",
+                room_seed=i,
+                object_id=1,
+                ref_type="Desk",
+                sim_time=0.0,
+                strategy="t",
+                related=[("ON-TOP-OF-DESK", "Cup", 2)],
+            )
+    args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "3"]
+    args += ["--policies", "exhaustive,location", "--budget-seconds", "20", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
+    a = json.loads((tmp_path / "serial" / "search.json").read_text())
+    b = json.loads((tmp_path / "ray" / "search.json").read_text())
+    assert len(a["episode_list"]) == 3
+    assert _strip_timing(a) == _strip_timing(b)
+    csv_a = (tmp_path / "serial" / "search.csv").read_text()
+    assert csv_a == (tmp_path / "ray" / "search.csv").read_text()

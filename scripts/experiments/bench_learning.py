@@ -49,7 +49,8 @@ from pathlib import Path
 
 from agent.perception_modes import DEFAULT_DETECTOR
 from envs.detector import default_or_named
-from envs.truth import ground_truth
+from envs.houses import resolve_style
+from envs.truth import sample_counts, truth_document
 from knowledge.catalog import Catalog, load_catalog
 from scripts.experiments.learning_report import decision_stats, fmt, markdown, plot
 from scripts.experiments.learning_trace import (
@@ -61,9 +62,11 @@ from scripts.experiments.learning_trace import (
     median_curve,
     run_trace,
 )
-from scripts.sweep import SweepOptions, run_units
+from scripts.experiments.tables import write_csv
+from scripts.sweep import SweepOptions, run_units, session
 
 TRUTH_SEED = 10_000_019  # first room seed of the ground truth (no learning run uses it)
+TRUTH_ROOMS_PER_UNIT = 10  # rooms of the ground truth per sweep unit
 
 
 @dataclass
@@ -81,15 +84,18 @@ def bench_learning(
     progress: bool = True,
     sweep: SweepOptions | None = None,
 ) -> BenchResult:
-    """Run the benchmark and write DIR/learning.json, DIR/learning.md and DIR/learning.png; the
-    (strategy, seed) runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
+    """Run the benchmark and write DIR/learning.json, DIR/learning.md, DIR/learning.png and
+    DIR/learning.csv (one row per examination of every run, ``exam_rows``); the (strategy, seed)
+    runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
     catalog = load_catalog()
     if config.perception == "camera":  # a bad preset: the one-line error before any run
         default_or_named(config.detector, catalog, DEFAULT_DETECTOR)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    truth = ground_truth(config.style, config.truth_samples, TRUTH_SEED, catalog)
-    traces = _run_all(config, truth, catalog, progress, sweep or SweepOptions())
+    sweep = sweep or SweepOptions()
+    with session(sweep):  # one Ray for both sweeps
+        truth = _ground_truth(config, catalog, progress, sweep)
+        traces = _run_all(config, truth, catalog, progress, sweep)
     data = _data(config, truth, traces)
     c = config
     title = (
@@ -104,7 +110,61 @@ def bench_learning(
     files[1].write_text(table)
     plot_title = f"{c.style}: {c.rooms} rooms x {c.seeds} seeds ({c.perception}{c.budget_note})"
     plot(files[2], traces, plot_title)
+    files.append(write_csv(out / "learning.csv", EXAM_COLUMNS, exam_rows(config, traces)))
     return BenchResult(data, table, files)
+
+
+# learning.csv: one row per examination of every (strategy, seed) run.
+EXAM_COLUMNS = (
+    "style",
+    "perception",
+    "strategy",
+    "seed",
+    "examination",  # 1-based, over the run
+    "room",  # 0-based index of the room it was made in
+    "sim_s",  # the run clock after it, simulated seconds
+    *METRICS,  # of the intervals against the ground truth after it
+)
+
+
+def exam_rows(config: LearningBenchConfig, traces: dict[str, list[Trace]]):
+    """The rows of learning.csv (``EXAM_COLUMNS``), strategy by strategy, seed by seed."""
+    for strategy, ts in traces.items():
+        for seed, tr in enumerate(ts):
+            rooms = [i for i, n in enumerate(tr.room_exams) for _ in range(n)]
+            for k, t in enumerate(tr.sim_s):
+                yield {
+                    "style": config.style,
+                    "perception": config.perception,
+                    "strategy": strategy,
+                    "seed": seed,
+                    "examination": k + 1,
+                    "room": rooms[k],
+                    "sim_s": float(t),
+                    **{m: float(tr.metrics[m][k]) for m in METRICS},
+                }
+
+
+def _ground_truth(
+    config: LearningBenchConfig, catalog: Catalog, progress: bool, sweep: SweepOptions
+) -> dict:
+    """``envs.truth.ground_truth`` of the benchmark's style, its rooms counted in sweep units of
+    ``TRUTH_ROOMS_PER_UNIT`` (the same document as the serial call)."""
+    style = resolve_style(config.style, catalog)
+    seeds = list(range(TRUTH_SEED, TRUTH_SEED + config.truth_samples))
+    chunks = [
+        seeds[i : i + TRUTH_ROOMS_PER_UNIT] for i in range(0, len(seeds), TRUTH_ROOMS_PER_UNIT)
+    ]
+    parts = run_units(
+        functools.partial(sample_counts, style, catalog=catalog),
+        chunks,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc=f"ground truth {style.name}",
+        progress=progress,
+    )
+    rooms = [c for part in parts for c in part]
+    return truth_document(style, config.truth_samples, TRUTH_SEED, catalog, rooms)
 
 
 def _run_all(

@@ -16,12 +16,17 @@ ratio (the median over episodes of this policy's time over exhaustive's) with it
 Policy names may carry a rank, ``location@low``, ``location@p0``, ``location@high``, to compare
 the parts of the interval on the same episodes.
 
-Writes ``DIR/search.json``, ``DIR/search.md`` (the table) and ``DIR/search.png`` (the
-time-to-find CDF of every policy).
+Writes ``DIR/search.json``, ``DIR/search.md`` (the table), ``DIR/search.png`` (the
+time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy).
+
+The episodes run in batches of ``EPISODES_PER_UNIT``, the units of a sweep (``scripts.sweep``:
+serially, or as Ray tasks with ``--workers N`` / ``--ray-address``); the files are the same
+either way, apart from the wall time.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -33,19 +38,24 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from agent import search as S
+from envs.detector import DetectorModel
 from envs.houses import resolve_style
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
 from scripts.experiments.episodes import (
+    Priors,
     SearchConfig,
     load_priors,
     make_episodes,
-    run_episodes,
+    run_episode,
     split_name,
 )
+from scripts.experiments.tables import write_csv
+from scripts.sweep import SweepOptions, run_units
 
 BOOTSTRAP_SAMPLES = 2000
+EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode either way)
 
 
 def bootstrap_ci(
@@ -222,8 +232,12 @@ def bench_search(
     out: Path | str,
     *,
     progress: Callable[[str], None] | None = print,
+    sweep: SweepOptions | None = None,
+    bar: bool = True,
 ) -> BenchResult:
-    """The benchmark (module docstring): run, aggregate, write the three files to ``out``."""
+    """The benchmark (module docstring): run, aggregate, write the four files to ``out``.
+    ``progress`` gets a line per episode and policy (in episode order, as batches finish),
+    ``bar`` shows a progress bar over the sweep's units."""
     t_wall = time.perf_counter()
     catalog = load_catalog()
     names = list(config.policies)
@@ -237,14 +251,103 @@ def bench_search(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
     )
     detector = config.detector_model(catalog)
-    results = run_episodes(
-        eps, names, catalog, style, priors.for_policy, progress=progress, detector=detector
-    )
+    results = _run_batches(eps, names, style, priors, sweep or SweepOptions(), bar, detector)
+    if progress is not None:
+        for i, ep in enumerate(eps):
+            for n in names:
+                r = results[n][i]
+                progress(f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {r.summary()}")
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
     res.wall_s = time.perf_counter() - t_wall
     return res
+
+
+def _run_batches(
+    eps: list[S.Episode],
+    names: list[str],
+    style,
+    priors: Priors,
+    sweep: SweepOptions,
+    bar: bool,
+    detector: DetectorModel | None,
+) -> dict[str, list[S.SearchResult]]:
+    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with the
+    ``detector`` preset."""
+    batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
+    done = run_units(
+        functools.partial(_batch_unit, tuple(names), style, priors, detector),
+        batches,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc=f"bench search {style.name}",
+        progress=bar,
+    )
+    results: dict[str, list[S.SearchResult]] = {n: [] for n in names}
+    for batch in done:
+        for per_policy in batch:
+            for n, r in zip(names, per_policy, strict=True):
+                results[n].append(r)
+    return results
+
+
+def _batch_unit(
+    names: tuple[str, ...],
+    style,
+    priors: Priors,
+    detector: DetectorModel | None,
+    batch: list[S.Episode],
+) -> list[list[S.SearchResult]]:
+    """One sweep unit: every policy on each episode of ``batch``."""
+    catalog = load_catalog()
+    return [
+        run_episode(ep, names, catalog, style, priors.for_policy, detector=detector) for ep in batch
+    ]
+
+
+# search.csv: one row per episode and policy.
+EPISODE_COLUMNS = (
+    "style",
+    "episode",
+    "room_seed",
+    "target",
+    "start_x_m",
+    "start_y_m",
+    "start_yaw_rad",
+    "budget_s",
+    "policy",
+    "found",  # the target was detected (maybe after the budget)
+    "success",  # found within the budget
+    "sim_s",  # simulated seconds until found, or until the policy stopped
+    "time_to_find_s",  # sim_s if success, else the budget
+    "gazes",
+    "path_m",
+)
+
+
+def episode_rows(eps: Sequence[S.Episode], results: dict[str, list[S.SearchResult]]):
+    """The rows of search.csv (``EPISODE_COLUMNS``), episode by episode, policy by policy."""
+    for i, ep in enumerate(eps):
+        for name, rs in results.items():
+            r = rs[i]
+            yield {
+                "style": ep.style,
+                "episode": ep.index,
+                "room_seed": ep.room_seed,
+                "target": ep.target,
+                "start_x_m": float(ep.start.x),
+                "start_y_m": float(ep.start.y),
+                "start_yaw_rad": float(ep.start.yaw),
+                "budget_s": float(ep.budget_s),
+                "policy": name,
+                "found": bool(r.found),
+                "success": bool(r.success),
+                "sim_s": float(r.sim_time),
+                "time_to_find_s": float(r.time_to_find),
+                "gazes": int(r.gazes),
+                "path_m": float(r.path_m),
+            }
 
 
 def _episode_json(ep: S.Episode, i: int, results: dict[str, list[S.SearchResult]]) -> dict:
@@ -270,7 +373,8 @@ def _write_files(
     kb: KnowledgeBase | None,
     res: BenchResult,
 ) -> list[Path]:
-    """Write search.json, search.md and search.png of ``res`` to ``out``; their paths."""
+    """Write search.json, search.md, search.png and search.csv of ``res`` to ``out``; their
+    paths."""
     eps, results, stats, table = res.episodes, res.results, res.stats, res.table
     out.mkdir(parents=True, exist_ok=True)
     doc = {
@@ -309,4 +413,5 @@ def _write_files(
     )
     title = f"time to find ({style}, {len(eps)} paired episodes)"
     plot_cdf(results, config.budget_s, files[2], title)
+    files.append(write_csv(out / "search.csv", EPISODE_COLUMNS, episode_rows(eps, results)))
     return files

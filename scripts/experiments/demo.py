@@ -1,14 +1,14 @@
 """The end-to-end demo (``ctxsearch demo``, what ``make demo`` runs).
 
 1. Learn: the robot learns spatial context on its own (Figure 2, Highest Impact First) in a few
-   office rooms, writing ``OUT/kb.sqlite`` and the rerun recording ``OUT/learn.rrd`` (one file per
-   room: ``learn.rrd``, ``learn.room1.rrd``, ...). Perception is the rendered camera
+   office rooms, writing ``OUT/kb.sqlite`` and the rerun recording ``OUT/learn.rrd`` (one
+   recording of the whole run, room after room on the run clock). Perception is the rendered camera
    (segmentation + detector), which takes about a minute for four rooms on a 2-core CPU
    (``--perception oracle`` reads relations from the layout instead, for a faster run).
 2. Search: in an office room it never learned in (held-out seed), from the same start pose, it
    looks for the same target (default ``Cup``) twice: with context (``location``: the learned
    intervals rank the relation volumes of the furniture it knows) and without (``exhaustive``).
-   Recordings: ``OUT/search.rrd`` (with context) and ``OUT/search_exhaustive.rrd`` (without).
+   Recording: ``OUT/search.rrd``, both searches side by side on the same simulated seconds.
 3. Report: ``OUT/report.md`` (what was learned, the two searches side by side, how to open the
    recordings), and a short summary on the terminal.
 
@@ -95,7 +95,7 @@ class _Searched:
 
     one: OneSearch
     kb: KnowledgeBase
-    records: tuple[Path, Path]  # with context, without
+    record: Path  # both searches side by side
 
     @property
     def ratio(self) -> float:
@@ -138,10 +138,10 @@ def run_demo(config: DemoConfig, echo=print) -> DemoResult:
     searched = _search_step(config, catalog, echo)
     report = out / "report.md"
     report.write_text(_report(config, learned, searched))
-    search_rrd, exhaustive_rrd = searched.records
+    search_rrd = searched.record
     ctx_res, exh_res = searched.one.results
     ratio = searched.ratio
-    files = [out / "kb.sqlite", *learned.files, search_rrd, exhaustive_rrd, report]
+    files = [out / "kb.sqlite", *learned.files, search_rrd, report]
     lines = [
         f"with context ({CONTEXT_POLICY}): {_outcome(ctx_res)}",
         f"without context (exhaustive): {_outcome(exh_res)}",
@@ -149,7 +149,7 @@ def run_demo(config: DemoConfig, echo=print) -> DemoResult:
         f"report: {report}",
         "open the recordings with:",
         f"  rerun {' '.join(str(f) for f in learned.files)}",
-        f"  rerun {search_rrd} {exhaustive_rrd}",
+        f"  rerun {search_rrd}",
     ]
     echo("[3/3] done")
     for line in lines:
@@ -169,7 +169,8 @@ def _learn_step(config: DemoConfig, echo) -> _Learned:
     learn_rrd = out / "learn.rrd"
     learned_now = not (_learning_complete(kb_path, rooms, perception) and learn_rrd.is_file())
     if learned_now:
-        for p in [kb_path, *out.glob("kb.sqlite-*"), *out.glob("learn*.rrd")]:
+        stale = [*out.glob("learn*.rrd"), out / "search_exhaustive.rrd"]  # earlier versions' files
+        for p in [kb_path, *out.glob("kb.sqlite-*"), *stale]:
             p.unlink(missing_ok=True)
         echo(
             f"[1/3] learning in {rooms} {DEMO_STYLE} rooms ({perception} perception, strategy {DEMO_STRATEGY})"
@@ -195,7 +196,7 @@ def _learn_step(config: DemoConfig, echo) -> _Learned:
             f"[1/3] reusing {kb_path}: its {rooms} learning rooms are done (delete {out}/ to learn again)"
         )
         learn_lines = [f"reused {kb_path} ({rooms} rooms learned earlier)"]
-        learn_files = sorted(out.glob("learn*.rrd"), key=lambda p: (len(p.name), p.name))
+        learn_files = [learn_rrd]
     for line in learn_lines:
         echo(f"      {line}")
     return _Learned(learn_lines, learn_files, learned_now)
@@ -205,7 +206,7 @@ def _search_step(config: DemoConfig, catalog: Catalog, echo) -> _Searched:
     """2. Two searches, same held-out room, start and target: with context and without."""
     out, target = config.out, config.target
     kb, learned_seeds = open_knowledge(out / "kb.sqlite", catalog)
-    search_rrd, exhaustive_rrd = out / "search.rrd", out / "search_exhaustive.rrd"
+    search_rrd = out / "search.rrd"
     echo(
         f"[2/3] searching for a {target} in a held-out {DEMO_STYLE} room: with context ({CONTEXT_POLICY}) "
         f"and without (exhaustive)"
@@ -217,13 +218,13 @@ def _search_step(config: DemoConfig, catalog: Catalog, echo) -> _Searched:
         search,
         target,
         kb=kb,
-        records=[search_rrd, exhaustive_rrd],
         exclude_seeds=learned_seeds,
         catalog=catalog,
+        record=search_rrd,
     )
     for r in one.results:
         echo(f"      {r.summary()}")
-    return _Searched(one, kb, (search_rrd, exhaustive_rrd))
+    return _Searched(one, kb, search_rrd)
 
 
 def _outcome(r: SearchResult) -> str:
@@ -242,9 +243,9 @@ def _report(config: DemoConfig, learned: _Learned, searched: _Searched) -> str:
         "## 3. Recordings",
         "",
         "```",
-        f"rerun {' '.join(str(f) for f in learned.files)}",
-        f"rerun {searched.records[0]}            # with context: ranked candidate regions, path, every camera view",
-        f"rerun {searched.records[1]} # without context",
+        f"rerun {' '.join(str(f) for f in learned.files)}   # the learning run, room after room",
+        f"rerun {searched.record}   # with context ({CONTEXT_POLICY}, left) and without "
+        "(exhaustive, right): ranked candidate regions, path, every camera view",
         "```",
         "",
     ]

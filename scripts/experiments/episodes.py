@@ -6,7 +6,8 @@ skipping any seed the knowledge store learned in and rooms without a small objec
 (kind=object) types present in the room, or a given target. ``run_episodes`` runs every policy
 on every episode (the room built once per episode, the robot put back at the same start pose for
 each policy, with a fresh seen map and nothing known); ``search_once`` runs policies on the first
-held-out room that holds a given target, with a recording per policy.
+held-out room that holds a given target, with a recording per policy or all of them side by side
+in one recording (each under its own root entity, on the same simulated seconds).
 
 A policy name may carry a rank, ``location@low``, ``location@p0``, ``location@high``: which part
 of the interval ranks the candidate regions.
@@ -14,6 +15,7 @@ of the interval ranks the candidate regions.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +26,8 @@ from agent import search as S
 from agent import search_space as ss
 from agent.navigation import OccupancyGrid
 from agent.perception_modes import DEFAULT_DETECTOR
-from agent.recording import Recorder
+from agent.recording import Recorder, open_stream
+from agent.rr_layout import SEARCH_APP, search_blueprint
 from envs.detector import DetectorModel, default_or_named
 from envs.floorplan import generate_layout
 from envs.houses import WorldStyle, resolve_style
@@ -200,17 +203,41 @@ class EpisodeRoom:
     maps: S.RoomMaps  # the given map scenario, with the detector preset (None: perfect)
 
 
+def recording_root(policy: str) -> str:
+    """The root entity of a policy's search in a shared recording (``location@low`` ->
+    ``location_low``)."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", policy)
+
+
+def _recorder(
+    ep: S.Episode, name: str, layout: RoomLayout, rec_path: Path | None, stream
+) -> Recorder:
+    """A recording of its own at ``rec_path``, a root in the shared ``stream``, or none."""
+    if rec_path is not None:
+        return Recorder(
+            rec_path,
+            SEARCH_APP,
+            name=f"search: {ep.style} room {ep.room_seed}, {ep.target}, {name}",
+            blueprint=search_blueprint(layout, [("", name)]),
+        )
+    if stream is not None:
+        return Recorder(stream=stream, root=recording_root(name))
+    return Recorder(None)
+
+
 def run_policy(
     ep: S.Episode,
     name: str,
     room: EpisodeRoom,
     probs: ss.ProbabilitySource | None,
     rec_path: Path | None = None,
+    stream=None,
 ) -> S.SearchResult:
-    """Policy ``name`` searches episode ``ep`` in ``room`` (a rerun recording to ``rec_path``)."""
+    """Policy ``name`` searches episode ``ep`` in ``room`` (a rerun recording to ``rec_path``, or
+    under the policy's root in the open rerun ``stream``)."""
     layout, catalog, world = room.layout, room.catalog, room.world
     base, _ = split_name(name)
-    with Recorder(rec_path) as rec:
+    with _recorder(ep, name, layout, rec_path, stream) as rec:
         rec.log_room(layout, catalog)
         rec.log_text(f"episode: room {ep.style}/{ep.room_seed}, target {ep.target}, policy {name}")
         ctx = S.SearchContext(
@@ -235,20 +262,37 @@ def search_room(
     runs: Sequence[tuple[str, ss.ProbabilitySource | None, Path | None]],
     progress: Callable[[str], None] | None = None,
     detector: DetectorModel | None = None,
+    shared: Path | None = None,
 ) -> list[S.SearchResult]:
     """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs`` (a
     policy may appear twice with other probabilities: results are in ``runs``' order) with the
-    ``detector`` preset (None: perfect)."""
+    ``detector`` preset (None: perfect); ``shared``: one recording of them all, side by side."""
     layout = generate_layout(style, ep.room_seed, catalog)
-    with World(layout, catalog) as world:
-        maps = S.RoomMaps.given(layout, catalog, world.spec, detector)
-        room = EpisodeRoom(layout, catalog, world, maps)
-        out = []
-        for name, probs, rec_path in runs:
-            res = run_policy(ep, name, room, probs, rec_path)
-            out.append(res)
-            if progress is not None:
-                progress(f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {res.summary()}")
+    stream = None
+    if shared is not None:
+        names = [name for name, _, _ in runs]
+        stream = open_stream(
+            shared,
+            SEARCH_APP,
+            name=f"search: {ep.style} room {ep.room_seed}, {ep.target}: {' vs '.join(names)}",
+            blueprint=search_blueprint(layout, [(recording_root(n), n) for n in names]),
+        )
+    try:
+        with World(layout, catalog) as world:
+            maps = S.RoomMaps.given(layout, catalog, world.spec, detector)
+            room = EpisodeRoom(layout, catalog, world, maps)
+            out = []
+            for name, probs, rec_path in runs:
+                res = run_policy(ep, name, room, probs, rec_path, stream)
+                out.append(res)
+                if progress is not None:
+                    progress(
+                        f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {res.summary()}"
+                    )
+    finally:
+        if stream is not None:
+            stream.flush()
+            stream.disconnect()
     return out
 
 
@@ -265,12 +309,28 @@ def run_episodes(
     the ``detector`` preset (None: perfect)."""
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
-        runs = [(name, probs_for(*split_name(name)), None) for name in policies]
         for name, res in zip(
-            policies, search_room(ep, style, catalog, runs, progress, detector), strict=True
+            policies,
+            run_episode(ep, policies, catalog, style, probs_for, progress, detector),
+            strict=True,
         ):
             results[name].append(res)
     return results
+
+
+def run_episode(
+    ep: S.Episode,
+    policies: Sequence[str],
+    catalog: Catalog,
+    style: WorldStyle,
+    probs_for: ProbsFor,
+    progress: Callable[[str], None] | None = None,
+    detector: DetectorModel | None = None,
+) -> list[S.SearchResult]:
+    """Every policy on episode ``ep`` (one World, shared by the policies), in ``policies`` order,
+    with the ``detector`` preset (None: perfect)."""
+    runs = [(name, probs_for(*split_name(name)), None) for name in policies]
+    return search_room(ep, style, catalog, runs, progress, detector)
 
 
 @dataclass
@@ -291,11 +351,13 @@ def search_once(
     records: Sequence[Path | None] | None = None,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
     catalog: Catalog | None = None,
+    record: Path | None = None,
 ) -> OneSearch:
     """Search for ``target`` in the first held-out room (for ``config.seed``) of ``config.style``
     that holds one, with each of ``config.policies`` in turn from the same start pose
-    (``records[i]``: policy i's rerun recording, or None). ``kb`` (a KnowledgeBase) or ``kb_path``
-    (a store) gives the learned probabilities."""
+    (``records[i]``: policy i's rerun recording, or None; ``record``: one recording of all of
+    them side by side). ``kb`` (a KnowledgeBase) or ``kb_path`` (a store) gives the learned
+    probabilities."""
     catalog = catalog or load_catalog()
     S.check_target(catalog, target)
     names = list(config.policies)
@@ -311,5 +373,8 @@ def search_once(
         (name, priors.for_policy(*split_name(name)), rec)
         for name, rec in zip(names, records, strict=True)
     ]
-    out = search_room(ep, style, catalog, runs, detector=config.detector_model(catalog))
-    return OneSearch(ep, out, [Path(p) for p in records if p is not None])
+    out = search_room(
+        ep, style, catalog, runs, detector=config.detector_model(catalog), shared=record
+    )
+    files = [Path(p) for p in records if p is not None]
+    return OneSearch(ep, out, files + ([Path(record)] if record is not None else []))
