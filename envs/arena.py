@@ -152,32 +152,8 @@ class RoomArena(composer.Arena):
         self._floor.size = [hw + WALL_THICKNESS, hd + WALL_THICKNESS, 0.1]
         for light in self._lights:
             light.pos = [0, 0, h]
-        wb = self._mjcf_root.worldbody
-        t = WALL_THICKNESS
-        for name, center, half in _wall_boxes(layout):
-            group = OVERHEAD_GEOM_GROUP if name.endswith("lintel") else ROOM_GEOM_GROUP
-            self._shell.append(
-                wb.add(
-                    "geom",
-                    name=name,
-                    type="box",
-                    pos=center,
-                    size=half,
-                    rgba=_WALL_RGBA,
-                    group=group,
-                )
-            )
-        self._shell.append(
-            wb.add(
-                "geom",
-                name="ceiling",
-                type="box",
-                pos=[0, 0, h + t / 2],
-                size=[hw + t, hd + t, t / 2],
-                rgba=_CEILING_RGBA,
-                group=OVERHEAD_GEOM_GROUP,
-            )
-        )
+        self._add_walls(_wall_boxes(layout))
+        self._add_ceiling(hw, hd, h, WALL_THICKNESS)
 
     def _set_house(self, layout: RoomLayout) -> None:
         """The shell of a house: the outer and interior walls with their door openings (lintels
@@ -186,14 +162,21 @@ class RoomArena(composer.Arena):
         Kept cheap: every wall run between two openings is one box, the ceiling is one box,
         and the per-room lights are few (see ``MAX_LIGHTS``)."""
         hw, hd, h, t = layout.width / 2, layout.depth / 2, layout.height, WALL_THICKNESS
-        wb = self._mjcf_root.worldbody
         # The rooms' floors cover the whole plan (under the walls too); the base floor is not
         # needed: shrunk out of sight (drawing a plane costs in proportion to its area).
         self._floor.size = [0.01, 0.01, 0.1]
         self._floor.pos = [0, 0, -0.01]
         for light in self._lights:
             light.pos = [0, 0, h]
-        for name, center, half in house_wall_boxes(layout, t, DOOR_HEIGHT):
+        self._add_walls(house_wall_boxes(layout, t, DOOR_HEIGHT))
+        self._add_room_floors(layout, hw, hd, t)
+        self._add_room_lights(layout, h)
+        self._add_ceiling(hw, hd, h, t)
+
+    def _add_walls(self, boxes) -> None:
+        """One box geom per (name, centre, half extents); lintels over doors are overhead."""
+        wb = self._mjcf_root.worldbody
+        for name, center, half in boxes:
             group = OVERHEAD_GEOM_GROUP if name.endswith("lintel") else ROOM_GEOM_GROUP
             self._shell.append(
                 wb.add(
@@ -204,12 +187,13 @@ class RoomArena(composer.Arena):
                     size=half,
                     rgba=_WALL_RGBA,
                     group=group,
-                )
+                )  # fmt: skip
             )
-        self._add_room_floors(layout, hw, hd, t)
-        self._add_room_lights(layout, h)
+
+    def _add_ceiling(self, hw: float, hd: float, h: float, t: float) -> None:
+        """One box over the whole plan."""
         self._shell.append(
-            wb.add(
+            self._mjcf_root.worldbody.add(
                 "geom",
                 name="ceiling",
                 type="box",

@@ -9,12 +9,18 @@ path) into a ``Style`` or a ``HouseStyle``; ``generate_layout`` makes the layout
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from envs.styles import STYLES_DIR, Style, StyleError, available_styles, load_style
+from envs.styles import (
+    STYLES_DIR,
+    Style,
+    StyleError,
+    available_styles,
+    load_style,
+    range_field,
+)
 from knowledge.catalog import ASSETS_DIR, Catalog, load_catalog
 
 HOUSES_DIR = ASSETS_DIR / "houses"
@@ -71,27 +77,9 @@ def _is_name(value: str | Path) -> bool:
 
 
 def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: float) -> tuple:
-    kind = "integers" if integer else "numbers"
-
-    def ok(v) -> bool:
-        if isinstance(v, bool):
-            return False
-        if integer:
-            return isinstance(v, int)
-        return isinstance(v, int | float) and math.isfinite(v)
-
-    if ok(value):
-        value = [value, value]
-    if not isinstance(value, list) or len(value) != 2 or not all(ok(v) for v in value):
-        raise HouseError(
-            path, f"expected a number or a [min, max] pair of {kind}, got {value!r}", field=field
-        )
-    a, b = value
-    if a > b:
-        raise HouseError(path, f"min {a} is larger than max {b}", field=field)
-    if a < lo_min or b > hi_max:
-        raise HouseError(path, f"must be within [{lo_min}, {hi_max}], got {value}", field=field)
-    return (int(a), int(b)) if integer else (float(a), float(b))
+    return range_field(
+        path, field, value, integer=integer, lo_min=lo_min, hi_max=hi_max, error=HouseError
+    )
 
 
 def _room_style(path, key: str, catalog: Catalog) -> Style:

@@ -101,7 +101,19 @@ def style_path(path_or_name: str | Path) -> Path:
     return STYLES_DIR / f"{p.name}.toml"
 
 
-def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: float) -> tuple:
+def range_field(
+    path,
+    field: str,
+    value,
+    *,
+    integer: bool,
+    lo_min: float,
+    hi_max: float,
+    error: type[StyleError] = StyleError,
+) -> tuple:
+    """A ``[min, max]`` field (a bare number is [v, v]) of a style or house file: finite, of the
+    right kind, min <= max, within [lo_min, hi_max]; ``error`` (one line naming file and field)
+    otherwise."""
     kind = "integers" if integer else "numbers"
 
     def ok(v):
@@ -114,16 +126,16 @@ def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: flo
     if ok(value):
         value = [value, value]
     if not isinstance(value, list) or len(value) != 2 or not all(ok(v) for v in value):
-        raise StyleError(
+        raise error(
             path, f"expected a number or a [min, max] pair of {kind}, got {value!r}", field=field
         )
     a, b = value
     if a > b:
-        raise StyleError(path, f"min {a} is larger than max {b}", field=field)
+        raise error(path, f"min {a} is larger than max {b}", field=field)
     if a < lo_min:
-        raise StyleError(path, f"must be at least {lo_min}, got {a}", field=field)
+        raise error(path, f"must be at least {lo_min}, got {a}", field=field)
     if b > hi_max:
-        raise StyleError(path, f"must be at most {hi_max:g}, got {b}", field=field)
+        raise error(path, f"must be at most {hi_max:g}, got {b}", field=field)
     return (int(a), int(b)) if integer else (float(a), float(b))
 
 
@@ -143,7 +155,7 @@ def _counts(path, section: str, raw, catalog: Catalog, *, furniture: bool) -> tu
             raise StyleError(
                 path, f"'{tname}' is a small object: put it in [clutter] or a [[rule]]", field=field
             )
-        rng = _range(path, field, val, integer=True, lo_min=0, hi_max=MAX_COUNT)
+        rng = range_field(path, field, val, integer=True, lo_min=0, hi_max=MAX_COUNT)
         out.append((tname, rng))
     return tuple(out)
 
@@ -187,7 +199,7 @@ def _rule(path, i: int, raw, catalog: Catalog, present: set[str]) -> Rule:
         or math.isnan(p)
     ):
         raise StyleError(path, f"probability must be in [0, 1], got {p!r}", field=f"{where}.p")
-    count = _range(
+    count = range_field(
         path, f"{where}.count", raw.get("count", 1), integer=True, lo_min=0, hi_max=MAX_COUNT
     )
     on = raw.get("on", "auto")
@@ -268,13 +280,13 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
     for req in ("width", "depth"):
         if req not in room:
             raise StyleError(path, "missing", field=f"room.{req}")
-    width = _range(
+    width = range_field(
         path, "room.width", room["width"], integer=False, lo_min=2.5, hi_max=MAX_ROOM_SIDE
     )
-    depth = _range(
+    depth = range_field(
         path, "room.depth", room["depth"], integer=False, lo_min=2.5, hi_max=MAX_ROOM_SIDE
     )
-    height = _range(
+    height = range_field(
         path,
         "room.height",
         room.get("height", [2.6, 3.0]),
@@ -282,7 +294,7 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
         lo_min=2.2,
         hi_max=MAX_ROOM_HEIGHT,
     )
-    door = _range(
+    door = range_field(
         path,
         "room.door_width",
         room.get("door_width", 0.9),

@@ -47,6 +47,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from agent.mapping import default_map_mode
 from agent.perception_modes import DEFAULT_DETECTOR
 from envs.detector import default_or_named
 from envs.houses import resolve_style
@@ -212,6 +213,7 @@ def _data(config: LearningBenchConfig, truth: dict, traces: dict[str, list[Trace
         "alpha": config.alpha,
         "room_budget_s": config.room_budget_s,
         "detector": config.detector_name,
+        "map": default_map_mode(config.perception),  # the grid the runs planned on
         "interval": config.interval,
         "confirm": config.confirm,
         "truth_samples": truth.get("samples", config.truth_samples),

@@ -385,6 +385,7 @@ def _write_files(
         "rank": config.rank,
         "detector": config.detector_model(load_catalog()).name,
         "interval": config.interval,
+        "map": "given",  # the policies search on RoomMaps.given (the true layout's maps)
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
