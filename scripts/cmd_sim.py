@@ -61,8 +61,7 @@ def run_bench(args: argparse.Namespace) -> int:
         gazes=args.gazes,
         style=args.style,
         seed=args.seed,
-        width=args.width,
-        height=args.height,
+        size=(args.width, args.height),
         explore=min(args.explore, args.rooms),
         frontier_rule=args.frontier_rule,
     )

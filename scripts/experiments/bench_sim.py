@@ -106,14 +106,15 @@ def run(
     gazes: int = 100,
     style: str = "office",
     seed: int = 0,
-    width: int = 320,
-    height: int = 240,
+    size: tuple[int, int] = (320, 240),
     explore: int = 1,
     frontier_rule: str = "info",
 ) -> dict:
     """Run the benchmark, write ``bench_sim.json``, ``bench_sim.md`` and ``bench_sim.png`` to
-    ``out_dir``, and return the results. The first ``explore`` worlds are also explored fully
-    with the robot's own map (scripts.experiments.bench_map; ``map_overview.png``)."""
+    ``out_dir``, and return the results (``size``: the head camera's width and height). The
+    first ``explore`` worlds are also explored fully with the robot's own map
+    (scripts.experiments.bench_map; ``map_overview.png``)."""
+    width, height = size
     load_before = os.getloadavg()[0]
     catalog = load_catalog()
     style_obj = resolve_style(style, catalog)
