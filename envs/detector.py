@@ -37,7 +37,7 @@ import numpy as np
 
 from envs.camera import Frame, PinholeCamera, focal_length
 from envs.layout import RoomLayout
-from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType
+from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType, asset_file
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
 
@@ -233,10 +233,7 @@ def available_detectors() -> list[str]:
 
 def detector_path(path_or_name: str | Path) -> Path:
     """The file of a preset given by path or bare name (``realistic`` -> assets/detectors/...)."""
-    p = Path(path_or_name)
-    if p.suffix == ".toml" or p.parent != Path(".") or p.exists():
-        return p
-    return DETECTORS_DIR / f"{p.name}.toml"
+    return asset_file(path_or_name, DETECTORS_DIR)
 
 
 def _number(path, field: str, value, lo: float, hi: float, lo_inclusive: bool) -> float:

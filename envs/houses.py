@@ -21,7 +21,7 @@ from envs.styles import (
     load_style,
     range_field,
 )
-from knowledge.catalog import ASSETS_DIR, Catalog, load_catalog
+from knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
 
 HOUSES_DIR = ASSETS_DIR / "houses"
 TOP_FIELDS = {"name", "description", "house", "rooms"}
@@ -72,8 +72,7 @@ def available_houses() -> list[str]:
 
 
 def _is_name(value: str | Path) -> bool:
-    p = Path(value)
-    return not (p.suffix == ".toml" or p.parent != Path(".") or p.exists())
+    return asset_file(value, HOUSES_DIR) != Path(value)
 
 
 def _range(path, field: str, value, *, integer: bool, lo_min: float, hi_max: float) -> tuple:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from envs.robot_spec import RobotSpec
-from knowledge.catalog import ASSETS_DIR, Catalog, load_catalog
+from knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
 from knowledge.errors import CtxsearchError
 
 STYLES_DIR = ASSETS_DIR / "styles"
@@ -95,10 +95,7 @@ def available_styles() -> list[str]:
 
 def style_path(path_or_name: str | Path) -> Path:
     """The file of a style given by path or bare name (``office`` -> assets/styles/office.toml)."""
-    p = Path(path_or_name)
-    if p.suffix == ".toml" or p.parent != Path(".") or p.exists():
-        return p
-    return STYLES_DIR / f"{p.name}.toml"
+    return asset_file(path_or_name, STYLES_DIR)
 
 
 def range_field(

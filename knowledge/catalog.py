@@ -37,6 +37,16 @@ from knowledge.hierarchy import Hierarchy, parse_hierarchy
 ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_CATALOG = ASSETS_DIR / "types.toml"
 
+
+def asset_file(path_or_name: str | Path, folder: Path) -> Path:
+    """The file a ``--style``/``--detector``-like value names: a path as it is, or a bare name
+    looked up as ``folder/<name>.toml`` (``office`` -> assets/styles/office.toml)."""
+    p = Path(path_or_name)
+    if p.suffix == ".toml" or p.parent != Path(".") or p.exists():
+        return p
+    return folder / f"{p.name}.toml"
+
+
 KINDS = ("furniture", "object")
 # How envs/ builds the type's geometry. knowledge/ only checks the name is one of these.
 SHAPES = (

@@ -21,24 +21,24 @@ def _int(text: str) -> int | None:
         return None
 
 
-def positive_int(text: str) -> int:
-    """An integer in [1, MAX_COUNT] (rooms, seeds per strategy, episodes, examinations...)."""
+def _count(text: str, minimum: int) -> int:
     v = _int(text)
-    if v is None or v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    if v is None or v < minimum:
+        what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
     if v > MAX_COUNT:
         raise argparse.ArgumentTypeError(f"expected at most {MAX_COUNT:_}, got {v:_}")
     return v
+
+
+def positive_int(text: str) -> int:
+    """An integer in [1, MAX_COUNT] (rooms, seeds per strategy, episodes, examinations...)."""
+    return _count(text, 1)
 
 
 def non_negative_int(text: str) -> int:
     """An integer in [0, MAX_COUNT] (a minimum number of examinations)."""
-    v = _int(text)
-    if v is None or v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    if v > MAX_COUNT:
-        raise argparse.ArgumentTypeError(f"expected at most {MAX_COUNT:_}, got {v:_}")
-    return v
+    return _count(text, 0)
 
 
 def seed(text: str) -> int:

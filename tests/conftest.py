@@ -45,3 +45,27 @@ def other_catalog() -> Catalog:
         ),
         path="<other catalog>",
     )
+
+
+@pytest.fixture()
+def desk_cup_store(catalog):
+    """A factory: ``desk_cup_store(path, rooms)`` writes a store in which each of ``rooms``
+    office rooms had one desk with a cup on top (run 't'), and returns ``path``."""
+    from knowledge.store import EvidenceStore
+
+    def make(path, rooms: int = 5):
+        with EvidenceStore.open(path, catalog, create=True) as s:
+            for i in range(rooms):
+                s.record(
+                    run="t",
+                    style="office",
+                    room_seed=i,
+                    object_id=1,
+                    ref_type="Desk",
+                    sim_time=0.0,
+                    strategy="t",
+                    related=[("ON-TOP-OF-DESK", "Cup", 2)],
+                )
+        return path
+
+    return make

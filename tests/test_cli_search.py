@@ -26,21 +26,8 @@ def _one_line_error(capsys, code: int, pattern: str) -> str:
 
 
 @pytest.fixture()
-def store(tmp_path, catalog):
-    path = tmp_path / "kb.sqlite"
-    with EvidenceStore.open(path, catalog, create=True) as s:
-        for i in range(5):
-            s.record(
-                run="t",
-                style="office",
-                room_seed=i,
-                object_id=1,
-                ref_type="Desk",
-                sim_time=0.0,
-                strategy="t",
-                related=[("ON-TOP-OF-DESK", "Cup", 2)],
-            )
-    return path
+def store(tmp_path, desk_cup_store):
+    return desk_cup_store(tmp_path / "kb.sqlite")
 
 
 def test_unknown_target_is_a_one_line_error(store, capsys):

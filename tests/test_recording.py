@@ -211,24 +211,11 @@ def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog
 
 
 @pytest.mark.render
-def test_searches_side_by_side_in_one_recording(catalog, tmp_path):
-    from knowledge.store import EvidenceStore
+def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_store):
     from scripts.experiments.episodes import SearchConfig, search_once
     from tests.rrd_files import read_rrd
 
-    kb = tmp_path / "kb.sqlite"
-    with EvidenceStore.open(kb, catalog, create=True) as s:
-        for i in range(5):
-            s.record(
-                run="t",
-                style="office",
-                room_seed=i,
-                object_id=1,
-                ref_type="Desk",
-                sim_time=0.0,
-                strategy="t",
-                related=[("ON-TOP-OF-DESK", "Cup", 2)],
-            )
+    kb = desk_cup_store(tmp_path / "kb.sqlite")
     rrd = tmp_path / "search.rrd"
     config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0)
     one = search_once(config, "Cup", kb_path=kb, record=rrd, catalog=catalog)

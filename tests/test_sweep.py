@@ -112,26 +112,12 @@ def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path):
+def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_store):
     import json
 
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore
     from scripts.cli import main
 
-    kb = tmp_path / "kb.sqlite"
-    with EvidenceStore.open(kb, load_catalog(), create=True) as s:
-        for i in range(3):
-            s.record(
-                run="t",
-                style="office",
-                room_seed=i,
-                object_id=1,
-                ref_type="Desk",
-                sim_time=0.0,
-                strategy="t",
-                related=[("ON-TOP-OF-DESK", "Cup", 2)],
-            )
+    kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "3"]
     args += ["--policies", "exhaustive,location", "--budget-seconds", "20", "--quiet"]
     assert main([*args, "--out", str(tmp_path / "serial")]) == 0
