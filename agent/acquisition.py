@@ -306,6 +306,7 @@ class RoomLearner:
         seen: dict[int, ObjectInstance] = {}
         for gaze in gazes:
             frame = execute_gaze(self.body, self.grid, gaze, rgb=self.log.recording, depth=True)
+            self._mapped(frame)  # the built map learns from these images as it did the first time
             seen.update((o.id, o) for o in self.perception.see(frame))
         related = self.perception.related(obj, list(seen.values()))
         if sorted({(r, o.type, o.id) for r, o in related}) != sorted(set(stored.related)):

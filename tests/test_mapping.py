@@ -103,25 +103,27 @@ def test_map_modes_default_by_perception_and_the_oracle_needs_the_given_map(tmp_
 @pytest.mark.render
 def test_learning_on_the_built_map_resumes_exactly(tmp_path):
     """A built-map run interrupted and resumed makes the choices, at the clock, of an
-    uninterrupted one (the replay renders depth for the map). With the perfect detector: with
-    the realistic one a resumed built-map run may diverge after a few examinations (known,
-    open: a replayed image can differ in a pixel, which shifts the detector's random stream)."""
+    uninterrupted one (the replay renders depth for the map), with either detector. With the
+    realistic one the replay re-takes the examination images: they must update the built map as
+    the first run's did (a replay that skipped it diverged after ~20 examinations)."""
 
-    def go(path, **kw):
+    def go(path, detector, rooms, **kw):
         seq = []
         s = learning.learn(
-            LearnConfig("office", 1, path, progress=False, detector="perfect", **kw),
+            LearnConfig("office", rooms, path, progress=False, detector=detector, **kw),
             on_examination=lambda res, kb: seq.append((res.choice.obj.id, round(res.sim_time, 6))),
         )
         return s, seq
 
-    full, seq_full = go(tmp_path / "full.sqlite")
-    assert full.map_mode == "built" and full.run.endswith("/map=built")
-    assert full.examinations >= 5
-    _, seq1 = go(tmp_path / "part.sqlite", max_examinations=4)
-    _, seq2 = go(tmp_path / "part.sqlite")
-    assert seq1 == seq_full[:4]
-    assert seq2 == seq_full
+    for detector, rooms, cut in (("perfect", 1, 4), ("realistic", 2, 7)):
+        full, seq_full = go(tmp_path / f"full_{detector}.sqlite", detector, rooms)
+        assert full.map_mode == "built" and full.run.endswith("/map=built")
+        assert len(seq_full) >= 20  # long enough that a map left behind in the replay shows
+        part = tmp_path / f"part_{detector}.sqlite"
+        _, seq1 = go(part, detector, rooms, max_examinations=cut)
+        _, seq2 = go(part, detector, rooms)
+        assert seq1 == seq_full[:cut]
+        assert seq2 == seq_full, detector
 
 
 def test_learn_says_which_map_and_takes_the_world_budget(tmp_path, capsys):
