@@ -299,7 +299,8 @@ class RoomLearner:
         again (the same draws: the stream is keyed by the image's simulated second) instead of
         reading the stored relations."""
         det, run = self.run.detector, self.run
-        return run.perceive is None and ((det is not None and not det.perfect) or run.confirm > 1)
+        errs = det is not None and not det.perfect
+        return run.perceive is None and (errs or run.confirm > 1 or run.min_score > 0)
 
     def _reexamine(self, obj: ObjectInstance, stored: StoredExam, gazes: Sequence[Gaze]) -> Related:
         """A replayed examination made again with images, checked against the store."""

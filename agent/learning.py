@@ -122,7 +122,8 @@ class LearnConfig:
     (agent.frontiers).
     ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
     ``confirm``: camera mode counts an object as related once that many images of the room
-    detected it (1: at once, Figure 2 as published).
+    detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
+    detections scored at least that confidence (0: any detection counts).
     """
 
     style: str
@@ -142,6 +143,7 @@ class LearnConfig:
     frontier_rule: str = "info"
     detector: str | None = None
     confirm: int = 1
+    min_score: float = 0.0
 
     @property
     def map_used(self) -> str:
@@ -175,6 +177,8 @@ class LearnConfig:
                 )
         if self.confirm < 1:
             raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
+        if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
+            raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
         if not own_perception and self.perception not in PERCEPTION_MODES:
             raise CtxsearchError(
                 f"unknown perception mode '{self.perception}' "
@@ -274,7 +278,7 @@ def learn(
         style, layouts = style_layouts(style, catalog)
     map_mode = config.map_used
     detector = config.detector_model(catalog) if perceive is None else None
-    label = perception_label(config.perception, detector, config.confirm)
+    label = perception_label(config.perception, detector, config.confirm, config.min_score)
     rid = run_id(config.strategy, label, config.seed, config.room_budget_s, map_mode)
     t_wall = time.perf_counter()
     summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode,
@@ -287,7 +291,7 @@ def learn(
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
                   on_choice=on_choice, perceive=perceive, map_mode=map_mode,
                   frontier_rule=config.frontier_rule, detector=detector,
-                  confirm=config.confirm)  # fmt: skip
+                  confirm=config.confirm, min_score=config.min_score)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):

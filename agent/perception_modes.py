@@ -3,7 +3,8 @@ objects an examined object is related to, and the body whose motions and images 
 
 ``camera`` renders segmentation in MuJoCo (envs.world) and runs the detector (envs.detector, a
 preset: ``realistic`` by default, ``perfect`` the exact threshold detector; with ``confirm`` k,
-an object counts as related only once k images of the room detected it);
+an object counts as related only once k images of the room detected it; with ``min_score`` c,
+only once a detection of it scored at least c);
 ``oracle`` reads relations from the true layout and decides what a look-around recognizes
 geometrically (type's max_range, inside the frustum, clear line of sight past furniture boxes),
 without rendering, on a ``KinematicBody``. Both charge the same ``TimeModel`` seconds for the same
@@ -35,21 +36,27 @@ DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors
 @dataclass(frozen=True)
 class Sensing:
     """Camera mode's detector settings: the preset (None: perfect), the run's seed its stream
-    derives from, and how many images of a room must detect an object before it counts."""
+    derives from, how many images of a room must detect an object before it counts, and the
+    confidence one of its detections must reach (envs.detector: ``Detection.score``)."""
 
     detector: DetectorModel | None = None
     seed: int = 0
     confirm: int = 1
+    min_score: float = 0.0
 
 
-def perception_label(mode: str, detector: DetectorModel | None, confirm: int = 1) -> str:
+def perception_label(
+    mode: str, detector: DetectorModel | None, confirm: int = 1, min_score: float = 0.0
+) -> str:
     """The perception's name in run keys and results: the mode, and in camera mode the detector
-    unless it is the perfect one (so runs made before detector models keep their keys) and the
-    confirmation count if above 1."""
+    unless it is the perfect one (so runs made before detector models keep their keys), the
+    confirmation count if above 1 and the minimum confidence if above 0."""
     if mode != "camera" or detector is None:
         return mode
     label = mode if detector.perfect else f"{mode}+{detector.name}"
-    return label if confirm <= 1 else f"{label}+confirm{confirm}"
+    if confirm > 1:
+        label += f"+confirm{confirm}"
+    return label if min_score <= 0 else f"{label}+score{min_score:g}"
 
 
 # =========================================================================== the oracle's body
@@ -250,7 +257,9 @@ class CameraPerception:
     """Rendered segmentation in MuJoCo and the detector (envs.detector): the preset ``detector``
     (None: perfect) with its stream seeded by the run's ``seed``, the room and the image; with
     ``confirm`` k > 1, ``related`` counts only objects k images of this room detected, under the
-    type most of them reported."""
+    type most of them reported; with ``min_score`` c > 0, only objects one of whose detections in
+    this room scored at least c (a detection confidence threshold on the counting, not on what
+    the robot sees: a weak detection still makes an object a candidate to examine)."""
 
     name = "camera"
     reads_truth = False
@@ -278,7 +287,9 @@ class CameraPerception:
         model = sensing.detector if sensing.detector is not None else load_detector("perfect")
         self.detector = SimDetector(model, layout, catalog, sensing.seed)
         self.confirm = int(sensing.confirm)
+        self.min_score = float(sensing.min_score)
         self._sightings: dict[int, Counter[str]] = {}
+        self._best_score: dict[int, float] = {}
         self.last_detections: Sequence[Detection] = ()
 
     def see(self, frame: Frame | None) -> list[ObjectInstance]:
@@ -289,6 +300,9 @@ class CameraPerception:
         if self.confirm > 1:
             for d in self.last_detections:
                 self._sightings.setdefault(d.instance_id, Counter())[d.type] += 1
+        for d in self.last_detections:
+            best = self._best_score.get(d.instance_id, 0.0)
+            self._best_score[d.instance_id] = max(best, d.score)
         return [d.pose for d in self.last_detections]
 
     def related(
@@ -297,6 +311,8 @@ class CameraPerception:
         """RELATED-OBJECTS/-TYPES from the detected poses (confirmed ones, with ``confirm``)."""
         if self.confirm > 1:
             seen = [c for c in (self._confirmed(o) for o in seen) if c is not None]
+        if self.min_score > 0:
+            seen = [o for o in seen if self._best_score.get(o.id, 0.0) >= self.min_score]
         return geometry.related(self.catalog, obj, seen)
 
     def _confirmed(self, obj: ObjectInstance) -> ObjectInstance | None:

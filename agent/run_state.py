@@ -88,6 +88,7 @@ class Run:
     frontier_rule: str = "info"  # agent.frontiers.FRONTIER_RULES (built maps only)
     detector: DetectorModel | None = None  # camera mode's preset (None: perfect)
     confirm: int = 1  # camera mode: images of a room that must detect an object to count it
+    min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
 
     def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
         """The robot's perception (and body) in the room ``layout``."""
@@ -96,4 +97,4 @@ class Run:
         mode = self.perception.split("+")[0]
         return make_perception(mode, layout, self.catalog, self.spec, self.time_model, rgb=rgb,
                                sensing=Sensing(self.detector, self.seed,
-                                               self.confirm))  # fmt: skip
+                                               self.confirm, self.min_score))  # fmt: skip

@@ -16,6 +16,14 @@ real detector makes of that is a model with four parts, each a section of the pr
   of a type drawn from ``types``, standing on a surface point the image shows.
 ``[pose]``  position and yaw noise, Gaussian, with sigmas growing linearly with distance.
 
+Every detection carries a confidence ``score`` in [0, 1], as a real detector's does: a detection
+of a true instance scores the model's recall at its pixels and distance (a calibrated detector's
+confidence tracks how detectable the box is; a look-alike report scores the same, as confusions
+do in practice: confidence cannot filter them); a false positive scores uniformly in
+(0, ``false_positives.max_score``] (optional, default 0.5: clutter fires weakly), drawn from a
+stream of its own keyed by its id so the image's stream is the same with or without scores. The
+perfect detector's detections score 1.
+
 ``kind = "perfect"`` is the threshold detector the project started with: an instance is detected
 iff it has at least min_pixels visible pixels within max_range, its pose exact, no confusion, no
 false positive, and it draws no random numbers (so runs with it are identical to runs before
@@ -61,6 +69,8 @@ POSE_FIELDS = {
     "yaw_sigma_deg_per_m": (0.0, 180.0, True),
 }
 FP_FIELDS = {"per_image": (0.0, 100.0, True)}
+FP_OPTIONAL = {"max_score": (0.0, 1.0, False)}  # optional fields of [false_positives]
+FP_MAX_SCORE = 0.5  # false positives' highest confidence when the preset does not say
 CONFUSION_FIELDS = {"a", "b", "p"}
 
 
@@ -112,6 +122,7 @@ class DetectorModel:
     fp_per_image: float = 0.0
     fp_types: tuple[str, ...] = ()
     pose: PoseNoise | None = None
+    fp_max_score: float = FP_MAX_SCORE
 
     @property
     def perfect(self) -> bool:
@@ -253,7 +264,8 @@ def _table(path, doc: dict, name: str, spec: dict) -> dict[str, float]:
     raw = doc.get(name)
     if not isinstance(raw, dict):
         raise DetectorError(path, "missing or not a table", field=name)
-    unknown = set(raw) - set(spec) - ({"types"} if name == "false_positives" else set())
+    extra = ({"types"} | set(FP_OPTIONAL)) if name == "false_positives" else set()
+    unknown = set(raw) - set(spec) - extra
     if unknown:
         raise DetectorError(path, f"unknown field(s) {sorted(unknown)}", field=name)
     out = {}
@@ -313,7 +325,12 @@ def parse_detector(doc: dict, path: str | Path = "<memory>") -> DetectorModel:
     recall = Recall(**_table(path, doc, "recall", RECALL_FIELDS))
     pose = PoseNoise(**_table(path, doc, "pose", POSE_FIELDS))
     fp = _table(path, doc, "false_positives", FP_FIELDS)
-    types = doc["false_positives"].get("types", [])
+    raw_fp = doc["false_positives"]
+    max_score = FP_MAX_SCORE
+    if "max_score" in raw_fp:
+        lo, hi, inc = FP_OPTIONAL["max_score"]
+        max_score = _number(path, "false_positives.max_score", raw_fp["max_score"], lo, hi, inc)
+    types = raw_fp.get("types", [])
     if not isinstance(types, list) or not all(isinstance(t, str) for t in types):
         raise DetectorError(path, "must be a list of type names", field="false_positives.types")
     return DetectorModel(
@@ -326,6 +343,7 @@ def parse_detector(doc: dict, path: str | Path = "<memory>") -> DetectorModel:
         fp["per_image"],
         tuple(types),
         pose,
+        max_score,
     )
 
 
@@ -362,6 +380,23 @@ def detection_rng(seed: int, image_index: int) -> np.random.Generator:
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7EC7, int(image_index)])
 
 
+def recall_probs(
+    model: DetectorModel,
+    types: Sequence[ObjectType],
+    pixels: np.ndarray,
+    distances: np.ndarray,
+    size: tuple[int, int],
+) -> np.ndarray:
+    """P(detected) of each candidate instance (``size``: the image's (width, height))."""
+    w, h = size
+    return np.array(
+        [
+            float(model.recall_prob(t, px, d, w, h))
+            for t, px, d in zip(types, pixels, distances, strict=True)
+        ]
+    )
+
+
 def keep(
     model: DetectorModel,
     types: Sequence[ObjectType],
@@ -373,13 +408,7 @@ def keep(
     """Which candidate instances the detector reports (bool mask over the candidates): each kept
     with its recall probability, one uniform draw per candidate in order (none at all for the
     perfect detector, which needs no ``rng``). ``size``: the image's (width, height)."""
-    w, h = size
-    probs = np.array(
-        [
-            float(model.recall_prob(t, px, d, w, h))
-            for t, px, d in zip(types, pixels, distances, strict=True)
-        ]
-    )
+    probs = recall_probs(model, types, pixels, distances, size)
     if model.perfect:
         return probs >= 1.0
     if rng is None:
@@ -404,7 +433,7 @@ def keep(
 class Detection:
     """One detection: instance id (negative: a false positive), the reported type, the estimated
     pose (the simulator's for the perfect detector), visible pixels, distance (m) from the camera,
-    and the pixel bounding box (x0, y0, x1, y1), inclusive."""
+    the pixel bounding box (x0, y0, x1, y1), inclusive, and the confidence score in [0, 1]."""
 
     instance_id: int
     type: str
@@ -412,6 +441,7 @@ class Detection:
     pixels: int
     distance: float
     bbox: tuple[int, int, int, int]
+    score: float = 1.0  # the detector's confidence (module docstring)
 
 
 @functools.lru_cache(maxsize=8)
@@ -553,16 +583,17 @@ def _detect_model(
     types = [catalog.type(o.type) for _, o, _, _ in found]
     pixels = np.array([len(idx) for _, _, idx, _ in found])
     dists = np.array([d for _, _, _, d in found])
-    mask = keep(model, types, pixels, dists, (img.width, img.height), rng)
+    probs = recall_probs(model, types, pixels, dists, (img.width, img.height))
+    mask = rng.random(len(probs)) < probs
     out: list[Detection] = []
-    for (oid, obj, idx, dist), kept in zip(found, mask, strict=True):
+    for (oid, obj, idx, dist), kept, p in zip(found, mask, probs, strict=True):
         if not kept:
             continue
         reported = model.reported_type(obj.type, rng)
         pose = model.noisy_pose(obj, dist, rng)
         if reported != obj.type:
             pose = replace(pose, type=reported)
-        out.append(Detection(oid, reported, pose, len(idx), dist, img.bbox(idx)))
+        out.append(Detection(oid, reported, pose, len(idx), dist, img.bbox(idx), float(p)))
     return out
 
 
@@ -594,7 +625,17 @@ def _false_positives(
         return points[k], dist
 
     fps = model.false_positives(rng, sample, catalog, base)
-    return [Detection(o.id, o.type, o, 0, dist, (0, 0, 0, 0)) for o, dist in fps]
+    return [
+        Detection(o.id, o.type, o, 0, dist, (0, 0, 0, 0), false_positive_score(model, o.id))
+        for o, dist in fps
+    ]
+
+
+def false_positive_score(model: DetectorModel, fp_id: int) -> float:
+    """A false positive's confidence: uniform in (0, max_score], from a stream keyed by its id
+    (not the image's stream, which stays as it was before detections had scores)."""
+    u = np.random.default_rng([abs(int(fp_id)) & 0xFFFFFFFFFFFFFFFF, 0x5C0E]).random()
+    return float(model.fp_max_score * (1.0 - u))
 
 
 def image_rng(seed: int, room_seed: int, sim_time: float) -> np.random.Generator:

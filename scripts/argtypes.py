@@ -91,6 +91,17 @@ def alpha(text: str) -> float:
     return v
 
 
+def unit_interval(text: str) -> float:
+    """A number in [0, 1] (a detection confidence)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {v}")
+    return v
+
+
 def out_file(text: str) -> Path:
     """An output file: a path that is not a directory (an existing file is replaced)."""
     p = Path(text)

@@ -121,6 +121,14 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         help="camera mode: count a related object only once K images of the room detected it "
         "(default: 1, at once)",
     )
+    p.add_argument(
+        "--min-score",
+        type=argtypes.unit_interval,
+        default=0.0,
+        metavar="C",
+        help="camera mode: count a related object only once one of its detections scored at "
+        "least C (0..1; the detector's confidence; default: 0, any detection)",
+    )
     argtypes.add_interval_argument(p)
 
 
@@ -146,6 +154,7 @@ def run_learn(args: argparse.Namespace) -> int:
             frontier_rule=args.frontier_rule,
             detector=args.detector,
             confirm=args.confirm,
+            min_score=args.min_score,
         )
     )
     for line in s.lines():
@@ -241,13 +250,14 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=argtypes.positive_int, default=3, help="seeds (default: 3)")
     p.add_argument(
         "--settings",
-        default="perfect,realistic,realistic+confirm2",
-        help="detector settings (default: perfect,realistic,realistic+confirm2)",
+        default="perfect,realistic,realistic+confirm2,realistic+score0.5",
+        help="detector settings (default: perfect,realistic,realistic+confirm2,realistic+score0.5)",
     )
     p.add_argument(
         "--truth-samples", type=argtypes.positive_int, default=200, help="ground-truth rooms"
     )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    add_sweep_arguments(p)
     p.set_defaults(func=run_intervals)
 
 
@@ -279,9 +289,10 @@ def run_intervals(args: argparse.Namespace) -> int:
         truth_samples=args.truth_samples,
         settings=settings,
     )
-    doc = bench_intervals(config, args.out)
+    doc = bench_intervals(config, args.out, sweep=SweepOptions.from_args(args))
     print(markdown(doc))
-    print(f"wrote {args.out / 'intervals.json'} and {args.out / 'intervals.md'}")
+    files = ", ".join(str(args.out / f"intervals.{x}") for x in ("json", "md", "csv"))
+    print(f"wrote {files}")
     return 0
 
 

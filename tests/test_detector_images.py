@@ -250,3 +250,34 @@ def test_a_resumed_realistic_run_equals_an_uninterrupted_one(tmp_path, catalog):
             return [(e.object_id, e.type, e.related, e.sim_time) for e in st.examinations()]
 
     assert rows(tmp_path / "a.sqlite") == rows(tmp_path / "b.sqlite")
+
+
+def test_scores_are_the_recall_for_true_boxes_and_weak_for_clutter(catalog):
+    """A true detection scores the model's recall at its pixels and distance (a look-alike report
+    the same), a false positive uniformly in (0, max_score]; the perfect detector scores 1."""
+    model = load_detector("realistic", catalog)
+    ids = np.full((240, 320), -1, np.int32)
+    ids[0:120, 0:120] = PHONE.id
+    ids[200:206, 300:306] = CUP.id  # small: a low recall
+    depth = np.full(ids.shape, 1.0, np.float32)
+    images = [
+        detect_ids(ids, OBJECTS, catalog, depth=depth, model=model,
+                   draws=ImageDraws(image_rng(3, 4, float(i)), _camera(240, 320)), fovy_deg=45.0)
+        for i in range(3000)
+    ]  # fmt: skip
+    dets = [d for im in images for d in im]
+    true = [d for d in dets if d.instance_id > 0]
+    for d in true[:50]:
+        typ = catalog.type(OBJECTS[d.instance_id].type)
+        want = model.recall_prob(typ, d.pixels, d.distance, 320, 240)
+        assert d.score == pytest.approx(float(want))
+    phone = {round(d.score, 12) for d in true if d.instance_id == PHONE.id}
+    cup = {round(d.score, 12) for d in true if d.instance_id == CUP.id}
+    assert len(phone) == 1 and len(cup) == 1 and min(phone) > 0.9 > 0.5 > max(cup)
+    assert any(d.type == "Remote" for d in true)  # confusions keep their box's score
+    assert {round(d.score, 12) for d in true if d.type == "Remote"} == phone
+    fps = [d.score for d in dets if d.instance_id < 0]
+    assert len(fps) > 50 and min(fps) > 0 and max(fps) <= model.fp_max_score == 0.5
+    assert abs(np.mean(fps) - 0.25) < 0.05  # uniform on (0, 0.5]
+    perfect = detect_ids(ids, OBJECTS, catalog, depth=depth, model=load_detector("perfect"))
+    assert perfect and all(d.score == 1.0 for d in perfect)

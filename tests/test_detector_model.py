@@ -142,6 +142,8 @@ def test_bad_numbers_and_types_are_refused(catalog, tmp_path):
         ("max_recall = 0.95", "max_recall = 1.5", "recall.max_recall"),
         ("slope = 2.5", "slope = inf", "recall.slope"),
         ("per_image = 0.05", "per_image = -1", "false_positives.per_image"),
+        ("max_score = 0.5", "max_score = 0", "false_positives.max_score"),
+        ("max_score = 0.5", 'max_score = "high"', "false_positives.max_score"),
         ('b = "Remote"', 'b = "Walkman"', "confusion"),
         ("p = 0.05", "p = 1.5", "confusion[1].p"),
         ("p = 0.04", "p = 0.99", "add up to more than 1"),

@@ -161,3 +161,59 @@ def test_a_bad_detector_file_gets_the_one_line_error(tmp_path, capsys, argv):
     assert err.count("\n") == 0 and err.startswith("ctxsearch: error: ")
     assert str(bad) in err and "max_recall" in err
     assert not (argv[0] == "learn" and kb.exists())  # nothing learned, nothing created
+
+
+@pytest.mark.render
+def test_a_confidence_threshold_counts_fewer_related_objects(catalog, tmp_path):
+    """``min_score`` counts a related object only once one of its detections scored that
+    confidence: at 1.0 (above the realistic preset's best, 0.95) nothing is ever related; the run
+    key says the threshold; at 0 the run is the default one."""
+    from agent.learning import LearnConfig, learn
+    from knowledge.store import EvidenceStore
+
+    def run(path, score):
+        cfg = LearnConfig("office", 1, path, progress=False, max_examinations=4, min_score=score)
+        return learn(cfg, catalog=catalog)
+
+    high = run(tmp_path / "high.sqlite", 1.0)
+    assert high.run == "hif/camera+realistic+score1/seed=0/map=built"
+    low = run(tmp_path / "low.sqlite", 0.0)
+    assert low.run == "hif/camera+realistic/seed=0/map=built"
+
+    def related(path):
+        with EvidenceStore.open(path, catalog, read_only=True) as st:
+            return [e.related for e in st.examinations()]
+
+    assert all(not r for r in related(tmp_path / "high.sqlite"))
+    assert any(r for r in related(tmp_path / "low.sqlite"))
+
+
+@pytest.mark.parametrize("bad", ["1.5", "-0.1", "x"])
+def test_min_score_outside_0_1_is_refused(capsys, tmp_path, bad):
+    from scripts.cli import main
+
+    kb = tmp_path / "kb.sqlite"
+    with pytest.raises(SystemExit) as exc:
+        main(["learn", "--style", "office", "--rooms", "1", "--kb", str(kb), "--min-score", bad])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--min-score" in err and "[0, 1]" in err
+    assert not kb.exists()
+
+
+def test_intervals_csv_has_one_column_per_bias_type(tmp_path):
+    import csv
+
+    from scripts.experiments.bench_intervals import write_csv_rows
+
+    rows = [
+        {"style": "office", "detector": "perfect", "rooms": 10, "examinations": 300.0,
+         "wilson_coverage_informative": 0.9, "bias_by_type": {"Desk": 0.01, "Cup": -0.02}},
+        {"style": "office", "detector": "realistic", "rooms": 10, "examinations": 310.0,
+         "wilson_coverage_informative": 0.8, "bias_by_type": {"Desk": 0.03}},
+    ]  # fmt: skip
+    path = write_csv_rows(tmp_path / "intervals.csv", rows)
+    got = list(csv.DictReader(path.open()))
+    assert [r["detector"] for r in got] == ["perfect", "realistic"]
+    assert list(got[0])[-2:] == ["bias_Cup", "bias_Desk"]
+    assert got[1]["bias_Cup"] == "" and float(got[1]["bias_Desk"]) == 0.03

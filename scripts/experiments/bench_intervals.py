@@ -1,7 +1,8 @@
 """``ctxsearch bench intervals``: what detector errors and room correlation do to the intervals.
 
-For every style and every detector setting (``perfect``, ``realistic``, and ``realistic`` with
-a related object counted only once two images of the room detected it), HIF learns in camera
+For every style and every detector setting (``perfect``, ``realistic``, ``realistic`` with a
+related object counted only once two images of the room detected it, and ``realistic`` with one
+counted only once a detection of it scored a confidence of 0.5: ``SETTINGS``), HIF learns in camera
 mode over the same rooms for every seed (``learning_trace.run_trace`` with clustered intervals,
 so the paper's Wilson figures are measured beside them on the same evidence). After the last
 examination of room r for every r in ``room_marks``, against the ground truth (``envs.truth``):
@@ -13,12 +14,13 @@ examination of room r for every r in ``room_marks``, against the ground truth (`
 
 for ``wilson`` and ``clustered``; and the bias per reference type: the mean of p0 - p_true over
 its informative entries (the detector's misses pull it down, its false positives and
-confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json and
-DIR/intervals.md.
+confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json,
+DIR/intervals.md and DIR/intervals.csv.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import tempfile
@@ -33,10 +35,15 @@ from knowledge import intervals
 from knowledge.catalog import load_catalog
 from scripts.experiments.bench_learning import TRUTH_SEED
 from scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
+from scripts.experiments.tables import write_csv
+from scripts.sweep import SweepOptions, run_units
 
-# (label, detector preset, confirm): the detector settings compared.
-SETTINGS = (("perfect", "perfect", 1), ("realistic", "realistic", 1),
-            ("realistic+confirm2", "realistic", 2))  # fmt: skip
+# (label, detector preset, confirm, min score): the detector settings compared. ``confirm2``
+# counts an object once two images detected it; ``score0.5`` once a detection of it scored 0.5.
+SETTINGS = (("perfect", "perfect", 1, 0.0), ("realistic", "realistic", 1, 0.0),
+            ("realistic+confirm2", "realistic", 2, 0.0),
+            ("realistic+score0.5", "realistic", 1, 0.5))  # fmt: skip
+DEFAULT_SETTINGS = ("perfect", "realistic", "realistic+confirm2", "realistic+score0.5")
 CELLS = (
     ("coverage_informative", "wilson_coverage_informative"),
     ("mean_abs_error", "wilson_mean_abs_error"),
@@ -53,15 +60,20 @@ class IntervalsBenchConfig:
     seeds: int = 3
     truth_samples: int = 200
     alpha: float = 0.10
-    settings: tuple[str, ...] = tuple(s[0] for s in SETTINGS)
+    settings: tuple[str, ...] = DEFAULT_SETTINGS
 
 
-def _run(style: str, setting: tuple[str, str, int], rooms: int, seed: int, truth, catalog, alpha):
-    """One HIF camera run; its trace and the per-type bias at the end of every room."""
-    _, detector, confirm = setting
+def _run(
+    rooms: int, truths: dict, alpha: float, unit: tuple[str, tuple[str, str, int, float], int]
+) -> Trace:
+    """One sweep unit: the HIF camera run of (style, setting, seed); its trace."""
+    style, setting, seed = unit
+    truth = truths[style]
+    catalog = load_catalog()
+    _, detector, confirm, min_score = setting
     config = LearningBenchConfig(
         style, rooms, 1, ("hif",), perception="camera", alpha=alpha, detector=detector,
-        interval="clustered", confirm=confirm,
+        interval="clustered", confirm=confirm, min_score=min_score,
     )  # fmt: skip
     shm = Path("/dev/shm")
     tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
@@ -87,9 +99,18 @@ def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float)
     return out
 
 
-def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: bool = True) -> dict:
-    """Run the benchmark; write DIR/intervals.json and DIR/intervals.md; the JSON document."""
+def bench_intervals(
+    config: IntervalsBenchConfig,
+    out: str | Path,
+    progress: bool = True,
+    sweep: SweepOptions | None = None,
+) -> dict:
+    """Run the benchmark; write DIR/intervals.json, DIR/intervals.md and DIR/intervals.csv
+    (one row per style, setting and room mark); the JSON document. The runs (style x setting x
+    seed) are the units of a sweep (scripts.sweep: serial, or Ray tasks with ``sweep.workers``);
+    the files are the same either way."""
     catalog = load_catalog()
+    sweep = sweep or SweepOptions()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     settings = [s for s in SETTINGS if s[0] in config.settings]
@@ -103,14 +124,23 @@ def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: boo
         "perception": "camera",
         "rows": [],
     }
+    truths = {s: ground_truth(s, config.truth_samples, TRUTH_SEED, catalog) for s in config.styles}
+    units = [
+        (st, se, seed) for st in config.styles for se in settings for seed in range(config.seeds)
+    ]
+    t0 = time.perf_counter()
+    done = run_units(
+        functools.partial(_run, rooms, truths, config.alpha),
+        units,
+        workers=sweep.workers,
+        ray_address=sweep.ray_address,
+        desc="bench intervals",
+        progress=progress,
+    )
+    by_unit = dict(zip(units, done, strict=True))
     for style in config.styles:
-        truth = ground_truth(style, config.truth_samples, TRUTH_SEED, catalog)
         for setting in settings:
-            t0 = time.perf_counter()
-            traces = [
-                _run(style, setting, rooms, s, truth, catalog, config.alpha)
-                for s in range(config.seeds)
-            ]
+            traces = [by_unit[(style, setting, s)] for s in range(config.seeds)]
             refs = [e["ref"] for e in traces[0].entries]
             truth_p = np.array([e["p"] for e in traces[0].entries])
             for mark in config.room_marks:
@@ -130,11 +160,24 @@ def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: boo
                     r: float(np.median([b[r] for b in biases if r in b])) for r in types
                 }
                 doc["rows"].append(row)
-            if progress:
-                print(f"{style} {setting[0]}: {time.perf_counter() - t0:.0f} s wall", flush=True)
+    if progress:
+        print(f"bench intervals: {time.perf_counter() - t0:.0f} s wall", flush=True)
     (out / "intervals.json").write_text(json.dumps(doc, indent=1) + "\n")
     (out / "intervals.md").write_text(markdown(doc))
+    write_csv_rows(out / "intervals.csv", doc["rows"])
     return doc
+
+
+def write_csv_rows(path: Path, rows: list[dict]) -> Path:
+    """intervals.csv: one row per (style, setting, room mark), its numbers, and its bias per
+    reference type as ``bias_<Type>`` (empty where the type had no informative entry)."""
+    types = sorted({t for r in rows for t in r["bias_by_type"]})
+    base = [k for k in (rows[0] if rows else {}) if k != "bias_by_type"]
+    flat = [
+        {**{k: r[k] for k in base}, **{f"bias_{t}": r["bias_by_type"].get(t) for t in types}}
+        for r in rows
+    ]
+    return write_csv(path, base + [f"bias_{t}" for t in types], flat)
 
 
 def markdown(doc: dict) -> str:

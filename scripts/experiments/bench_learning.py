@@ -216,6 +216,7 @@ def _data(config: LearningBenchConfig, truth: dict, traces: dict[str, list[Trace
         "map": default_map_mode(config.perception),  # the grid the runs planned on
         "interval": config.interval,
         "confirm": config.confirm,
+        "min_score": config.min_score,
         "truth_samples": truth.get("samples", config.truth_samples),
         "strategies": {
             s: {

@@ -224,6 +224,7 @@ class LearningBenchConfig:
     detector: str | None = None  # camera mode's preset (None: realistic; oracle: none)
     interval: str = "wilson"  # the intervals measured: wilson or clustered
     confirm: int = 1  # camera mode: images that must detect a related object
+    min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
 
     @property
     def detector_name(self) -> str:
@@ -330,6 +331,7 @@ def run_trace(
             room_budget_s=room_budget_s,
             detector=config.detector,
             confirm=config.confirm,
+            min_score=config.min_score,
         ),
         catalog=catalog,
         layouts=layouts,
