@@ -58,8 +58,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from agent import search_explore as sx
 from agent import search_space as ss
+from agent.frontiers import NEAR_TILT
 from agent.interfaces import Body, WrappedBody
+from agent.mapping import MAP_MODES, BuiltMap
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
 from agent.recording import Recorder
 from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
@@ -142,6 +145,10 @@ class SearchResult:
     budget_s: float
     trace: list[GazeRecord] = field(default_factory=list)
     log: list[str] = field(default_factory=list)
+    # indirect search: the intermediate type it searched for first (None: none), and Wixson &
+    # Ballard's predicted gain C_direct / C_via for it (else for the best candidate type)
+    intermediate: str | None = None
+    predicted_gain: float | None = None
 
     @property
     def success(self) -> bool:
@@ -183,6 +190,23 @@ def small_types_present(layout: RoomLayout, catalog: Catalog) -> list[str]:
     return [t.name for t in catalog.types if t.name in present and not t.is_furniture]
 
 
+@dataclass(frozen=True)
+class ViaOption:
+    """An intermediate type worth searching for (Wixson & Ballard's model says it pays): its
+    q = P(T related to one found), expected instances per world, the height it is found up to,
+    the seconds to look into its best relation volume, and the model's predicted gain."""
+
+    type: str
+    q: float
+    instances: float
+    zmax: float
+    look_s: float
+    gain: float
+
+
+_Option = tuple[float, str, Callable[[], None]]  # (probability per second, label, action)
+
+
 # =========================================================================== the running episode
 class _Stop(Exception):
     """Raised inside a policy when the target is found or the budget is spent."""
@@ -207,13 +231,37 @@ class _PathMeter(WrappedBody):
 class RoomMaps:
     """What the robot is given of a room before it searches it, built once and shared by the
     policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy),
-    the furniture poses the location constraint may assume, and the detector preset its images
-    are read with (None: perfect)."""
+    the furniture poses the location constraint may assume, the detector preset its images
+    are read with (None: perfect), and the scenario (``map``: ``given`` or ``built``; in
+    ``built`` each policy's SearchContext builds its own agent.mapping ``BuiltMap`` from its
+    depth images, starting from nothing but its pose)."""
 
     grid: OccupancyGrid
     seen: ss.SeenMap
     furniture: tuple[ObjectInstance, ...] = ()
     detector: DetectorModel | None = None
+    map: str = "given"
+
+    @classmethod
+    def built(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
+        """The ``built`` map scenario: the robot knows nothing at the start, no furniture, no
+        free cell (``grid`` is all unknown); only the footprint's extent (the map's allocation,
+        as in learning's built map) and height bound the seen map's lattice. Objects become
+        known when detected; the robot plans on what its depth images mapped."""
+        hw, hd = layout.width / 2, layout.depth / 2
+        empty = BuiltMap((-hw, -hd, hw, hd), spec, RobotPose(0.0, 0.0, 0.0))
+        empty.floor[:] = False
+        grid = OccupancyGrid(
+            free=np.zeros_like(empty.floor), x0=empty.x0, y0=empty.y0,
+            resolution=empty.resolution, clearance=spec.clearance,
+        )  # fmt: skip
+        return cls(grid, ss.SeenMap.for_footprint(layout), (), detector, "built")
 
     @classmethod
     def given(
@@ -258,7 +306,12 @@ class SearchContext:
         self.time_model: TimeModel = body.time_model
         self.body = _PathMeter(body)
         self.maps = maps or RoomMaps.given(layout, catalog, self.spec)
-        self.grid = self.maps.grid
+        # The built scenario's own map (the layout gives only the footprint's extent).
+        self.built: BuiltMap | None = (
+            BuiltMap.for_layout(layout, self.spec, episode.start)
+            if self.maps.map == "built"
+            else None
+        )
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = policy
@@ -285,6 +338,17 @@ class SearchContext:
         self._range_cache: dict[str, float] = {}
         self._mean_drive: float | None = None
         self._visited: set[tuple] = set()  # candidate regions already looked into
+        self.intermediate: str | None = None  # set by indirect search (SearchResult)
+        self.predicted_gain: float | None = None
+        self._scorer: sx.ViewpointScorer | None = None
+        self._exhausted: dict[float, np.ndarray] = {}
+        self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
+        self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The grid the robot plans on: the given map's, or its built map as it stands."""
+        return self.maps.grid if self.built is None else self.built.refresh()
 
     # ----------------------------------------------------------------- clock and knowledge
     @property
@@ -318,6 +382,8 @@ class SearchContext:
     # ----------------------------------------------------------------- acting
     def _after_image(self, frame: Frame, purpose: str) -> list[Detection]:
         dets = self.detector(frame)
+        if self.built is not None:
+            self.built.update(frame)
         if frame.depth is not None:
             self.seen.update(frame.camera, frame.depth)
         else:
@@ -522,6 +588,181 @@ class SearchContext:
             for g in gazes:
                 self.look_gaze(g, f"region {best.label}")
 
+    # ----------------------------------------------------------------- the built map
+    def todo(self, rng: float, zmax: float | None = None) -> np.ndarray:
+        """(N,) bool: seen-map points still to be seen for range ``rng`` (not seen from within
+        it, not exhausted), up to height ``zmax`` if given."""
+        m = self.seen.unseen(rng)
+        ex = self._exhausted.get(rng)
+        if ex is not None:
+            m &= ~ex
+        if zmax is not None:
+            m &= self.seen.points[:, 2] <= zmax
+        return m
+
+    def viewpoints(
+        self, rng: float, images: float, zmax: float | None = None
+    ) -> list[sx.Viewpoint]:
+        """Where to sweep next for range ``rng`` on the built map, best share per second first
+        (agent.search_explore); none on a given map."""
+        if self.built is None:
+            return []
+        if self._scorer is None:
+            self._scorer = sx.ViewpointScorer(
+                self.built, self.seen.points, self.spec, self.time_model
+            )
+        here = self.body.pose().xy
+        avoid = np.array(self._swept[rng]) if self._swept.get(rng) else None
+        return self._scorer.rank(self.grid, self.todo(rng, zmax), here, rng, images, avoid)
+
+    def explore_step(
+        self,
+        vp: sx.Viewpoint,
+        rng: float,
+        tilts: Sequence[float] = ss.SWEEP_TILTS,
+        purpose: str = "explore",
+        until: Callable[[], bool] | None = None,
+    ) -> None:
+        """Drive to ``vp`` and sweep there for range ``rng``; what stayed unseen nearby is
+        exhausted."""
+        self._swept.setdefault(rng, []).append(np.asarray(vp.xy, float))
+        if self.drive_to(vp.xy):
+            self.sweep(rng, tilts=tilts, purpose=purpose, until=until)
+            if until is None or not until():
+                self.map_floor()
+        self.exhaust(rng, vp.xy)
+
+    def map_floor(self) -> None:
+        """On the built map: images at the near-floor tilt where the floor around is still
+        unknown (agent.search_explore.floor_headings)."""
+        if self.built is None:
+            return
+        p = self.body.pose()
+        for h in sx.floor_headings(self.built, p.xy, p.yaw + p.pan):
+            self.look_heading(h, NEAR_TILT, "map the floor")
+
+    def exhaust(self, rng: float, xy: np.ndarray | None = None) -> None:
+        """Mark what a sweep at ``xy`` (default: here) left unseen nearby as exhausted for
+        ``rng`` (agent.search_explore)."""
+        if self.built is None:
+            return
+        if self._scorer is None:
+            self.viewpoints(rng, 0.0)
+        assert self._scorer is not None
+        here = self.body.pose().xy if xy is None else np.asarray(xy, float)
+        ex = self._scorer.exhaust(here, self.seen.unseen(rng), rng)
+        old = self._exhausted.get(rng)
+        self._exhausted[rng] = ex if old is None else old | ex
+        self._deferred.clear()
+
+    def look_around(self) -> None:
+        """A sweep for the target where the robot stands (the first images of a built map)."""
+        self._swept.setdefault(self.target_range, []).append(self.body.pose().xy)
+        self.sweep(self.target_range, purpose="look around")
+        self.map_floor()
+        self.exhaust(self.target_range)
+
+    def online_search(self, probs: ss.ProbabilitySource | None, vias: Sequence[ViaOption]) -> None:
+        """Search on the built map: at each decision the best expected probability of finding
+        the target per second among looking into a known object's relation volume (``probs``),
+        sweeping for an intermediate type of ``vias``, and sweeping the best frontier viewpoint
+        for the target; returns when none is left."""
+        builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
+        self.look_around()
+        while True:
+            self.check()
+            options = [o for o in (self._region_option(builder), self._direct_option()) if o]
+            options += [o for o in (self._via_option(v) for v in vias) if o]
+            if not options:
+                return
+            rate, label, act = max(options, key=lambda o: o[0])
+            self.note(f"{label} ({rate:.4f}/s; {len(options)} options)")
+            act()
+
+    def _direct_option(self) -> _Option | None:
+        vps = self.viewpoints(self.target_range, sx.SWEEP_IMAGES)
+        if not vps:
+            return None
+        v = vps[0]
+        return (v.rate, f"explore for {self.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
+                f"{v.gain} points, ~{v.seconds:.0f} s",
+                lambda: self.explore_step(v, self.target_range))  # fmt: skip
+
+    def _via_option(self, via: ViaOption) -> _Option | None:
+        found = sum(1 for o in self.known.values() if o.type == via.type)
+        left = 1.0 - math.exp(-max(0.0, via.instances - found))
+        if left < 0.05:
+            return None
+        rng = self.range_of(via.type)
+        vps = self.viewpoints(rng, sx.RING_IMAGES, via.zmax)
+        if not vps:
+            return None
+        v = vps[0]
+        m = left * min(1.0, v.share * max(1.0, via.instances - found))
+        rate = m * via.q / (v.seconds + m * via.look_s)
+
+        def act() -> None:
+            if self.intermediate is None:
+                self.intermediate, self.predicted_gain = via.type, via.gain
+            n0 = found
+            self.explore_step(v, rng, FURNITURE_TILTS, f"find {via.type}", until=lambda: sum(
+                1 for o in self.known.values() if o.type == via.type) > n0)  # fmt: skip
+
+        return rate, f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})", act
+
+    def _region_option(self, builder: ss.RegionBuilder | None) -> _Option | None:
+        if builder is None:
+            return None
+        skip = self._visited | self._deferred
+        regions = [r for r in builder.regions(list(self.known.values())) if r.key not in skip]
+        costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
+        ranked = ss.score_regions(regions, self.seen, self.target_range, costs, self.body.pose().xy)
+        ranked = [r for r in ranked if r.score >= MIN_REGION_SCORE]
+        if not ranked:
+            return None
+        self._log_candidates(ranked)
+        best = ranked[0]
+        return best.rate, f"look into {best.label}: P={best.score:.2f}, ~{best.cost:.1f} s", (
+            lambda: self.look_region(best))  # fmt: skip
+
+    def look_region(self, region: ss.Region) -> None:
+        """Look into a candidate region with the view planner's gazes (a region no gaze reaches
+        on the map as it stands waits for the next exploration step)."""
+        gazes = plan_gazes(
+            self.grid, region.box, self.body.pose(), self.spec, self.time_model,
+            GazePlanOptions(max_distance=min(self.target_range, 2.5)), facing=region.facing,
+        )  # fmt: skip
+        if not gazes:
+            self._deferred.add(region.key)
+            return
+        self._visited.add(region.key)
+        for g in gazes:
+            self.look_gaze(g, f"region {region.label}")
+
+    def tour_regions(self, objects: Sequence[ObjectInstance]) -> None:
+        """``map-only``: look into every relation volume of ``objects`` (no probabilities) in the
+        order of a short tour from here, skipping volumes already mostly seen."""
+        regions = ss.build_regions(
+            objects, self.target, self.catalog, ss.UniformProbabilities(), self.seen
+        )
+        if not regions:
+            return
+        grid = self.grid
+        here = self.body.pose().xy
+        sites = []
+        for r in regions:
+            p = nearest_free(grid, np.asarray(r.box.center[:2], float))
+            sites.append(p if p is not None else np.asarray(r.box.center[:2], float))
+        by_site: dict[tuple[float, float], list[ss.Region]] = {}
+        for xy, r in zip(sites, regions, strict=True):
+            by_site.setdefault((round(float(xy[0]), 6), round(float(xy[1]), 6)), []).append(r)
+        order = ss.tour_order(grid, np.array(list(by_site)), here)
+        self.note(f"tour of {len(regions)} relation volumes of the map")
+        for xy in order:
+            for r in by_site[(round(float(xy[0]), 6), round(float(xy[1]), 6))]:
+                if self.seen.unseen(self.target_range)[r.points].mean() >= 0.5:
+                    self.look_region(r)
+
     def _log_candidates(
         self, ranked: Sequence[ss.Region], show: int = 12, labelled: int = 3
     ) -> None:
@@ -567,6 +808,8 @@ class SearchContext:
             self.episode.budget_s,
             list(self.trace),
             list(self.log),
+            self.intermediate,
+            self.predicted_gain,
         )
 
 
@@ -604,6 +847,30 @@ class Exhaustive(SearchPolicy):
         ctx.cover()
 
 
+class Frontier(SearchPolicy):
+    """No context, on the built map: sweep the frontier viewpoint that shows the most of what is
+    left to see for the target per expected second, until nothing is left (then coverage)."""
+
+    name = "frontier"
+
+    def search(self, ctx: SearchContext) -> None:
+        ctx.online_search(None, [])
+        ctx.note("no viewpoint left; coverage of what stayed unseen")
+        ctx.cover()
+
+
+class MapOnly(SearchPolicy):
+    """The value of the map alone: the relation volumes of the known furniture in the order of a
+    short tour, no probabilities; then coverage."""
+
+    name = "map-only"
+
+    def search(self, ctx: SearchContext) -> None:
+        ctx.tour_regions(ctx.furniture_map())
+        ctx.note("falling back to exhaustive coverage")
+        ctx.cover()
+
+
 class Location(SearchPolicy):
     """Location constraint around the furniture map and everything detected so far."""
 
@@ -629,8 +896,56 @@ class Indirect(SearchPolicy):
     name = "indirect"
     needs = "kb"
     min_q = 0.05  # intermediate types less related than this are not considered
+    max_vias = 3  # intermediate types compared online on the built map
 
     def search(self, ctx: SearchContext) -> None:
+        if ctx.built is not None:
+            self.search_built(ctx)
+        else:
+            self.search_given(ctx)
+
+    def search_built(self, ctx: SearchContext) -> None:
+        """Online on the built map (SearchContext.online_search): known objects' relation
+        volumes, the intermediate types Wixson & Ballard's model says pay, and the frontier."""
+        probs = _probs(ctx)
+        vias = self.worth(ctx, probs)
+        ctx.online_search(probs, vias)
+        ctx.note("no option left; coverage of what stayed unseen")
+        ctx.cover()
+
+    def worth(self, ctx: SearchContext, probs: ss.ProbabilitySource) -> list[ViaOption]:
+        """The intermediate types whose predicted gain (agent.search_explore.predicted_plan)
+        exceeds 1, best first (at most ``max_vias``); sets the context's predicted gain to the
+        best candidate's."""
+        cat = ctx.catalog
+        cands = [
+            t.name
+            for t in cat.types
+            if t.name != ctx.target
+            and ss.relation_probability(cat, probs, t.name, ctx.target) >= self.min_q
+            and self._present(ctx, t.name)
+        ]
+        lay = ctx.truth  # its footprint and room count only: the world's size, as a style says
+        size = sx.WorldSize(lay.width * lay.depth, max(1, len(lay.rooms)))
+        ranges = {n: ctx.range_of(n) for n in [ctx.target, *cands]}
+        plan = sx.predicted_plan(ctx.target, cat, probs, size, ranges, ctx.time_model, cands)
+        gains = {o.via: sx.predicted_gain(plan, o.via) or 0.0 for o in plan if o.via}
+        ctx.note("predicted gains: " + ", ".join(f"{k} {v:.2f}" for k, v in gains.items()))
+        best = max(gains.items(), key=lambda kv: kv[1], default=None)
+        ctx.predicted_gain = best[1] if best else None
+        out = []
+        for o in sorted(
+            (o for o in plan if o.via and gains[o.via] > 1.0), key=lambda o: -gains[o.via]
+        ):
+            typ = cat.type(o.via)
+            k = probs.instances(o.via)
+            zmax = max(typ.size_max[2], 0.3) if typ.is_furniture else None
+            out.append(ViaOption(o.via, o.q, 1.0 if k is None else k, zmax or 9.0, o.look_s,
+                                 gains[o.via]))  # fmt: skip
+        return out[: self.max_vias]
+
+    def search_given(self, ctx: SearchContext) -> None:
+        """On the given map: the plan of ``options`` made once at the start (module docstring)."""
         probs = _probs(ctx)
         options = self.options(ctx, probs)
         best = options[0]
@@ -847,8 +1162,41 @@ FURNITURE_TILTS = (-0.35,)  # one ring of images finds furniture (detected from 
 
 POLICIES: dict[str, type[SearchPolicy]] = {
     cls.name: cls
-    for cls in (Exhaustive, Location, Indirect, OraclePrior, OraclePriorIndirect, Oracle)
+    for cls in (
+        Exhaustive, Location, Indirect, OraclePrior, OraclePriorIndirect, Oracle, Frontier,
+        MapOnly,
+    )
+}  # fmt: skip
+
+# The map scenarios each policy runs in (``--map``), and each scenario's default policies.
+POLICY_MAPS: dict[str, tuple[str, ...]] = {
+    "exhaustive": ("given",),
+    "location": ("given",),
+    "map-only": ("given",),
+    "oracle-prior": ("given",),
+    "frontier": ("built",),
+    "indirect": ("built", "given"),
+    "oracle-prior-indirect": ("built", "given"),
+    "oracle": ("built", "given"),
 }
+DEFAULT_POLICIES: dict[str, tuple[str, ...]] = {
+    "built": ("frontier", "indirect", "oracle-prior-indirect", "oracle"),
+    "given": ("map-only", "location", "oracle-prior", "oracle", "exhaustive"),
+}
+# Policies that plan on the true layout's maps whatever the scenario (the bound knows all).
+TRUE_MAP_POLICIES = frozenset({"oracle"})
+
+
+def check_scenario(names: Sequence[str], map_mode: str) -> None:
+    """One-line errors: an unknown map scenario, or a policy (``name`` or ``name@rank``) that
+    does not run in ``map_mode``."""
+    if map_mode not in MAP_MODES:
+        raise CtxsearchError(f"unknown map '{map_mode}' (known: {', '.join(MAP_MODES)})")
+    for n in names:
+        base = n.partition("@")[0]
+        maps = POLICY_MAPS.get(base, ())
+        if maps and map_mode not in maps:
+            raise CtxsearchError(f"policy '{base}' needs --map {maps[0]}")
 
 
 def make_policy(name: str) -> SearchPolicy:

@@ -251,7 +251,9 @@ def bench_search(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
     )
     detector = config.detector_model(catalog)
-    results = _run_batches(eps, names, style, priors, sweep or SweepOptions(), bar, detector)
+    results = _run_batches(
+        eps, names, style, priors, sweep or SweepOptions(), bar, (detector, config.map)
+    )
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -271,13 +273,13 @@ def _run_batches(
     priors: Priors,
     sweep: SweepOptions,
     bar: bool,
-    detector: DetectorModel | None,
+    sensing: tuple[DetectorModel | None, str],
 ) -> dict[str, list[S.SearchResult]]:
-    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with the
-    ``detector`` preset."""
+    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with
+    ``sensing``: the detector preset and the map scenario."""
     batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
     done = run_units(
-        functools.partial(_batch_unit, tuple(names), style, priors, detector),
+        functools.partial(_batch_unit, tuple(names), style, priors, sensing),
         batches,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
@@ -296,13 +298,18 @@ def _batch_unit(
     names: tuple[str, ...],
     style,
     priors: Priors,
-    detector: DetectorModel | None,
+    sensing: tuple[DetectorModel | None, str],
     batch: list[S.Episode],
 ) -> list[list[S.SearchResult]]:
-    """One sweep unit: every policy on each episode of ``batch``."""
+    """One sweep unit: every policy on each episode of ``batch`` (``sensing``: the detector
+    preset and the map scenario)."""
     catalog = load_catalog()
+    detector, map_mode = sensing
     return [
-        run_episode(ep, names, catalog, style, priors.for_policy, detector=detector) for ep in batch
+        run_episode(
+            ep, names, catalog, style, priors.for_policy, detector=detector, map_mode=map_mode
+        )
+        for ep in batch
     ]
 
 
@@ -385,7 +392,7 @@ def _write_files(
         "rank": config.rank,
         "detector": config.detector_model(load_catalog()).name,
         "interval": config.interval,
-        "map": "given",  # the policies search on RoomMaps.given (the true layout's maps)
+        "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
