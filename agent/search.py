@@ -81,6 +81,7 @@ from knowledge.store import EvidenceStore
 DEFAULT_BUDGET_S = 300.0
 HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
 MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a look
+REPLAN_REGIONS = 3  # on the built map, the best few regions are re-costed with planned gazes
 
 
 # =========================================================================== episodes and results
@@ -344,6 +345,7 @@ class SearchContext:
         self._exhausted: dict[float, np.ndarray] = {}
         self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
         self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
+        self._vias: dict[str, float] = {}  # intermediate types worth it: predicted gain
 
     @property
     def grid(self) -> OccupancyGrid:
@@ -668,6 +670,7 @@ class SearchContext:
         sweeping for an intermediate type of ``vias``, and sweeping the best frontier viewpoint
         for the target; returns when none is left."""
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
+        self._vias = {v.type: v.gain for v in vias}
         self.look_around()
         while True:
             self.check()
@@ -721,21 +724,43 @@ class SearchContext:
         if not ranked:
             return None
         self._log_candidates(ranked)
-        best = ranked[0]
-        return best.rate, f"look into {best.label}: P={best.score:.2f}, ~{best.cost:.1f} s", (
-            lambda: self.look_region(best))  # fmt: skip
+        # The cost model's estimate ranks; the best few are re-costed with their planned gazes
+        # (on a built map the drive around what is not mapped yet can be much longer).
+        planned = []
+        for r in ranked[:REPLAN_REGIONS]:
+            gz = self._region_gazes(r)
+            if not gz:
+                self._deferred.add(r.key)
+                continue
+            cost = sum(g.cost for g in gz) + self.time_model.image_cost * len(gz)
+            planned.append((r.score / max(cost, 1e-6), cost, r, gz))
+        if not planned:
+            return None
+        rate, cost, best, gazes = max(planned, key=lambda x: (x[0], -x[1]))
+        return rate, f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s", (
+            lambda: self.look_region(best, gazes))  # fmt: skip
 
-    def look_region(self, region: ss.Region) -> None:
-        """Look into a candidate region with the view planner's gazes (a region no gaze reaches
-        on the map as it stands waits for the next exploration step)."""
-        gazes = plan_gazes(
+    def _region_gazes(self, region: ss.Region) -> list[Gaze]:
+        return plan_gazes(
             self.grid, region.box, self.body.pose(), self.spec, self.time_model,
             GazePlanOptions(max_distance=min(self.target_range, 2.5)), facing=region.facing,
         )  # fmt: skip
+
+    def look_region(self, region: ss.Region, gazes: Sequence[Gaze] | None = None) -> None:
+        """Look into a candidate region with the view planner's gazes (``gazes`` if planned
+        already; a region no gaze reaches on the map as it stands waits for the next
+        exploration step)."""
+        gazes = self._region_gazes(region) if gazes is None else gazes
         if not gazes:
             self._deferred.add(region.key)
             return
         self._visited.add(region.key)
+        if self.intermediate is None:  # indirect search via a type found before, maybe by chance
+            for _rel, ref in region.members:
+                ref_type = self.known[ref].type if ref in self.known else None
+                if ref_type in self._vias:
+                    self.intermediate, self.predicted_gain = ref_type, self._vias[ref_type]
+                    break
         for g in gazes:
             self.look_gaze(g, f"region {region.label}")
 

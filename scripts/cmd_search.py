@@ -245,6 +245,9 @@ def run_bench(args: argparse.Namespace) -> int:
     )
     print(res.table)
     for f in res.files:
+        if f.name == "indirect.md":
+            print(f.read_text())
+    for f in res.files:
         print(f"wrote {f}")
     print(f"({res.wall_s:.0f} s wall)")
     return 0

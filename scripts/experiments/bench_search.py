@@ -17,7 +17,13 @@ Policy names may carry a rank, ``location@low``, ``location@p0``, ``location@hig
 the parts of the interval on the same episodes.
 
 Writes ``DIR/search.json``, ``DIR/search.md`` (the table), ``DIR/search.png`` (the
-time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy).
+time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy); with
+``indirect`` and ``frontier`` also ``DIR/indirect.json`` and ``DIR/indirect.md`` (each
+intermediate type's predicted gain against the measured paired ratio: bench_indirect).
+
+The map scenario (``SearchConfig.map``, ``--map``): ``built`` (the robot knows nothing at the
+start: frontier, indirect, oracle-prior-indirect, oracle) or ``given`` (the furniture poses are
+known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``map`` says which.
 
 The episodes run in batches of ``EPISODES_PER_UNIT``, the units of a sweep (``scripts.sweep``:
 serially, or as Ray tasks with ``--workers N`` / ``--ray-address``); the files are the same
@@ -43,6 +49,7 @@ from envs.houses import resolve_style
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
+from scripts.experiments.bench_indirect import indirect_analysis, write_indirect
 from scripts.experiments.episodes import (
     Priors,
     SearchConfig,
@@ -262,6 +269,10 @@ def bench_search(
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
+    if (
+        "indirect" in results and "frontier" in results
+    ):  # point 7: scripts.experiments.bench_indirect
+        res.files += write_indirect(Path(out), indirect_analysis(eps, results, seed=config.seed))
     res.wall_s = time.perf_counter() - t_wall
     return res
 
