@@ -11,8 +11,33 @@ its room seeds from (seed, index) with ``agent.learning.room_seed``; search epis
 ``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the benchmark
 skips any seed the store lists among its learned rooms.
 
+Two map scenarios (``RoomMaps.map``, ``--map``; ``POLICY_MAPS`` says which policy runs in
+which, ``check_scenario`` gives the one-line error, ``DEFAULT_POLICIES`` the lists run when none
+are named):
+
+- ``built`` (``RoomMaps.built``, the default in houses): the robot knows nothing at the start:
+  no furniture, no free cell. Each policy's context builds its own agent.mapping ``BuiltMap``
+  from its depth images (the same map and rules as learning's ``--map built``: it plans only
+  through cells seen to be floor with nothing within the clearance), objects are known only once
+  detected, and the seen map's lattice covers the footprint without knowing the furniture.
+  Policies: ``frontier``, ``indirect``, ``oracle-prior-indirect``, ``oracle``.
+- ``given`` (``RoomMaps.given``): the furniture poses and the true layout's grid are known.
+  Policies: ``map-only``, ``location``, ``oracle-prior``, ``oracle``, and ``exhaustive`` as a
+  reference; ``indirect`` runs here too (its plan made once at the start, below).
+
+The oracle plans on the true layout's maps in both (``TRUE_MAP_POLICIES``): it is the bound.
+
 Policies (``POLICIES``; ``make_policy(name)``, one-line error for unknown names), each a small
 class with a ``name`` and ``run(ctx) -> SearchResult``:
+
+- ``frontier`` (built): no context. At each step it drives to the viewpoint of the built map
+  that shows the largest share of what is left to see for the target per expected second
+  (agent.search_explore: information gain by 2-D rays over the mapped obstacles, the unknown
+  beyond the frontier counted) and sweeps there (pan/tilt, skipping images predicted to add
+  little, plus near-floor images where the floor around is unknown, so the map grows); when no
+  viewpoint is left, coverage of what stayed unseen.
+- ``map-only`` (given): the value of the map alone: every relation volume of the known
+  furniture, no probabilities, in the order of a short tour; then coverage.
 
 - ``exhaustive``: no context. Covers the room for the target's effective detection range:
   viewpoints from a greedy set cover, visited in a short tour, with pan/tilt sweeps that skip
@@ -22,9 +47,17 @@ class with a ``name`` and ``run(ctx) -> SearchResult``:
   volumes, ranked by P(T in the unseen part) per expected second (agent.search_space), each
   looked into with the view planner's gazes; falls back to ``exhaustive`` when no candidate
   has probability left.
-- ``indirect``: detectability-driven. Knows nothing at start; compares the expected cost of
-  looking for T directly with looking first for an intermediate type I that is detected from
-  further away and likely related to T (``search_space.indirect_plan``); if I wins it sweeps for
+- ``indirect``: detectability-driven. On the built map it decides online: at each step it takes
+  the best expected probability of finding T per second among (a) looking into a relation volume
+  of an object detected so far (P(T in its unseen part) over the seconds of its planned gazes),
+  (b) sweeping for an intermediate type I that Wixson & Ballard's efficiency model says pays
+  (agent.search_explore.predicted_plan: gain C_direct / C_via > 1 from I's detectability, the
+  intervals' q_I and the instances per world), valued as P(a new I is seen there) q_I over the
+  seconds, and (c) the frontier step above; frontier exploration when nothing is worth more.
+  Its result records the intermediate type it used (searched for, or whose relation volume it
+  looked into first) and the model's predicted gain. On the given map it knows the furniture
+  map but plans once: it compares the expected cost of looking for T directly with looking first
+  for I (``search_space.indirect_plan`` on the map's coverage costs); if I wins it sweeps for
   I, then applies the location constraint around what it detected, then falls back.
 - ``oracle-prior``: ``location`` with the ground-truth probabilities (envs.truth) instead of
   the learned intervals; ``oracle-prior-indirect`` likewise for ``indirect``.
@@ -146,8 +179,9 @@ class SearchResult:
     budget_s: float
     trace: list[GazeRecord] = field(default_factory=list)
     log: list[str] = field(default_factory=list)
-    # indirect search: the intermediate type it searched for first (None: none), and Wixson &
-    # Ballard's predicted gain C_direct / C_via for it (else for the best candidate type)
+    # indirect search on the built map: the intermediate type it used first (searched for, or
+    # whose relation volume it looked into; None: none), and Wixson & Ballard's predicted gain
+    # C_direct / C_via for it (else for the best candidate type)
     intermediate: str | None = None
     predicted_gain: float | None = None
 
