@@ -276,6 +276,9 @@ class RoomMaps:
     furniture: tuple[ObjectInstance, ...] = ()
     detector: DetectorModel | None = None
     map: str = "given"
+    # What the efficiency model of indirect search assumes of the world before seeing it: its
+    # footprint (m^2) and room count (a house style says how many rooms it has).
+    size: sx.WorldSize = sx.WorldSize(0.0, 1)
 
     @classmethod
     def built(
@@ -296,7 +299,8 @@ class RoomMaps:
             free=np.zeros_like(empty.floor), x0=empty.x0, y0=empty.y0,
             resolution=empty.resolution, clearance=spec.clearance,
         )  # fmt: skip
-        return cls(grid, ss.SeenMap.for_footprint(layout), (), detector, "built")
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        return cls(grid, ss.SeenMap.for_footprint(layout), (), detector, "built", size)
 
     @classmethod
     def given(
@@ -311,7 +315,8 @@ class RoomMaps:
         the true layout."""
         furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
         grid = OccupancyGrid.from_layout(layout, spec)
-        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture, detector)
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture, detector, "given", size)
 
 
 class SearchContext:
@@ -354,8 +359,11 @@ class SearchContext:
         sim = SimDetector(
             self.maps.detector or load_detector("perfect"), layout, catalog, layout.seed
         )
+        # The detector's random stream is indexed by the seconds since the episode started, not
+        # the world's clock (which runs on from policy to policy in a shared World): policies
+        # compared on an episode draw the same numbers at the same second (paired comparison).
         self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: sim(
-            frame, float(self.body.sim_time)
+            frame, self.elapsed
         )
         self.seen = self.maps.seen.copy()
         self.target = episode.target
@@ -984,8 +992,7 @@ class Indirect(SearchPolicy):
             and ss.relation_probability(cat, probs, t.name, ctx.target) >= self.min_q
             and self._present(ctx, t.name)
         ]
-        lay = ctx.truth  # its footprint and room count only: the world's size, as a style says
-        size = sx.WorldSize(lay.width * lay.depth, max(1, len(lay.rooms)))
+        size = ctx.maps.size
         ranges = {n: ctx.range_of(n) for n in [ctx.target, *cands]}
         plan = sx.predicted_plan(ctx.target, cat, probs, size, ranges, ctx.time_model, cands)
         gains = {o.via: sx.predicted_gain(plan, o.via) or 0.0 for o in plan if o.via}
