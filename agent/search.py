@@ -120,6 +120,10 @@ MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a lo
 # 10-world camera store: location's median 39.3 s without, 28.1 s with 3, 25.0 s with 6
 # (map-only: 52.6 s; paired ratio to map-only 1.09, 1.00, 1.00).
 REPLAN_REGIONS = 6
+# On the built map (indirect's region option) 3: over the same 20 built-map episodes indirect's
+# median was 36.0 s with 3 and 54.3 s with 6 (frontier: 29.1 s; paired 5 wins / 5 losses
+# against 3 / 6).
+REPLAN_REGIONS_BUILT = 3
 
 
 # =========================================================================== episodes and results
@@ -785,7 +789,7 @@ class SearchContext:
         # The cost model's estimate ranks; the best few are re-costed with their planned gazes
         # (on a built map the drive around what is not mapped yet can be much longer).
         planned = []
-        for r in ranked[:REPLAN_REGIONS]:
+        for r in ranked[:REPLAN_REGIONS_BUILT]:
             gz = self._region_gazes(r)
             if not gz:
                 self._deferred.add(r.key)
