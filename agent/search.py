@@ -11,8 +11,33 @@ its room seeds from (seed, index) with ``agent.learning.room_seed``; search epis
 ``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the benchmark
 skips any seed the store lists among its learned rooms.
 
+Two map scenarios (``RoomMaps.map``, ``--map``; ``POLICY_MAPS`` says which policy runs in
+which, ``check_scenario`` gives the one-line error, ``DEFAULT_POLICIES`` the lists run when none
+are named):
+
+- ``built`` (``RoomMaps.built``, the default in houses): the robot knows nothing at the start:
+  no furniture, no free cell. Each policy's context builds its own agent.mapping ``BuiltMap``
+  from its depth images (the same map and rules as learning's ``--map built``: it plans only
+  through cells seen to be floor with nothing within the clearance), objects are known only once
+  detected, and the seen map's lattice covers the footprint without knowing the furniture.
+  Policies: ``frontier``, ``indirect``, ``oracle-prior-indirect``, ``oracle``.
+- ``given`` (``RoomMaps.given``): the furniture poses and the true layout's grid are known.
+  Policies: ``map-only``, ``location``, ``oracle-prior``, ``oracle``, and ``exhaustive`` as a
+  reference; ``indirect`` runs here too (its plan made once at the start, below).
+
+The oracle plans on the true layout's maps in both (``TRUE_MAP_POLICIES``): it is the bound.
+
 Policies (``POLICIES``; ``make_policy(name)``, one-line error for unknown names), each a small
 class with a ``name`` and ``run(ctx) -> SearchResult``:
+
+- ``frontier`` (built): no context. At each step it drives to the viewpoint of the built map
+  that shows the largest share of what is left to see for the target per expected second
+  (agent.search_explore: information gain by 2-D rays over the mapped obstacles, the unknown
+  beyond the frontier counted) and sweeps there (pan/tilt, skipping images predicted to add
+  little, plus near-floor images where the floor around is unknown, so the map grows); when no
+  viewpoint is left, coverage of what stayed unseen.
+- ``map-only`` (given): the value of the map alone: every relation volume of the known
+  furniture, no probabilities, in the order of a short tour; then coverage.
 
 - ``exhaustive``: no context. Covers the room for the target's effective detection range:
   viewpoints from a greedy set cover, visited in a short tour, with pan/tilt sweeps that skip
@@ -22,9 +47,17 @@ class with a ``name`` and ``run(ctx) -> SearchResult``:
   volumes, ranked by P(T in the unseen part) per expected second (agent.search_space), each
   looked into with the view planner's gazes; falls back to ``exhaustive`` when no candidate
   has probability left.
-- ``indirect``: detectability-driven. Knows nothing at start; compares the expected cost of
-  looking for T directly with looking first for an intermediate type I that is detected from
-  further away and likely related to T (``search_space.indirect_plan``); if I wins it sweeps for
+- ``indirect``: detectability-driven. On the built map it decides online: at each step it takes
+  the best expected probability of finding T per second among (a) looking into a relation volume
+  of an object detected so far (P(T in its unseen part) over the seconds of its planned gazes),
+  (b) sweeping for an intermediate type I that Wixson & Ballard's efficiency model says pays
+  (agent.search_explore.predicted_plan: gain C_direct / C_via > 1 from I's detectability, the
+  intervals' q_I and the instances per world), valued as P(a new I is seen there) q_I over the
+  seconds, and (c) the frontier step above; frontier exploration when nothing is worth more.
+  Its result records the intermediate type it used (searched for, or whose relation volume it
+  looked into first) and the model's predicted gain. On the given map it knows the furniture
+  map but plans once: it compares the expected cost of looking for T directly with looking first
+  for I (``search_space.indirect_plan`` on the map's coverage costs); if I wins it sweeps for
   I, then applies the location constraint around what it detected, then falls back.
 - ``oracle-prior``: ``location`` with the ground-truth probabilities (envs.truth) instead of
   the learned intervals; ``oracle-prior-indirect`` likewise for ``indirect``.
@@ -58,8 +91,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from agent import search_explore as sx
 from agent import search_space as ss
+from agent.frontiers import NEAR_TILT
 from agent.interfaces import Body, WrappedBody
+from agent.mapping import MAP_MODES, BuiltMap
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
 from agent.recording import Recorder
 from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
@@ -78,6 +114,16 @@ from knowledge.store import EvidenceStore
 DEFAULT_BUDGET_S = 300.0
 HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
 MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a look
+# The best few regions by the cost model are re-costed with their planned gazes before one is
+# chosen (the estimate misses detours: furniture in the way, on a built map what is not mapped).
+# bench search --style apartment --map given --policies map-only,location --episodes 20 on a
+# 10-world camera store: location's median 39.3 s without, 28.1 s with 3, 25.0 s with 6
+# (map-only: 52.6 s; paired ratio to map-only 1.09, 1.00, 1.00).
+REPLAN_REGIONS = 6
+# On the built map (indirect's region option) 3: over the same 20 built-map episodes indirect's
+# median was 36.0 s with 3 and 54.3 s with 6 (frontier: 29.1 s; paired 5 wins / 5 losses
+# against 3 / 6).
+REPLAN_REGIONS_BUILT = 3
 
 
 # =========================================================================== episodes and results
@@ -142,6 +188,11 @@ class SearchResult:
     budget_s: float
     trace: list[GazeRecord] = field(default_factory=list)
     log: list[str] = field(default_factory=list)
+    # indirect search on the built map: the intermediate type it used first (searched for, or
+    # whose relation volume it looked into; None: none), and Wixson & Ballard's predicted gain
+    # C_direct / C_via for it (else for the best candidate type)
+    intermediate: str | None = None
+    predicted_gain: float | None = None
 
     @property
     def success(self) -> bool:
@@ -183,6 +234,23 @@ def small_types_present(layout: RoomLayout, catalog: Catalog) -> list[str]:
     return [t.name for t in catalog.types if t.name in present and not t.is_furniture]
 
 
+@dataclass(frozen=True)
+class ViaOption:
+    """An intermediate type worth searching for (Wixson & Ballard's model says it pays): its
+    q = P(T related to one found), expected instances per world, the height it is found up to,
+    the seconds to look into its best relation volume, and the model's predicted gain."""
+
+    type: str
+    q: float
+    instances: float
+    zmax: float
+    look_s: float
+    gain: float
+
+
+_Option = tuple[float, str, Callable[[], None]]  # (probability per second, label, action)
+
+
 # =========================================================================== the running episode
 class _Stop(Exception):
     """Raised inside a policy when the target is found or the budget is spent."""
@@ -207,13 +275,41 @@ class _PathMeter(WrappedBody):
 class RoomMaps:
     """What the robot is given of a room before it searches it, built once and shared by the
     policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy),
-    the furniture poses the location constraint may assume, and the detector preset its images
-    are read with (None: perfect)."""
+    the furniture poses the location constraint may assume, the detector preset its images
+    are read with (None: perfect), and the scenario (``map``: ``given`` or ``built``; in
+    ``built`` each policy's SearchContext builds its own agent.mapping ``BuiltMap`` from its
+    depth images, starting from nothing but its pose)."""
 
     grid: OccupancyGrid
     seen: ss.SeenMap
     furniture: tuple[ObjectInstance, ...] = ()
     detector: DetectorModel | None = None
+    map: str = "given"
+    # What the efficiency model of indirect search assumes of the world before seeing it: its
+    # footprint (m^2) and room count (a house style says how many rooms it has).
+    size: sx.WorldSize = sx.WorldSize(0.0, 1)
+
+    @classmethod
+    def built(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
+        """The ``built`` map scenario: the robot knows nothing at the start, no furniture, no
+        free cell (``grid`` is all unknown); only the footprint's extent (the map's allocation,
+        as in learning's built map) and height bound the seen map's lattice. Objects become
+        known when detected; the robot plans on what its depth images mapped."""
+        hw, hd = layout.width / 2, layout.depth / 2
+        empty = BuiltMap((-hw, -hd, hw, hd), spec, RobotPose(0.0, 0.0, 0.0))
+        empty.floor[:] = False
+        grid = OccupancyGrid(
+            free=np.zeros_like(empty.floor), x0=empty.x0, y0=empty.y0,
+            resolution=empty.resolution, clearance=spec.clearance,
+        )  # fmt: skip
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        return cls(grid, ss.SeenMap.for_footprint(layout), (), detector, "built", size)
 
     @classmethod
     def given(
@@ -228,7 +324,8 @@ class RoomMaps:
         the true layout."""
         furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
         grid = OccupancyGrid.from_layout(layout, spec)
-        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture, detector)
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        return cls(grid, ss.SeenMap.for_room(layout, catalog), furniture, detector, "given", size)
 
 
 class SearchContext:
@@ -258,7 +355,12 @@ class SearchContext:
         self.time_model: TimeModel = body.time_model
         self.body = _PathMeter(body)
         self.maps = maps or RoomMaps.given(layout, catalog, self.spec)
-        self.grid = self.maps.grid
+        # The built scenario's own map (the layout gives only the footprint's extent).
+        self.built: BuiltMap | None = (
+            BuiltMap.for_layout(layout, self.spec, episode.start)
+            if self.maps.map == "built"
+            else None
+        )
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = policy
@@ -266,8 +368,11 @@ class SearchContext:
         sim = SimDetector(
             self.maps.detector or load_detector("perfect"), layout, catalog, layout.seed
         )
+        # The detector's random stream is indexed by the seconds since the episode started, not
+        # the world's clock (which runs on from policy to policy in a shared World): policies
+        # compared on an episode draw the same numbers at the same second (paired comparison).
         self.detector: Callable[[Frame | None], list[Detection]] = lambda frame: sim(
-            frame, float(self.body.sim_time)
+            frame, self.elapsed
         )
         self.seen = self.maps.seen.copy()
         self.target = episode.target
@@ -285,6 +390,18 @@ class SearchContext:
         self._range_cache: dict[str, float] = {}
         self._mean_drive: float | None = None
         self._visited: set[tuple] = set()  # candidate regions already looked into
+        self.intermediate: str | None = None  # set by indirect search (SearchResult)
+        self.predicted_gain: float | None = None
+        self._scorer: sx.ViewpointScorer | None = None
+        self._exhausted: dict[float, np.ndarray] = {}
+        self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
+        self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
+        self._vias: dict[str, float] = {}  # intermediate types worth it: predicted gain
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The grid the robot plans on: the given map's, or its built map as it stands."""
+        return self.maps.grid if self.built is None else self.built.refresh()
 
     # ----------------------------------------------------------------- clock and knowledge
     @property
@@ -318,6 +435,8 @@ class SearchContext:
     # ----------------------------------------------------------------- acting
     def _after_image(self, frame: Frame, purpose: str) -> list[Detection]:
         dets = self.detector(frame)
+        if self.built is not None:
+            self.built.update(frame)
         if frame.depth is not None:
             self.seen.update(frame.camera, frame.depth)
         else:
@@ -484,10 +603,15 @@ class SearchContext:
         return n
 
     def search_regions(
-        self, probs: ss.ProbabilitySource, *, known: Callable[[], Sequence[ObjectInstance]]
+        self,
+        probs: ss.ProbabilitySource,
+        *,
+        known: Callable[[], Sequence[ObjectInstance]],
+        replan: int = 0,
     ) -> None:
         """The location constraint: look into the best candidate region (probability per second)
-        until none has probability left (see agent.search_space)."""
+        until none has probability left (see agent.search_space); with ``replan`` > 0 the best
+        ``replan`` regions by the cost model are re-costed with their planned gazes."""
         visited = self._visited
         costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target)
@@ -504,23 +628,227 @@ class SearchContext:
             if not ranked:
                 self.note("no candidate region left")
                 return
-            best = ranked[0]
+            best, gazes = self._best_planned(ranked, replan)
             visited.add(best.key)
-            gazes = plan_gazes(
-                self.grid,
-                best.box,
-                self.body.pose(),
-                self.spec,
-                self.time_model,
-                GazePlanOptions(max_distance=min(self.target_range, 2.5)),
-                facing=best.facing,
-            )
             self.note(
                 f"look into {best.label}: P={best.score:.2f}, ~{best.cost:.1f} s, {len(gazes)} gazes "
                 f"({len(ranked)} candidates)"
             )
             for g in gazes:
                 self.look_gaze(g, f"region {best.label}")
+
+    def _best_planned(
+        self, ranked: Sequence[ss.Region], replan: int
+    ) -> tuple[ss.Region, list[Gaze]]:
+        """The region to look into and its gazes: ``ranked[0]``, or with ``replan`` > 0 the best
+        probability per planned second among the first ``replan``."""
+        if replan <= 0:
+            return ranked[0], self._region_gazes(ranked[0])
+        planned = []
+        for r in ranked[:replan]:
+            gz = self._region_gazes(r)
+            cost = sum(g.cost for g in gz) + self.time_model.image_cost * len(gz)
+            planned.append((r.score / max(cost, 1e-6) if gz else -1.0, -cost, r.key, r, gz))
+        best = max(planned, key=lambda x: x[:3])
+        return best[3], best[4]
+
+    # ----------------------------------------------------------------- the built map
+    def todo(self, rng: float, zmax: float | None = None) -> np.ndarray:
+        """(N,) bool: seen-map points still to be seen for range ``rng`` (not seen from within
+        it, not exhausted), up to height ``zmax`` if given."""
+        m = self.seen.unseen(rng)
+        ex = self._exhausted.get(rng)
+        if ex is not None:
+            m &= ~ex
+        if zmax is not None:
+            m &= self.seen.points[:, 2] <= zmax
+        return m
+
+    def viewpoints(
+        self, rng: float, images: float, zmax: float | None = None
+    ) -> list[sx.Viewpoint]:
+        """Where to sweep next for range ``rng`` on the built map, best share per second first
+        (agent.search_explore); none on a given map."""
+        if self.built is None:
+            return []
+        if self._scorer is None:
+            self._scorer = sx.ViewpointScorer(
+                self.built, self.seen.points, self.spec, self.time_model
+            )
+        here = self.body.pose().xy
+        avoid = np.array(self._swept[rng]) if self._swept.get(rng) else None
+        return self._scorer.rank(self.grid, self.todo(rng, zmax), here, rng, images, avoid)
+
+    def explore_step(
+        self,
+        vp: sx.Viewpoint,
+        rng: float,
+        tilts: Sequence[float] = ss.SWEEP_TILTS,
+        purpose: str = "explore",
+        until: Callable[[], bool] | None = None,
+    ) -> None:
+        """Drive to ``vp`` and sweep there for range ``rng``; what stayed unseen nearby is
+        exhausted."""
+        self._swept.setdefault(rng, []).append(np.asarray(vp.xy, float))
+        if self.drive_to(vp.xy):
+            self.sweep(rng, tilts=tilts, purpose=purpose, until=until)
+            if until is None or not until():
+                self.map_floor()
+        self.exhaust(rng, vp.xy)
+
+    def map_floor(self) -> None:
+        """On the built map: images at the near-floor tilt where the floor around is still
+        unknown (agent.search_explore.floor_headings)."""
+        if self.built is None:
+            return
+        p = self.body.pose()
+        for h in sx.floor_headings(self.built, p.xy, p.yaw + p.pan):
+            self.look_heading(h, NEAR_TILT, "map the floor")
+
+    def exhaust(self, rng: float, xy: np.ndarray | None = None) -> None:
+        """Mark what a sweep at ``xy`` (default: here) left unseen nearby as exhausted for
+        ``rng`` (agent.search_explore)."""
+        if self.built is None:
+            return
+        if self._scorer is None:
+            self.viewpoints(rng, 0.0)
+        assert self._scorer is not None
+        here = self.body.pose().xy if xy is None else np.asarray(xy, float)
+        ex = self._scorer.exhaust(here, self.seen.unseen(rng), rng)
+        old = self._exhausted.get(rng)
+        self._exhausted[rng] = ex if old is None else old | ex
+        self._deferred.clear()
+
+    def look_around(self) -> None:
+        """A sweep for the target where the robot stands (the first images of a built map)."""
+        self._swept.setdefault(self.target_range, []).append(self.body.pose().xy)
+        self.sweep(self.target_range, purpose="look around")
+        self.map_floor()
+        self.exhaust(self.target_range)
+
+    def online_search(self, probs: ss.ProbabilitySource | None, vias: Sequence[ViaOption]) -> None:
+        """Search on the built map: at each decision the best expected probability of finding
+        the target per second among looking into a known object's relation volume (``probs``),
+        sweeping for an intermediate type of ``vias``, and sweeping the best frontier viewpoint
+        for the target; returns when none is left."""
+        builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
+        self._vias = {v.type: v.gain for v in vias}
+        self.look_around()
+        while True:
+            self.check()
+            options = [o for o in (self._region_option(builder), self._direct_option()) if o]
+            options += [o for o in (self._via_option(v) for v in vias) if o]
+            if not options:
+                return
+            rate, label, act = max(options, key=lambda o: o[0])
+            self.note(f"{label} ({rate:.4f}/s; {len(options)} options)")
+            act()
+
+    def _direct_option(self) -> _Option | None:
+        vps = self.viewpoints(self.target_range, sx.SWEEP_IMAGES)
+        if not vps:
+            return None
+        v = vps[0]
+        return (v.rate, f"explore for {self.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
+                f"{v.gain} points, ~{v.seconds:.0f} s",
+                lambda: self.explore_step(v, self.target_range))  # fmt: skip
+
+    def _via_option(self, via: ViaOption) -> _Option | None:
+        found = sum(1 for o in self.known.values() if o.type == via.type)
+        left = 1.0 - math.exp(-max(0.0, via.instances - found))
+        if left < 0.05:
+            return None
+        rng = self.range_of(via.type)
+        vps = self.viewpoints(rng, sx.RING_IMAGES, via.zmax)
+        if not vps:
+            return None
+        v = vps[0]
+        m = left * min(1.0, v.share * max(1.0, via.instances - found))
+        rate = m * via.q / (v.seconds + m * via.look_s)
+
+        def act() -> None:
+            if self.intermediate is None:
+                self.intermediate, self.predicted_gain = via.type, via.gain
+            n0 = found
+            self.explore_step(v, rng, FURNITURE_TILTS, f"find {via.type}", until=lambda: sum(
+                1 for o in self.known.values() if o.type == via.type) > n0)  # fmt: skip
+
+        return rate, f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})", act
+
+    def _region_option(self, builder: ss.RegionBuilder | None) -> _Option | None:
+        if builder is None:
+            return None
+        skip = self._visited | self._deferred
+        regions = [r for r in builder.regions(list(self.known.values())) if r.key not in skip]
+        costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
+        ranked = ss.score_regions(regions, self.seen, self.target_range, costs, self.body.pose().xy)
+        ranked = [r for r in ranked if r.score >= MIN_REGION_SCORE]
+        if not ranked:
+            return None
+        self._log_candidates(ranked)
+        # The cost model's estimate ranks; the best few are re-costed with their planned gazes
+        # (on a built map the drive around what is not mapped yet can be much longer).
+        planned = []
+        for r in ranked[:REPLAN_REGIONS_BUILT]:
+            gz = self._region_gazes(r)
+            if not gz:
+                self._deferred.add(r.key)
+                continue
+            cost = sum(g.cost for g in gz) + self.time_model.image_cost * len(gz)
+            planned.append((r.score / max(cost, 1e-6), cost, r, gz))
+        if not planned:
+            return None
+        rate, cost, best, gazes = max(planned, key=lambda x: (x[0], -x[1]))
+        return rate, f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s", (
+            lambda: self.look_region(best, gazes))  # fmt: skip
+
+    def _region_gazes(self, region: ss.Region) -> list[Gaze]:
+        return plan_gazes(
+            self.grid, region.box, self.body.pose(), self.spec, self.time_model,
+            GazePlanOptions(max_distance=min(self.target_range, 2.5)), facing=region.facing,
+        )  # fmt: skip
+
+    def look_region(self, region: ss.Region, gazes: Sequence[Gaze] | None = None) -> None:
+        """Look into a candidate region with the view planner's gazes (``gazes`` if planned
+        already; a region no gaze reaches on the map as it stands waits for the next
+        exploration step)."""
+        gazes = self._region_gazes(region) if gazes is None else gazes
+        if not gazes:
+            self._deferred.add(region.key)
+            return
+        self._visited.add(region.key)
+        if self.intermediate is None:  # indirect search via a type found before, maybe by chance
+            for _rel, ref in region.members:
+                ref_type = self.known[ref].type if ref in self.known else None
+                if ref_type in self._vias:
+                    self.intermediate, self.predicted_gain = ref_type, self._vias[ref_type]
+                    break
+        for g in gazes:
+            self.look_gaze(g, f"region {region.label}")
+
+    def tour_regions(self, objects: Sequence[ObjectInstance]) -> None:
+        """``map-only``: look into every relation volume of ``objects`` (no probabilities) in the
+        order of a short tour from here, skipping volumes already mostly seen."""
+        regions = ss.build_regions(
+            objects, self.target, self.catalog, ss.UniformProbabilities(), self.seen
+        )
+        if not regions:
+            return
+        grid = self.grid
+        here = self.body.pose().xy
+        sites = []
+        for r in regions:
+            p = nearest_free(grid, np.asarray(r.box.center[:2], float))
+            sites.append(p if p is not None else np.asarray(r.box.center[:2], float))
+        by_site: dict[tuple[float, float], list[ss.Region]] = {}
+        for xy, r in zip(sites, regions, strict=True):
+            by_site.setdefault((round(float(xy[0]), 6), round(float(xy[1]), 6)), []).append(r)
+        order = ss.tour_order(grid, np.array(list(by_site)), here)
+        self.note(f"tour of {len(regions)} relation volumes of the map")
+        for xy in order:
+            for r in by_site[(round(float(xy[0]), 6), round(float(xy[1]), 6))]:
+                if self.seen.unseen(self.target_range)[r.points].mean() >= 0.5:
+                    self.look_region(r)
 
     def _log_candidates(
         self, ranked: Sequence[ss.Region], show: int = 12, labelled: int = 3
@@ -567,6 +895,8 @@ class SearchContext:
             self.episode.budget_s,
             list(self.trace),
             list(self.log),
+            self.intermediate,
+            self.predicted_gain,
         )
 
 
@@ -604,11 +934,36 @@ class Exhaustive(SearchPolicy):
         ctx.cover()
 
 
+class Frontier(SearchPolicy):
+    """No context, on the built map: sweep the frontier viewpoint that shows the most of what is
+    left to see for the target per expected second, until nothing is left (then coverage)."""
+
+    name = "frontier"
+
+    def search(self, ctx: SearchContext) -> None:
+        ctx.online_search(None, [])
+        ctx.note("no viewpoint left; coverage of what stayed unseen")
+        ctx.cover()
+
+
+class MapOnly(SearchPolicy):
+    """The value of the map alone: the relation volumes of the known furniture in the order of a
+    short tour, no probabilities; then coverage."""
+
+    name = "map-only"
+
+    def search(self, ctx: SearchContext) -> None:
+        ctx.tour_regions(ctx.furniture_map())
+        ctx.note("falling back to exhaustive coverage")
+        ctx.cover()
+
+
 class Location(SearchPolicy):
     """Location constraint around the furniture map and everything detected so far."""
 
     name = "location"
     needs = "kb"
+    replan = REPLAN_REGIONS  # re-cost the best regions with planned gazes (search_regions)
 
     def search(self, ctx: SearchContext) -> None:
         base = ctx.furniture_map()
@@ -618,7 +973,7 @@ class Location(SearchPolicy):
             objs.update(ctx.known)
             return list(objs.values())
 
-        ctx.search_regions(_probs(ctx), known=known)
+        ctx.search_regions(_probs(ctx), known=known, replan=self.replan)
         ctx.note("falling back to exhaustive coverage")
         ctx.cover()
 
@@ -629,8 +984,55 @@ class Indirect(SearchPolicy):
     name = "indirect"
     needs = "kb"
     min_q = 0.05  # intermediate types less related than this are not considered
+    max_vias = 3  # intermediate types compared online on the built map
 
     def search(self, ctx: SearchContext) -> None:
+        if ctx.built is not None:
+            self.search_built(ctx)
+        else:
+            self.search_given(ctx)
+
+    def search_built(self, ctx: SearchContext) -> None:
+        """Online on the built map (SearchContext.online_search): known objects' relation
+        volumes, the intermediate types Wixson & Ballard's model says pay, and the frontier."""
+        probs = _probs(ctx)
+        vias = self.worth(ctx, probs)
+        ctx.online_search(probs, vias)
+        ctx.note("no option left; coverage of what stayed unseen")
+        ctx.cover()
+
+    def worth(self, ctx: SearchContext, probs: ss.ProbabilitySource) -> list[ViaOption]:
+        """The intermediate types whose predicted gain (agent.search_explore.predicted_plan)
+        exceeds 1, best first (at most ``max_vias``); sets the context's predicted gain to the
+        best candidate's."""
+        cat = ctx.catalog
+        cands = [
+            t.name
+            for t in cat.types
+            if t.name != ctx.target
+            and ss.relation_probability(cat, probs, t.name, ctx.target) >= self.min_q
+            and self._present(ctx, t.name)
+        ]
+        size = ctx.maps.size
+        ranges = {n: ctx.range_of(n) for n in [ctx.target, *cands]}
+        plan = sx.predicted_plan(ctx.target, cat, probs, size, ranges, ctx.time_model, cands)
+        gains = {o.via: sx.predicted_gain(plan, o.via) or 0.0 for o in plan if o.via}
+        ctx.note("predicted gains: " + ", ".join(f"{k} {v:.2f}" for k, v in gains.items()))
+        best = max(gains.items(), key=lambda kv: kv[1], default=None)
+        ctx.predicted_gain = best[1] if best else None
+        out = []
+        for o in sorted(
+            (o for o in plan if o.via and gains[o.via] > 1.0), key=lambda o: -gains[o.via]
+        ):
+            typ = cat.type(o.via)
+            k = probs.instances(o.via)
+            zmax = max(typ.size_max[2], 0.3) if typ.is_furniture else None
+            out.append(ViaOption(o.via, o.q, 1.0 if k is None else k, zmax or 9.0, o.look_s,
+                                 gains[o.via]))  # fmt: skip
+        return out[: self.max_vias]
+
+    def search_given(self, ctx: SearchContext) -> None:
+        """On the given map: the plan of ``options`` made once at the start (module docstring)."""
         probs = _probs(ctx)
         options = self.options(ctx, probs)
         best = options[0]
@@ -847,8 +1249,41 @@ FURNITURE_TILTS = (-0.35,)  # one ring of images finds furniture (detected from 
 
 POLICIES: dict[str, type[SearchPolicy]] = {
     cls.name: cls
-    for cls in (Exhaustive, Location, Indirect, OraclePrior, OraclePriorIndirect, Oracle)
+    for cls in (
+        Exhaustive, Location, Indirect, OraclePrior, OraclePriorIndirect, Oracle, Frontier,
+        MapOnly,
+    )
+}  # fmt: skip
+
+# The map scenarios each policy runs in (``--map``), and each scenario's default policies.
+POLICY_MAPS: dict[str, tuple[str, ...]] = {
+    "exhaustive": ("given",),
+    "location": ("given",),
+    "map-only": ("given",),
+    "oracle-prior": ("given",),
+    "frontier": ("built",),
+    "indirect": ("built", "given"),
+    "oracle-prior-indirect": ("built", "given"),
+    "oracle": ("built", "given"),
 }
+DEFAULT_POLICIES: dict[str, tuple[str, ...]] = {
+    "built": ("frontier", "indirect", "oracle-prior-indirect", "oracle"),
+    "given": ("map-only", "location", "oracle-prior", "oracle", "exhaustive"),
+}
+# Policies that plan on the true layout's maps whatever the scenario (the bound knows all).
+TRUE_MAP_POLICIES = frozenset({"oracle"})
+
+
+def check_scenario(names: Sequence[str], map_mode: str) -> None:
+    """One-line errors: an unknown map scenario, or a policy (``name`` or ``name@rank``) that
+    does not run in ``map_mode``."""
+    if map_mode not in MAP_MODES:
+        raise CtxsearchError(f"unknown map '{map_mode}' (known: {', '.join(MAP_MODES)})")
+    for n in names:
+        base = n.partition("@")[0]
+        maps = POLICY_MAPS.get(base, ())
+        if maps and map_mode not in maps:
+            raise CtxsearchError(f"policy '{base}' needs --map {maps[0]}")
 
 
 def make_policy(name: str) -> SearchPolicy:

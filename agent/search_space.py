@@ -86,6 +86,7 @@ from knowledge.ranking import (  # noqa: F401
     KBProbabilities,
     ProbabilitySource,
     TableProbabilities,
+    UniformProbabilities,
 )
 
 RANGE_SAFETY = 0.8
@@ -143,13 +144,7 @@ class SeenMap:
         z: tuple[float, float, float] = LATTICE_Z,
     ) -> SeenMap:
         """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
-        hw, hd = layout.width / 2, layout.depth / 2
-        xs = np.arange(-hw + step_xy / 2, hw, step_xy)
-        ys = np.arange(-hd + step_xy / 2, hd, step_xy)
-        zs = np.arange(z[0], z[1] + 1e-9, z[2])
-        zs = zs[zs < layout.height]
-        gx, gy, gz = np.meshgrid(xs, ys, zs, indexing="ij")
-        pts = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
+        pts = cls._lattice(layout, step_xy, z)
         keep = np.ones(len(pts), bool)
         for o in layout.objects:
             if not catalog.type(o.type).is_furniture:
@@ -158,6 +153,29 @@ class SeenMap:
             for c, yaw, h in zip(arr.centers, arr.yaws, arr.halves, strict=True):
                 keep &= ~Box(c, float(yaw), h).contains_points(pts)
         return cls(pts[keep], np.full(int(keep.sum()), np.inf))
+
+    @classmethod
+    def for_footprint(
+        cls,
+        layout: RoomLayout,
+        step_xy: float = LATTICE_XY,
+        z: tuple[float, float, float] = LATTICE_Z,
+    ) -> SeenMap:
+        """The lattice over ``layout``'s footprint and height only (what a robot that knows
+        nothing of the furniture may assume: ``--map built``)."""
+        pts = cls._lattice(layout, step_xy, z)
+        return cls(pts, np.full(len(pts), np.inf))
+
+    @staticmethod
+    def _lattice(layout: RoomLayout, step_xy: float, z: tuple[float, float, float]) -> np.ndarray:
+        """(N, 3) lattice points over the footprint, from z[0] to z[1] below the ceiling."""
+        hw, hd = layout.width / 2, layout.depth / 2
+        xs = np.arange(-hw + step_xy / 2, hw, step_xy)
+        ys = np.arange(-hd + step_xy / 2, hd, step_xy)
+        zs = np.arange(z[0], z[1] + 1e-9, z[2])
+        zs = zs[zs < layout.height]
+        gx, gy, gz = np.meshgrid(xs, ys, zs, indexing="ij")
+        return np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
 
     def __len__(self) -> int:
         return len(self.points)

@@ -53,6 +53,17 @@ class ProbabilitySource:
         return None
 
 
+class UniformProbabilities(ProbabilitySource):
+    """No probabilities: every relation counts the same (``map-only`` search, the value of the
+    map alone)."""
+
+    name = "uniform"
+
+    def p(self, relation: str, type_name: str) -> float:
+        """1 for every relation and type."""
+        return 1.0
+
+
 class KBProbabilities(ProbabilitySource):
     """The learned intervals: lower bound, p0 (the Wilson centre) or upper bound, by ``rank``."""
 

@@ -15,8 +15,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="learn in a few office rooms, then search a held-out room with and without context",
         description="The end-to-end demo: the robot learns spatial context on its own (Highest "
         "Impact First) in --rooms office rooms, then looks for a Cup in a room it never learned in, "
-        "once with the learned context and once without. Writes OUT/kb.sqlite, OUT/learn.rrd, "
-        "OUT/search.rrd (with context), OUT/search_exhaustive.rrd and OUT/report.md. Re-running "
+        "once with the learned context (indirect) and once without (frontier), both on the map it "
+        "builds as it searches. Writes OUT/kb.sqlite, OUT/learn.rrd, OUT/search.rrd (both "
+        "searches side by side) and OUT/report.md. Re-running "
         "reuses a complete store (delete OUT/ to learn again) and redoes the searches.",
     )
     p.add_argument(

@@ -18,7 +18,16 @@ POLICY_NAMES = (
     "oracle-prior",
     "oracle-prior-indirect",
     "oracle",
+    "frontier",
+    "map-only",
 )
+MAP_MODES = ("given", "built")  # agent.mapping.MAP_MODES
+# agent.search.DEFAULT_POLICIES
+DEFAULT_POLICIES = {
+    "built": "frontier,indirect,oracle-prior-indirect,oracle",
+    "given": "map-only,location,oracle-prior,oracle,exhaustive",
+}
+DEFAULT_POLICY = {"built": "indirect", "given": "location"}  # `search --policy`
 DEFAULT_BUDGET_S = 300.0
 RANK_MODES = ("low", "p0", "high")
 DEFAULT_RANK = "low"
@@ -74,6 +83,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     argtypes.add_detector_argument(p)
     argtypes.add_interval_argument(p)
+    p.add_argument(
+        "--map",
+        choices=MAP_MODES,
+        default=None,
+        help="the map scenario: built (the robot knows nothing at the start and maps as it "
+        "searches: frontier, indirect, oracle-prior-indirect, oracle) or given (the furniture "
+        "poses are known: map-only, location, oracle-prior, oracle, exhaustive); default: built "
+        "(in houses; single-room styles, the small-world reference, default to given)",
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -98,9 +116,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--target", required=True, help="the object type to find (e.g. Cup)")
     p.add_argument(
         "--policy",
-        default="location",
+        default=None,
         choices=POLICY_NAMES,
-        help="search policy (default: location)",
+        help="search policy (default: indirect with --map built, location with --map given)",
     )
     p.add_argument(
         "--seed",
@@ -115,9 +133,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_search)
 
 
+def map_of(args: argparse.Namespace) -> str:
+    """The map scenario: ``--map``, else the style's default (episodes.default_map)."""
+    if args.map is not None:
+        return args.map
+    from envs.houses import resolve_style
+    from scripts.experiments.episodes import default_map
+
+    return default_map(resolve_style(args.style))
+
+
 def _config_fields(args: argparse.Namespace) -> dict:
-    """The SearchConfig fields ``search`` and ``bench search`` share, from their flags."""
+    """The SearchConfig fields ``search`` and ``bench search`` share, from their flags (``map``
+    resolved)."""
     return {
+        "map": map_of(args),
         "style": args.style,
         "seed": args.seed,
         "budget_s": args.budget_seconds,
@@ -137,7 +167,9 @@ def run_search(args: argparse.Namespace) -> int:
     from knowledge.catalog import load_catalog
     from scripts.experiments.episodes import SearchConfig, search_once
 
-    config = SearchConfig(policies=(args.policy,), **_config_fields(args))
+    fields = _config_fields(args)
+    policy = args.policy or DEFAULT_POLICY[fields["map"]]
+    config = SearchConfig(policies=(policy,), **fields)
     one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
     ep, res = one.episode, one.results[0]
     s = ep.start
@@ -146,7 +178,10 @@ def run_search(args: argparse.Namespace) -> int:
         f"{s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
     )
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
-    print(f"detector: {config.detector_model(load_catalog()).name}; intervals: {config.interval}")
+    print(
+        f"detector: {config.detector_model(load_catalog()).name}; intervals: {config.interval}; "
+        f"map: {config.map}"
+    )
     if args.record is not None:
         print(f"recording: {args.record} (open with: rerun {args.record})")
     return 0
@@ -179,8 +214,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--policies",
-        default="exhaustive,location,indirect,oracle-prior,oracle",
-        help="comma-separated policies (default: exhaustive,location,indirect,oracle-prior,oracle)",
+        default=None,
+        help="comma-separated policies (default with --map built: "
+        f"{DEFAULT_POLICIES['built']}; with --map given: {DEFAULT_POLICIES['given']})",
     )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     p.add_argument("--seed", type=argtypes.seed, default=0, help="episode seed (default: 0)")
@@ -197,10 +233,9 @@ def run_bench(args: argparse.Namespace) -> int:
     from scripts.experiments.bench_search import SearchBenchConfig, bench_search
     from scripts.sweep import SweepOptions
 
-    names = parse_policies(args.policies)
-    config = SearchBenchConfig(
-        policies=tuple(names), kb=args.kb, episodes=args.episodes, **_config_fields(args)
-    )
+    fields = _config_fields(args)
+    names = parse_policies(args.policies or DEFAULT_POLICIES[fields["map"]])
+    config = SearchBenchConfig(policies=tuple(names), kb=args.kb, episodes=args.episodes, **fields)
     res = bench_search(
         config,
         args.out,
@@ -209,6 +244,9 @@ def run_bench(args: argparse.Namespace) -> int:
         bar=not args.quiet,
     )
     print(res.table)
+    for f in res.files:
+        if f.name == "indirect.md":
+            print(f.read_text())
     for f in res.files:
         print(f"wrote {f}")
     print(f"({res.wall_s:.0f} s wall)")

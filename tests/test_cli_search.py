@@ -203,3 +203,11 @@ def test_parser_constants_match_the_search_stack():
     assert tuple(search_space.ESTIMATES) == cmd_search.ESTIMATES
     assert cmd_search.DEFAULT_ESTIMATE == search_space.DEFAULT_ESTIMATE
     assert cmd_search.DEFAULT_MIN_EVIDENCE == search_space.DEFAULT_MIN_EVIDENCE
+    from agent.mapping import MAP_MODES
+
+    assert set(cmd_search.MAP_MODES) == set(MAP_MODES)
+    assert {k: tuple(v.split(",")) for k, v in cmd_search.DEFAULT_POLICIES.items()} == dict(
+        search.DEFAULT_POLICIES
+    )
+    for scenario, name in cmd_search.DEFAULT_POLICY.items():
+        assert scenario in search.POLICY_MAPS[name]

@@ -19,7 +19,7 @@ def test_demo_writes_its_files_and_reruns(tmp_path):
     assert res.learned_now
     report = (out / "report.md").read_text()
     assert "## 1. Learning" in report and "## 2. Search" in report and "rerun " in report
-    assert "| location |" in report and "| exhaustive |" in report
+    assert "| indirect |" in report and "| frontier |" in report
     assert any(line.strip().startswith("rerun ") and "learn.rrd" in line for line in lines)
     # A second run reuses the complete store and redoes the searches.
     lines2: list[str] = []

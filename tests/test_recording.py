@@ -217,7 +217,7 @@ def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_stor
 
     kb = desk_cup_store(tmp_path / "kb.sqlite")
     rrd = tmp_path / "search.rrd"
-    config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0)
+    config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0, map="given")
     one = search_once(config, "Cup", kb_path=kb, record=rrd, catalog=catalog)
     assert one.files == [rrd]
     f = read_rrd(rrd)

@@ -296,6 +296,7 @@ def paired_search(
         rank=config.rank,
         estimate="backoff",
         min_evidence=config.min_evidence,
+        map="given",
     )
     priors = load_priors(sc, variant, catalog, kb_path=kb_path)
     rooms = len(priors.learned) or None

@@ -17,7 +17,13 @@ Policy names may carry a rank, ``location@low``, ``location@p0``, ``location@hig
 the parts of the interval on the same episodes.
 
 Writes ``DIR/search.json``, ``DIR/search.md`` (the table), ``DIR/search.png`` (the
-time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy).
+time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy); with
+``indirect`` and ``frontier`` also ``DIR/indirect.json`` and ``DIR/indirect.md`` (each
+intermediate type's predicted gain against the measured paired ratio: bench_indirect).
+
+The map scenario (``SearchConfig.map``, ``--map``): ``built`` (the robot knows nothing at the
+start: frontier, indirect, oracle-prior-indirect, oracle) or ``given`` (the furniture poses are
+known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``map`` says which.
 
 The episodes run in batches of ``EPISODES_PER_UNIT``, the units of a sweep (``scripts.sweep``:
 serially, or as Ray tasks with ``--workers N`` / ``--ray-address``); the files are the same
@@ -43,6 +49,7 @@ from envs.houses import resolve_style
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
+from scripts.experiments.bench_indirect import indirect_analysis, write_indirect
 from scripts.experiments.episodes import (
     Priors,
     SearchConfig,
@@ -251,7 +258,9 @@ def bench_search(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
     )
     detector = config.detector_model(catalog)
-    results = _run_batches(eps, names, style, priors, sweep or SweepOptions(), bar, detector)
+    results = _run_batches(
+        eps, names, style, priors, sweep or SweepOptions(), bar, (detector, config.map)
+    )
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -260,6 +269,10 @@ def bench_search(
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
+    if (
+        "indirect" in results and "frontier" in results
+    ):  # point 7: scripts.experiments.bench_indirect
+        res.files += write_indirect(Path(out), indirect_analysis(eps, results, seed=config.seed))
     res.wall_s = time.perf_counter() - t_wall
     return res
 
@@ -271,13 +284,13 @@ def _run_batches(
     priors: Priors,
     sweep: SweepOptions,
     bar: bool,
-    detector: DetectorModel | None,
+    sensing: tuple[DetectorModel | None, str],
 ) -> dict[str, list[S.SearchResult]]:
-    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with the
-    ``detector`` preset."""
+    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with
+    ``sensing``: the detector preset and the map scenario."""
     batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
     done = run_units(
-        functools.partial(_batch_unit, tuple(names), style, priors, detector),
+        functools.partial(_batch_unit, tuple(names), style, priors, sensing),
         batches,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
@@ -296,13 +309,18 @@ def _batch_unit(
     names: tuple[str, ...],
     style,
     priors: Priors,
-    detector: DetectorModel | None,
+    sensing: tuple[DetectorModel | None, str],
     batch: list[S.Episode],
 ) -> list[list[S.SearchResult]]:
-    """One sweep unit: every policy on each episode of ``batch``."""
+    """One sweep unit: every policy on each episode of ``batch`` (``sensing``: the detector
+    preset and the map scenario)."""
     catalog = load_catalog()
+    detector, map_mode = sensing
     return [
-        run_episode(ep, names, catalog, style, priors.for_policy, detector=detector) for ep in batch
+        run_episode(
+            ep, names, catalog, style, priors.for_policy, detector=detector, map_mode=map_mode
+        )
+        for ep in batch
     ]
 
 
@@ -385,7 +403,7 @@ def _write_files(
         "rank": config.rank,
         "detector": config.detector_model(load_catalog()).name,
         "interval": config.interval,
-        "map": "given",  # the policies search on RoomMaps.given (the true layout's maps)
+        "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,

@@ -30,7 +30,7 @@ from agent.recording import Recorder, open_stream
 from agent.rr_layout import SEARCH_APP, search_blueprint
 from envs.detector import DetectorModel, default_or_named
 from envs.floorplan import generate_layout
-from envs.houses import WorldStyle, resolve_style
+from envs.houses import HouseStyle, WorldStyle, resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec
 from envs.world import World
@@ -61,10 +61,20 @@ class SearchConfig:
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
     detector: str | None = None  # the detector preset (name or file; None: realistic)
     interval: str = "wilson"  # how the learned intervals are read: wilson or clustered
+    # The map scenario (agent.mapping.MAP_MODES): "built" (the default: the robot knows nothing
+    # at the start and maps as it searches) or "given" (the furniture poses are known). The CLI
+    # passes "given" for single-room styles unless --map says otherwise (default_map).
+    map: str = "built"
 
     def detector_model(self, catalog: Catalog) -> DetectorModel:
         """The detector preset, loaded and checked against the catalog (one-line errors)."""
         return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
+
+
+def default_map(style: WorldStyle) -> str:
+    """The map scenario a style is searched in when ``--map`` is not given: ``built`` in houses,
+    ``given`` in single rooms (the small-world reference of the earlier results)."""
+    return "built" if isinstance(style, HouseStyle) else "given"
 
 
 def split_name(name: str) -> tuple[str, str | None]:
@@ -176,6 +186,7 @@ def load_priors(
         raise CtxsearchError(
             f"unknown estimate '{config.estimate}' (known: {', '.join(ss.ESTIMATES)})"
         )
+    S.check_scenario(config.policies, config.map)
     learned = set(exclude_seeds)
     pooled = None
     if kb is None and kb_path is not None:
@@ -200,7 +211,14 @@ class EpisodeRoom:
     layout: RoomLayout
     catalog: Catalog
     world: World
-    maps: S.RoomMaps  # the given map scenario, with the detector preset (None: perfect)
+    maps: S.RoomMaps  # the scenario's maps, with the detector preset (None: perfect)
+    given: S.RoomMaps | None = None  # the true layout's maps for TRUE_MAP_POLICIES (built)
+
+    def maps_for(self, policy: str) -> S.RoomMaps:
+        """The maps policy ``policy`` (a base name) searches on."""
+        if policy in S.TRUE_MAP_POLICIES and self.given is not None:
+            return self.given
+        return self.maps
 
 
 def recording_root(policy: str) -> str:
@@ -245,7 +263,7 @@ def run_policy(
             layout,
             catalog,
             world,
-            maps=room.maps,
+            maps=room.maps_for(base),
             probs=probs,
             recorder=rec,
             policy=name,
@@ -263,10 +281,12 @@ def search_room(
     progress: Callable[[str], None] | None = None,
     detector: DetectorModel | None = None,
     shared: Path | None = None,
+    map_mode: str = "given",
 ) -> list[S.SearchResult]:
     """Build ``ep``'s room once and run each (policy, probabilities, recording) of ``runs`` (a
     policy may appear twice with other probabilities: results are in ``runs``' order) with the
-    ``detector`` preset (None: perfect); ``shared``: one recording of them all, side by side."""
+    ``detector`` preset (None: perfect) in map scenario ``map_mode``; ``shared``: one recording
+    of them all, side by side."""
     layout = generate_layout(style, ep.room_seed, catalog)
     stream = None
     if shared is not None:
@@ -279,8 +299,12 @@ def search_room(
         )
     try:
         with World(layout, catalog) as world:
-            maps = S.RoomMaps.given(layout, catalog, world.spec, detector)
-            room = EpisodeRoom(layout, catalog, world, maps)
+            given = S.RoomMaps.given(layout, catalog, world.spec, detector)
+            if map_mode == "built":
+                built = S.RoomMaps.built(layout, catalog, world.spec, detector)
+                room = EpisodeRoom(layout, catalog, world, built, given)
+            else:
+                room = EpisodeRoom(layout, catalog, world, given)
             out = []
             for name, probs, rec_path in runs:
                 res = run_policy(ep, name, room, probs, rec_path, stream)
@@ -304,14 +328,15 @@ def run_episodes(
     probs_for: ProbsFor,
     progress: Callable[[str], None] | None = None,
     detector: DetectorModel | None = None,
+    map_mode: str = "given",
 ) -> dict[str, list[S.SearchResult]]:
     """Run every policy on every episode (one World per episode, shared by the policies) with
-    the ``detector`` preset (None: perfect)."""
+    the ``detector`` preset (None: perfect) in map scenario ``map_mode``."""
     results: dict[str, list[S.SearchResult]] = {p: [] for p in policies}
     for ep in episodes:
         for name, res in zip(
             policies,
-            run_episode(ep, policies, catalog, style, probs_for, progress, detector),
+            run_episode(ep, policies, catalog, style, probs_for, progress, detector, map_mode),
             strict=True,
         ):
             results[name].append(res)
@@ -326,11 +351,12 @@ def run_episode(
     probs_for: ProbsFor,
     progress: Callable[[str], None] | None = None,
     detector: DetectorModel | None = None,
+    map_mode: str = "given",
 ) -> list[S.SearchResult]:
     """Every policy on episode ``ep`` (one World, shared by the policies), in ``policies`` order,
-    with the ``detector`` preset (None: perfect)."""
+    with the ``detector`` preset (None: perfect) in map scenario ``map_mode``."""
     runs = [(name, probs_for(*split_name(name)), None) for name in policies]
-    return search_room(ep, style, catalog, runs, progress, detector)
+    return search_room(ep, style, catalog, runs, progress, detector, map_mode=map_mode)
 
 
 @dataclass
@@ -374,7 +400,13 @@ def search_once(
         for name, rec in zip(names, records, strict=True)
     ]
     out = search_room(
-        ep, style, catalog, runs, detector=config.detector_model(catalog), shared=record
+        ep,
+        style,
+        catalog,
+        runs,
+        detector=config.detector_model(catalog),
+        shared=record,
+        map_mode=config.map,
     )
     files = [Path(p) for p in records if p is not None]
     return OneSearch(ep, out, files + ([Path(record)] if record is not None else []))

@@ -1,0 +1,275 @@
+"""Search on the robot's own map (``--map built``): where to look next, and Wixson & Ballard's
+efficiency model of indirect search. Pure numpy on agent.mapping's ``BuiltMap`` arrays; nothing
+here renders or drives (agent/search.py runs the policies).
+
+Viewpoints. A candidate viewpoint is a reachable free cell of the built map's navigable grid on a
+0.5 m lattice (``search_space.lattice_candidates``). Its *gain* for a detection range r is the
+number of seen-map lattice points still to be seen for r (not seen from within r, not
+exhausted) that lie within r of the camera there and in a 2-D cell the camera can see: the
+built map's occupied cells, pooled onto the lattice's 0.2 m cells, stop each of ``RAY_COUNT``
+rays (the first occupied cell itself is seen: a desk top is), unknown cells do not (the space
+beyond the frontier is what exploring is for). Its *seconds* are the planned drive there (grid
+distance, a quarter turn) plus the images of a sweep. Viewpoints are ranked by the share of what
+is left that they show per second: information gain per expected second.
+
+Exhaustion. After a sweep at p, the points within ``EXHAUST_RADIUS`` of p that p's rays reach
+and that are still unseen are *exhausted* for that range: they cannot be seen from nearby
+(inside furniture, under a bed), so they no longer attract the robot. Without it the points
+inside the furniture's solid parts, which the robot does not know about, would.
+
+Wixson & Ballard's efficiency model (IJCV 12(2/3), 1994). Direct search for T costs the expected
+half of a coverage at T's detection range; indirect search via I costs finding I (coverage at
+I's larger range, one ring of images for furniture) plus looking into I's most likely relation
+volume, plus the direct search when T is not there (``search_space.indirect_plan``). Indirect
+search pays when the efficiency ratio C_direct / C_via exceeds 1 (``predicted_gain``). Coverage
+costs come from the area model ``area_cover_seconds`` (the house's footprint and room count,
+the detection range and the images per site), so the prediction needs no map: it is what the
+robot can expect before it has seen anything.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent import search_space as ss
+from agent.mapping import BuiltMap
+from agent.navigation import OccupancyGrid
+from envs.robot_spec import RobotSpec, TimeModel
+from knowledge.catalog import Catalog
+from knowledge.geometry import ObjectInstance, relation_volume
+
+RAY_COUNT = 120
+COARSE = ss.LATTICE_XY  # m: the visibility cells (the seen map's lattice spacing)
+EXHAUST_RADIUS = 1.5  # m
+MAX_VIEW = 5.0  # m: the built map's depth range; nothing further is counted as seen
+MIN_GAIN = 8  # points a viewpoint must show to be worth driving to
+VISITED_RADIUS = 0.4  # m: a viewpoint this near an earlier sweep's is not chosen again
+HEAD_S = 0.6  # s: mean head slew per image
+
+
+@dataclass(frozen=True)
+class Viewpoint:
+    """A place to sweep from: where, what it shows (points), the share of what is left, and
+    the expected seconds to get there and sweep."""
+
+    xy: np.ndarray
+    gain: int
+    share: float
+    seconds: float
+
+    @property
+    def rate(self) -> float:
+        """Share of what is left shown per second."""
+        return self.share / max(self.seconds, 1e-6)
+
+
+def coarse_blocked(built: BuiltMap, cell: float = COARSE) -> np.ndarray:
+    """(h, w) bool: coarse cells (``cell`` m, from the map's corner) holding an occupied cell."""
+    k = max(1, int(round(cell / built.resolution)))
+    occ = built.occupied
+    h, w = occ.shape
+    pad = np.zeros((-(-h // k) * k, -(-w // k) * k), bool)
+    pad[:h, :w] = occ
+    return pad.reshape(pad.shape[0] // k, k, pad.shape[1] // k, k).any(axis=(1, 3))
+
+
+def visible_cells(
+    blocked: np.ndarray,
+    origin: tuple[float, float],
+    xy: np.ndarray,
+    radius: float,
+    cell: float = COARSE,
+    rays: int = RAY_COUNT,
+) -> np.ndarray:
+    """(h, w) bool: the coarse cells that rays from ``xy`` reach within ``radius`` before (and
+    including) the first blocked cell."""
+    h, w = blocked.shape
+    a = np.linspace(0.0, 2 * math.pi, rays, endpoint=False)
+    t = np.arange(0.0, radius + 1e-9, cell * 0.5)
+    px = xy[0] + np.cos(a)[:, None] * t[None, :]
+    py = xy[1] + np.sin(a)[:, None] * t[None, :]
+    c = np.floor((px - origin[0]) / cell).astype(np.int64)
+    r = np.floor((py - origin[1]) / cell).astype(np.int64)
+    inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+    rc, cc = np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)
+    blk = blocked[rc, cc] & inside
+    before = np.cumsum(blk, axis=1) - blk  # blocked cells passed before this step
+    keep = inside & (before == 0) & (np.cumsum(~inside, axis=1) == 0)
+    out = np.zeros((h, w), bool)
+    out[rc[keep], cc[keep]] = True
+    return out
+
+
+class ViewpointScorer:
+    """Gains and seconds of candidate viewpoints on a built map (module docstring)."""
+
+    def __init__(self, built: BuiltMap, points: np.ndarray, spec: RobotSpec, tm: TimeModel):
+        self.built, self.points, self.spec, self.tm = built, points, spec, tm
+        self.origin = (built.x0, built.y0)
+        self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
+
+    def visible_points(self, blocked: np.ndarray, xy: np.ndarray, rng: float) -> np.ndarray:
+        """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
+        vis = visible_cells(blocked, self.origin, xy, min(rng, MAX_VIEW))
+        h, w = vis.shape
+        r, c = self.cells[:, 1], self.cells[:, 0]
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        m = np.zeros(len(self.points), bool)
+        m[ok] = vis[r[ok], c[ok]]
+        cam = np.array([xy[0], xy[1], self.spec.camera_height])
+        return m & (np.linalg.norm(self.points - cam, axis=1) <= min(rng, MAX_VIEW))
+
+    def rank(
+        self,
+        grid: OccupancyGrid,
+        todo: np.ndarray,
+        here: np.ndarray,
+        rng: float,
+        images: float,
+        avoid: np.ndarray | None = None,
+    ) -> list[Viewpoint]:
+        """Candidate viewpoints for the points ``todo`` (N,) bool at range ``rng``, best rate
+        first; a sweep there is expected to take ``images`` images. Candidates within
+        ``VISITED_RADIUS`` of a point of ``avoid`` (K, 2: where sweeps were made) are left out."""
+        left = int(todo.sum())
+        if left < MIN_GAIN:
+            return []
+        cand = ss.lattice_candidates(grid, here, 0.5)
+        if avoid is not None and len(avoid) and len(cand):
+            d = np.linalg.norm(cand[:, None, :] - np.asarray(avoid)[None, :, :], axis=-1)
+            cand = cand[d.min(axis=1) > VISITED_RADIUS]
+        if len(cand) == 0:
+            return []
+        blocked = coarse_blocked(self.built)
+        dist = grid.distances_from(here)
+        sweep_s = self.tm.looks_estimate(images, HEAD_S)
+        sub = np.flatnonzero(todo)
+        pts = self.points[sub]
+        out = []
+        for xy in cand:
+            g = int(self._gain(blocked, xy, rng, sub, pts))
+            if g < MIN_GAIN:
+                continue
+            r, c = grid.to_cell(xy)
+            d = float(dist[r, c]) if grid.in_grid(r, c) else math.inf
+            if not math.isfinite(d):
+                continue
+            out.append(Viewpoint(xy, g, g / left, self.tm.leg_estimate(d) + sweep_s))
+        return sorted(out, key=lambda v: (-v.rate, v.seconds, float(v.xy[0]), float(v.xy[1])))
+
+    def _gain(self, blocked, xy, rng, sub, pts) -> int:
+        cam = np.array([xy[0], xy[1], self.spec.camera_height])
+        near = np.linalg.norm(pts - cam, axis=1) <= min(rng, MAX_VIEW)
+        if near.sum() < MIN_GAIN:
+            return 0
+        vis = visible_cells(blocked, self.origin, xy, min(rng, MAX_VIEW))
+        h, w = vis.shape
+        cells = self.cells[sub[near]]
+        r, c = cells[:, 1], cells[:, 0]
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        return int(vis[r[ok], c[ok]].sum())
+
+    def exhaust(self, xy: np.ndarray, unseen: np.ndarray, rng: float) -> np.ndarray:
+        """(N,) bool: the points a sweep at ``xy`` should have shown but did not (module
+        docstring)."""
+        near = self.visible_points(coarse_blocked(self.built), xy, min(rng, EXHAUST_RADIUS))
+        return near & unseen
+
+
+def floor_headings(
+    built: BuiltMap, xy: np.ndarray, heading0: float, near: tuple[float, float] = (0.4, 2.0),
+    min_unknown: float = 0.3,
+) -> list[float]:  # fmt: skip
+    """World headings (six, 60 degrees apart from ``heading0``) whose floor wedge (within
+    ``near`` metres, 50 degrees wide) is at least ``min_unknown`` unknown: where an image at
+    the near-floor tilt still maps something. Without these the robot would never know the floor
+    around itself free (agent.frontiers: its look-around's second tilt)."""
+    xs, ys = built._centers()
+    dx, dy = xs[None, :] - xy[0], ys[:, None] - xy[1]
+    d = np.hypot(dx, dy)
+    ring = (d >= near[0]) & (d <= near[1])
+    ang = np.arctan2(dy, dx)
+    unknown = built.unknown
+    out = []
+    for i in range(6):
+        h = heading0 + i * math.pi / 3
+        wedge = ring & (np.abs(np.angle(np.exp(1j * (ang - h)))) <= math.radians(25))
+        if wedge.any() and unknown[wedge].mean() >= min_unknown:
+            out.append(float(np.angle(np.exp(1j * h))))
+    return out
+
+
+# =========================================================================== the efficiency model
+def area_cover_seconds(
+    area: float, rooms: int, rng: float, tm: TimeModel, images_per_site: float
+) -> float:
+    """Seconds to cover a footprint of ``area`` m^2 in ``rooms`` rooms for detection range
+    ``rng``: sites of radius 0.8 min(rng, MAX_VIEW) but at least one per room, the legs between
+    them (a square lattice's spacing) and ``images_per_site`` images at each."""
+    reach = 0.8 * min(rng, MAX_VIEW)
+    rooms = max(1, rooms)
+    per_room = max(1.0, (area / rooms) / (math.pi * reach * reach))
+    sites = rooms * per_room
+    spacing = math.sqrt(area / sites)
+    return sites * (tm.leg_estimate(spacing) + tm.looks_estimate(images_per_site, HEAD_S))
+
+
+@dataclass(frozen=True)
+class WorldSize:
+    """What the efficiency model assumes of the world before seeing it: footprint and rooms."""
+
+    area: float
+    rooms: int
+
+
+def look_seconds_model(
+    catalog: Catalog, probs: ss.ProbabilitySource, via: str, target: str, size: WorldSize,
+    tm: TimeModel,
+) -> float:  # fmt: skip
+    """Seconds to look into the most likely relation volume of a found ``via`` (mid-range size):
+    a drive of half a room's side and the images the volume needs."""
+    typ = catalog.type(via)
+    s = tuple((np.asarray(typ.size_min) + np.asarray(typ.size_max)) / 2)
+    mid = ObjectInstance(via, -1, (0.0, 0.0, s[2] / 2), 0.0, s)
+    best = max(typ.relations, key=lambda r: (probs.p(r.name, target), r.name))
+    box = relation_volume(best, mid)
+    images = int(np.clip(math.ceil(2 * float(max(box.half[0], box.half[1])) / 1.2 - 1e-9), 1, 4))
+    drive = 0.5 * math.sqrt(size.area / max(1, size.rooms))
+    return tm.leg_estimate(drive) + tm.looks_estimate(images, HEAD_S)
+
+
+SWEEP_IMAGES = 0.6 * 6 * len(ss.SWEEP_TILTS)  # images of a target sweep (60% of 6 x 3 taken)
+RING_IMAGES = 6.0  # one ring of images finds furniture
+
+
+def predicted_plan(
+    target: str,
+    catalog: Catalog,
+    probs: ss.ProbabilitySource,
+    size: WorldSize,
+    ranges: Mapping[str, float],
+    tm: TimeModel,
+    candidates: Sequence[str],
+) -> list[ss.IndirectOption]:
+    """Wixson & Ballard's expected costs (``search_space.indirect_plan``) with the area model's
+    coverage costs: the direct plan and one per candidate type, cheapest first."""
+    cover = {target: area_cover_seconds(size.area, size.rooms, ranges[target], tm, SWEEP_IMAGES)}
+    for name in candidates:
+        furniture = catalog.type(name).is_furniture
+        images = RING_IMAGES if furniture else SWEEP_IMAGES
+        cover[name] = area_cover_seconds(size.area, size.rooms, ranges[name], tm, images)
+    look = {n: look_seconds_model(catalog, probs, n, target, size, tm) for n in candidates}
+    return ss.indirect_plan(target, catalog, probs, cover, look, candidates)
+
+
+def predicted_gain(plan: Sequence[ss.IndirectOption], via: str | None) -> float | None:
+    """The efficiency ratio C_direct / C_via of ``via`` in ``plan`` (None if not in it)."""
+    direct = next(o.cost for o in plan if o.via is None)
+    for o in plan:
+        if o.via == via and via is not None:
+            return direct / max(o.cost, 1e-9)
+    return None

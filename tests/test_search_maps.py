@@ -1,0 +1,169 @@
+"""The two map scenarios of object search (issue 12, point 2) and indirect search against Wixson
+& Ballard's model (point 7): what the built scenario knows, frontier, map-only, the scenario
+checks, the recorded intermediate, determinism."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from agent import search as S
+from agent import search_explore as sx
+from agent import search_space as ss
+from envs.layout import Door, RoomLayout
+from envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import ObjectInstance
+from scripts.experiments.bench_indirect import NONE_PREDICTED, indirect_analysis
+
+DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
+SHELF = ObjectInstance("Shelf", 2, (-2.2, -0.2, 0.8), 0.0, (0.35, 1.0, 1.6))
+CUP = ObjectInstance("Cup", 3, (0.2, 1.5, 0.79), 0.0, (0.08, 0.08, 0.10))
+PEN = ObjectInstance("Pen", 4, (-0.2, 1.6, 0.75), 0.3, (0.14, 0.012, 0.012))
+START = RobotPose(0.0, -1.2, -math.pi / 2)  # facing away from the desk: nothing in view
+
+
+def room(*objects: ObjectInstance) -> RoomLayout:
+    return RoomLayout(
+        style="test",
+        seed=0,
+        width=5.0,
+        depth=4.0,
+        height=2.8,
+        door=Door("south", 1.5, 0.9),
+        objects=tuple(objects),
+        support={},
+        placed_by={},
+    )
+
+
+def _run(policy, layout, catalog, world, target="Cup", probs=None, scenario="built", budget=200.0):
+    ep = S.Episode(0, "test", 0, target, START, budget)
+    maker = S.RoomMaps.built if scenario == "built" else S.RoomMaps.given
+    maps = maker(layout, catalog, world.spec)
+    ctx = S.SearchContext(ep, layout, catalog, world, maps=maps, probs=probs, policy=policy)
+    return S.make_policy(policy).run(ctx), ctx
+
+
+# =========================================================================== pure parts
+def test_built_scenario_knows_no_furniture_and_no_free_cell(catalog):
+    layout = room(DESK, SHELF, CUP)
+    maps = S.RoomMaps.built(layout, catalog, RobotSpec())
+    assert maps.map == "built" and maps.furniture == ()
+    assert not maps.grid.free.any()
+    given = S.RoomMaps.given(layout, catalog, RobotSpec())
+    assert given.map == "given" and {o.id for o in given.furniture} == {DESK.id, SHELF.id}
+    # The built seen map's lattice does not know where the furniture's solid parts are.
+    assert len(maps.seen) > len(given.seen)
+
+
+def test_visible_cells_stop_at_the_first_blocked_cell():
+    blocked = np.zeros((20, 20), bool)
+    blocked[:, 10] = True  # a wall at x in [2.0, 2.2)
+    vis = sx.visible_cells(blocked, (0.0, 0.0), np.array([1.0, 2.0]), 3.0)
+    assert vis[10, 5] and vis[10, 10]  # open floor and the wall itself
+    assert not vis[10, 11:].any()  # nothing behind the wall
+
+
+def test_efficiency_model_predicts_a_gain_only_for_a_related_easier_type(catalog):
+    tm = TimeModel()
+    size = sx.WorldSize(120.0, 5)
+    ranges = {"Pen": 1.0, "Desk": 9.0}
+    related = ss.TableProbabilities({("ON-TOP-OF-DESK", "Pen"): 0.9}, per_room={"Desk": 2.0})
+    plan = sx.predicted_plan("Pen", catalog, related, size, ranges, tm, ["Desk"])
+    assert sx.predicted_gain(plan, "Desk") > 1.0
+    unrelated = ss.TableProbabilities({("ON-TOP-OF-DESK", "Pen"): 0.01}, per_room={"Desk": 2.0})
+    plan = sx.predicted_plan("Pen", catalog, unrelated, size, ranges, tm, ["Desk"])
+    assert sx.predicted_gain(plan, "Desk") < 1.0
+
+
+def test_policy_scenario_mismatch_is_a_one_line_error():
+    with pytest.raises(CtxsearchError, match="policy 'location' needs --map given"):
+        S.check_scenario(["frontier", "location@low"], "built")
+    with pytest.raises(CtxsearchError, match="policy 'frontier' needs --map built"):
+        S.check_scenario(["frontier"], "given")
+    with pytest.raises(CtxsearchError, match="unknown map"):
+        S.check_scenario(["oracle"], "drawn")
+    S.check_scenario(["indirect", "oracle"], "given")  # both scenarios
+    for scenario, names in S.DEFAULT_POLICIES.items():
+        S.check_scenario(names, scenario)
+
+
+def test_cli_policy_scenario_mismatch_exits_2_with_one_line(tmp_path):
+    cmd = [sys.executable, "-m", "scripts.cli", "bench", "search", "--kb", str(tmp_path / "k"),
+           "--style", "apartment", "--policies", "frontier,location", "--out", str(tmp_path / "o")]  # fmt: skip
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip() == "ctxsearch: error: policy 'location' needs --map given"
+
+
+def test_indirect_analysis_groups_by_intermediate():
+    eps = [S.Episode(i, "test", i, "Pen", START, 100.0) for i in range(3)]
+
+    def res(name, t, via=None, gain=None):
+        return S.SearchResult(name, 0, "Pen", True, 1, t, 1, 0.0, 100.0, [], [], via, gain)
+
+    results = {
+        "indirect": [res("indirect", 10, "Desk", 2.0), res("indirect", 30, "Desk", 1.5),
+                     res("indirect", 20, None, 0.4)],
+        "frontier": [res("frontier", 40), res("frontier", 20), res("frontier", 20)],
+    }  # fmt: skip
+    doc = indirect_analysis(eps, results)
+    g = doc["groups"]
+    assert g["Desk"]["episodes"] == 2 and g["Desk"]["wins"] == 1 and g["Desk"]["losses"] == 1
+    assert g["Desk"]["predicted_gain"] == pytest.approx(1.75)
+    assert g[NONE_PREDICTED]["measured_ratio"] == pytest.approx(1.0)
+    assert g["all"]["episodes"] == 3
+
+
+# =========================================================================== rendered
+@pytest.mark.render
+def test_frontier_finds_a_cup_out_of_view_and_its_map_starts_unknown(catalog):
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP)
+    with World(layout, catalog) as world:
+        ep = S.Episode(0, "test", 0, "Cup", START, 200.0)
+        ctx = S.SearchContext(
+            ep, layout, catalog, world, maps=S.RoomMaps.built(layout, catalog, world.spec)
+        )
+        assert ctx.built is not None and ctx.built.unknown.mean() > 0.95
+        assert ctx.known == {} and ctx.furniture_map() == []
+        res, ctx = _run("frontier", layout, catalog, world)
+        again, _ = _run("frontier", layout, catalog, world)
+    assert res.success and res.found_id == CUP.id and res.sim_time < 200.0, res.log
+    assert ctx.built.images == res.gazes and ctx.built.floor.sum() > 500
+    # Determinism: the same episode gives the same search.
+    assert again.sim_time == res.sim_time and again.gazes == res.gazes
+    assert [g.pose for g in again.trace] == [g.pose for g in res.trace]
+
+
+@pytest.mark.render
+def test_map_only_looks_into_the_furniture_volumes_without_probabilities(catalog):
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP)
+    with World(layout, catalog) as world:
+        res, _ = _run("map-only", layout, catalog, world, scenario="given")
+    assert res.success and res.found_id == CUP.id, res.log
+    assert any(g.purpose.startswith("region ") for g in res.trace)
+    assert any("tour of" in line for line in res.log)
+
+
+@pytest.mark.render
+def test_indirect_records_the_intermediate_it_searched_for(catalog):
+    from envs.world import World
+
+    layout = room(DESK, SHELF, PEN)
+    probs = ss.TableProbabilities(
+        {("ON-TOP-OF-DESK", "Pen"): 0.95, ("ON-SHELF", "Pen"): 0.01}, per_room={"Desk": 3.0}
+    )
+    with World(layout, catalog) as world:
+        res, _ = _run("indirect", layout, catalog, world, target="Pen", probs=probs)
+    assert res.predicted_gain is not None and res.predicted_gain > 1.0, res.log
+    assert res.intermediate == "Desk", res.log
+    assert res.success, res.log
