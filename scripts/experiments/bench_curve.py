@@ -274,6 +274,7 @@ def plot_curve(doc: dict, path: Path) -> None:
     ax.axhline(1.0, color="grey", ls=":", lw=1)
     ax.set_xscale("symlog", linthresh=1)
     ax.set_xlim(left=0)
+    ax.set_xticks(ks, [str(k) for k in ks])
     ax.set_xlabel("worlds learned k (symlog)")
     ax.set_ylabel("paired median ratio  t_context / t_baseline")
     ax.set_title(
