@@ -145,6 +145,11 @@ def test_transfer_table_is_learned_in_by_searched_in(transfer_dir):
         doc["noticing"]["wilson"]["office"]["biology_lab"]["unknown_type_share"]
         > (doc["noticing"]["wilson"]["office"]["office"]["unknown_type_share"])
     )
+    for style in styles:
+        n, rooms = _examinations(transfer_dir / "stores" / f"{style}.sqlite")
+        assert n == doc["stores"][style]["examinations"] > 0 and len(rooms) == 1
+        n, probe_rooms = _examinations(transfer_dir / "stores" / f"{style}.probe.sqlite")
+        assert n == doc["stores"][style]["probe_examinations"] > 0 and not rooms & probe_rooms
     rows = list(csv.DictReader((transfer_dir / "transfer.csv").open()))
     assert len(rows) == 2 * 2 + 2 * 2 * 2 * 2  # baseline per style; context per cell x interval
     md = (transfer_dir / "transfer.md").read_text()

@@ -38,6 +38,7 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.store import EvidenceStore
+from scripts.experiments.bench_curve import snapshot
 from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
 from scripts.experiments.scenarios import (
     RESULT_COLUMNS,
@@ -80,6 +81,11 @@ class TransferResult:
     wall_s: float = 0.0
 
 
+def _slug(style: str) -> str:
+    """A style (a name or a TOML path) as a file name."""
+    return Path(style).stem
+
+
 def learn_unit(perception: str, detector: str | None, unit: tuple[str, int, int]) -> dict:
     """A sweep unit: learn ``unit`` = (style, rooms, seed) in a fresh store; its examinations
     and the store's bytes (plain data: the unit may run on another machine)."""
@@ -91,7 +97,9 @@ def learn_unit(perception: str, detector: str | None, unit: tuple[str, int, int]
         summary = learn(lc)
         if summary.interrupted:
             raise KeyboardInterrupt
-        return {"examinations": summary.total_examinations, "store": path.read_bytes()}
+        copy = Path(tmp) / "copy.sqlite"
+        snapshot(path, copy)  # one self-contained file, whatever the journal left beside it
+        return {"examinations": summary.total_examinations, "store": copy.read_bytes()}
 
 
 def check_config(config: TransferConfig) -> None:
@@ -135,7 +143,9 @@ def learn_stores(
     out: dict[str, dict] = {s: {"probe": None, "probe_examinations": 0} for s in config.styles}
     for (style, _rooms, s), r in zip(units, done, strict=True):
         kind = "kb" if s == seed else "probe"
-        path = stores / (f"{style}.sqlite" if kind == "kb" else f"{style}.probe.sqlite")
+        path = stores / (
+            f"{_slug(style)}.sqlite" if kind == "kb" else f"{_slug(style)}.probe.sqlite"
+        )
         path.write_bytes(r["store"])
         out[style][kind] = path
         out[style]["examinations" if kind == "kb" else "probe_examinations"] = r["examinations"]
@@ -216,7 +226,7 @@ def search_cells(
                     base = replace(config.search, style=y, kb=stores[x]["kb"], interval=m)
                     first = cell is None
                     pols = (sc.baseline, sc.context) if first else (sc.context,)
-                    where = out / "search" / f"{x}_to_{y}" / sc.name / m
+                    where = out / "search" / f"{_slug(x)}_to_{_slug(y)}" / sc.name / m
                     res = search(base, sc, where, policies=pols, sweep=sweep, bar=bar)
                     if first:
                         cell = Cell(res)
