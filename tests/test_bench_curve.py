@@ -183,6 +183,15 @@ def test_bad_input_is_one_line_and_exit_2(argv, message, tmp_path, capsys):
     assert not (tmp_path / "out" / "stores").exists()  # nothing learned before the check
 
 
+def test_an_earlier_runs_stores_are_never_overwritten(curve_dir, transfer_dir, capsys):
+    before = (curve_dir / "stores" / "k=0001.sqlite").read_bytes()
+    assert main([*CURVE, *POLICY_FLAGS, *SMALL, "--out", str(curve_dir)]) == 2
+    assert main([*TRANSFER, *POLICY_FLAGS, *SMALL, "--out", str(transfer_dir)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("an earlier run is in the way" in e for e in err)
+    assert (curve_dir / "stores" / "k=0001.sqlite").read_bytes() == before
+
+
 def test_default_scenarios_match_the_cli_copy():
     from scripts.cmd_context import SCENARIO_POLICIES
     from scripts.experiments.scenarios import DEFAULT_SCENARIOS

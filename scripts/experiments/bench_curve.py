@@ -13,7 +13,8 @@ policy to the baseline and of the asymptote to the baseline), ``DIR/curve.md``, 
 (the paired ratio against k on a symlog axis with its 95% band, the asymptote dashed) and
 ``DIR/curve.csv`` (one row per k, scenario, episode and policy; a baseline or asymptote row
 repeats, at every k, the run made at ``measured_at_k``). The snapshots stay in
-``DIR/stores/k=K.sqlite``, each snapshot's search files in ``DIR/k=K/MAP/``.
+``DIR/stores/k=K.sqlite`` (stores of an earlier run there are an error, never overwritten),
+each snapshot's search files in ``DIR/k=K/MAP/``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
 from scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
+    check_no_stores,
     check_policies,
     paired_ratio,
     result_rows,
@@ -109,8 +111,7 @@ def learn_snapshots(
     (k, examinations, snapshot path or None for k = 0) per k."""
     s = config.search
     stores.mkdir(parents=True, exist_ok=True)
-    run = stores / "run.sqlite"
-    run.unlink(missing_ok=True)  # one fresh run: an old one of other settings would mix in
+    run = stores / "run.sqlite"  # a fresh run (bench_curve checked that none is there)
     out: list[tuple[int, int, Path | None]] = []
     for k in config.rooms:
         if k == 0:
@@ -152,6 +153,7 @@ def bench_curve(
     resolve_style(config.search.style, catalog)  # one-line errors before any learning
     config.search.detector_model(catalog)
     check_policies(config.scenarios)
+    check_no_stores(out / "stores")
     snaps = learn_snapshots(config, out / "stores", bar)
     points: list[CurvePoint] = []
     with session(sweep or SweepOptions()):

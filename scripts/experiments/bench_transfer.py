@@ -19,7 +19,8 @@ share of probe examinations of reference types the store never examined
 
 Writes ``DIR/transfer.json``, ``DIR/transfer.md`` and ``DIR/transfer.csv`` (one row per learned-in,
 searched-in, interval, scenario, episode and policy; the baseline's rows once per searched-in
-style, with no learned-in style and interval); stores in ``DIR/stores/``, every search's files
+style, with no learned-in style and interval); stores in ``DIR/stores/`` (an earlier run's
+there are an error, never overwritten), every search's files
 in ``DIR/search/LEARNED_to_SEARCHED/MAP/INTERVAL/``.
 """
 
@@ -43,6 +44,7 @@ from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
 from scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
+    check_no_stores,
     check_policies,
     paired_ratio,
     result_rows,
@@ -249,6 +251,7 @@ def bench_transfer(
     out = Path(out)
     sweep = sweep or SweepOptions()
     check_config(config)
+    check_no_stores(out / "stores")
     with session(sweep):
         stores = learn_stores(config, out / "stores", sweep, bar)
         if progress is not None:

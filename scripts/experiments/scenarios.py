@@ -116,6 +116,17 @@ def check_policies(scenarios: Iterable[Scenario]) -> None:
             ) from None
 
 
+def check_no_stores(stores: Path) -> None:
+    """A one-line error if ``stores`` holds knowledge stores already (an earlier run's
+    learning): a benchmark never overwrites learned evidence."""
+    old = sorted(stores.glob("*.sqlite")) if stores.is_dir() else []
+    if old:
+        raise CtxsearchError(
+            f"{old[0]}: a knowledge store of an earlier run is in the way; remove {stores} or "
+            "choose another --out"
+        )
+
+
 def times(res: BenchResult, policy: str) -> np.ndarray:
     """Simulated seconds to find per episode of ``policy`` in ``res`` (failures at the budget)."""
     return np.array([r.time_to_find for r in res.results[policy]], float)
