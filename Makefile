@@ -53,6 +53,12 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 # Detector x interval against the truth, camera mode (about 22 minutes on 2 shared cores).
 	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals
+# Does learning pay? The paired search ratio after k learned houses, built and given map (issue 12),
+# and context learned in one room style used in another (estimated at about 9 + 3 minutes on 2
+# unloaded cores from smaller runs, before the built-map search policies; see README).
+	rm -rf results/curve/stores results/transfer/stores
+	$(VENV)/bin/ctxsearch bench curve --style apartment --rooms 0,1,3,10,30 --seed 0 --episodes 20 --out results/curve --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench transfer --styles office,biology_lab --rooms 10 --episodes 40 --out results/transfer --workers $(WORKERS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -34,6 +34,7 @@ BENCH_MODULES = [
     "scripts.cmd_learn",
     "scripts.cmd_search",
     "scripts.cmd_hierarchy",
+    "scripts.cmd_context",
 ]
 
 

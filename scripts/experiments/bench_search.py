@@ -241,10 +241,12 @@ def bench_search(
     progress: Callable[[str], None] | None = print,
     sweep: SweepOptions | None = None,
     bar: bool = True,
+    kb: KnowledgeBase | None = None,
 ) -> BenchResult:
     """The benchmark (module docstring): run, aggregate, write the four files to ``out``.
     ``progress`` gets a line per episode and policy (in episode order, as batches finish),
-    ``bar`` shows a progress bar over the sweep's units."""
+    ``bar`` shows a progress bar over the sweep's units; ``kb``: the knowledge in memory
+    instead of the store ``config.kb`` (``bench curve``'s empty store at k = 0)."""
     t_wall = time.perf_counter()
     catalog = load_catalog()
     names = list(config.policies)
@@ -253,7 +255,7 @@ def bench_search(
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
     style = resolve_style(config.style, catalog)
-    priors = load_priors(config, style, catalog, kb_path=config.kb)
+    priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb)
     eps = make_episodes(
         style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
     )

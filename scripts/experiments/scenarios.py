@@ -1,0 +1,213 @@
+"""Search scenarios and the paired ratio, shared by ``bench curve`` and ``bench transfer``.
+
+A scenario names what the robot knows at the start of an episode (``built``: nothing, it builds
+its map; ``given``: the furniture poses) and three policies: the no-context baseline, the
+context policy (the learned intervals) and the asymptote (the same policy with the true
+probabilities). ``scenario_config`` turns a scenario into a ``bench search`` configuration.
+
+The headline statistic is the **paired** ratio: per episode, the context policy's simulated
+seconds to find over the baseline's (a failure counted at the budget), summarised by its median
+over episodes with a seeded percentile bootstrap 95% interval, and the episodes the context
+policy won (ratio < 1) and lost (ratio > 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from agent import search as S
+from knowledge.base import KnowledgeBase
+from knowledge.errors import CtxsearchError
+from scripts.experiments.bench_search import (
+    BenchResult,
+    SearchBenchConfig,
+    bench_search,
+    bootstrap_ci,
+)
+from scripts.sweep import SweepOptions
+
+SCENARIO_NAMES = ("built", "given")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A map scenario and its three policies (module docstring)."""
+
+    name: str  # "built" or "given": the map the robot searches on
+    baseline: str  # no context
+    context: str  # ranks by the learned intervals
+    asymptote: str  # the context policy with the true probabilities
+
+    @property
+    def policies(self) -> tuple[str, str, str]:
+        """(baseline, context, asymptote)."""
+        return (self.baseline, self.context, self.asymptote)
+
+    def to_json(self) -> dict:
+        """The scenario as JSON."""
+        return {
+            "map": self.name,
+            "baseline": self.baseline,
+            "context": self.context,
+            "asymptote": self.asymptote,
+        }
+
+
+# The scenarios of issue 12: the built map against frontier exploration, the given map against
+# the map alone.
+DEFAULT_SCENARIOS = {
+    "built": Scenario("built", "frontier", "indirect", "oracle-prior-indirect"),
+    "given": Scenario("given", "map-only", "location", "oracle-prior"),
+}
+
+
+def scenario_config(
+    base: SearchBenchConfig, scenario: Scenario, policies: Sequence[str] | None = None
+) -> SearchBenchConfig:
+    """``base`` set up for ``scenario``: its policies (or ``policies``, a subset) and its map."""
+    # The map scenario joins here once SearchConfig has a ``map`` field (issue 12, wt12b):
+    # replace(..., map=scenario.name).
+    return replace(base, policies=tuple(policies or scenario.policies))
+
+
+def parse_scenarios(names: str, overrides: dict[str, str | None]) -> tuple[Scenario, ...]:
+    """The scenarios named in ``names`` (comma-separated, of SCENARIO_NAMES), each with its
+    policies from ``overrides[name]`` ("baseline,context,asymptote") when given; one-line errors
+    for unknown scenarios or policies."""
+    out = []
+    for name in (n.strip() for n in names.split(",") if n.strip()):
+        if name not in DEFAULT_SCENARIOS:
+            raise CtxsearchError(
+                f"--scenarios: unknown scenario '{name}' (known: {', '.join(SCENARIO_NAMES)})"
+            )
+        if any(s.name == name for s in out):
+            raise CtxsearchError(f"--scenarios: '{name}' is listed twice")
+        text = overrides.get(name)
+        sc = DEFAULT_SCENARIOS[name]
+        if text is not None:
+            try:
+                names3 = S.parse_policies(text)
+            except CtxsearchError as exc:
+                raise CtxsearchError(f"--{name}-policies: {exc}") from None
+            if len(names3) != 3:
+                raise CtxsearchError(
+                    f"--{name}-policies: give three policies, baseline,context,asymptote "
+                    f"(got {len(names3)})"
+                )
+            sc = Scenario(name, *names3)
+        out.append(sc)
+    if not out:
+        raise CtxsearchError("--scenarios: give at least one scenario")
+    return tuple(out)
+
+
+def check_policies(scenarios: Iterable[Scenario]) -> None:
+    """A one-line error naming the first unknown policy of ``scenarios`` (before any learning)."""
+    for sc in scenarios:
+        try:
+            S.parse_policies(",".join(sc.policies))
+        except CtxsearchError as exc:
+            raise CtxsearchError(
+                f"scenario '{sc.name}': {exc} (choose others with --{sc.name}-policies)"
+            ) from None
+
+
+def check_no_stores(stores: Path) -> None:
+    """A one-line error if ``stores`` holds knowledge stores already (an earlier run's
+    learning): a benchmark never overwrites learned evidence."""
+    old = sorted(stores.glob("*.sqlite")) if stores.is_dir() else []
+    if old:
+        raise CtxsearchError(
+            f"{old[0]}: a knowledge store of an earlier run is in the way; remove {stores} or "
+            "choose another --out"
+        )
+
+
+def times(res: BenchResult, policy: str) -> np.ndarray:
+    """Simulated seconds to find per episode of ``policy`` in ``res`` (failures at the budget)."""
+    return np.array([r.time_to_find for r in res.results[policy]], float)
+
+
+# The paired ratio of one policy to a baseline. bench_search.aggregate computes the same
+# statistics (issue 12: ``paired_ratio: {baseline: {median, ci, wins, losses}}``) once wt12a's
+# version is merged; this helper is then replaced by reading it from there.
+def paired_ratio(t: Sequence[float], t_baseline: Sequence[float], seed: int = 0) -> dict:
+    """Median over episodes of t / t_baseline, its seeded bootstrap 95% interval, the episodes
+    won (ratio < 1), lost (> 1) and their number."""
+    a, b = np.asarray(t, float), np.asarray(t_baseline, float)
+    if a.shape != b.shape:
+        raise ValueError(f"unpaired times: {a.shape} vs {b.shape}")
+    ratio = a / np.maximum(b, 1e-6)
+    lo, hi = bootstrap_ci(ratio, np.median, seed=seed)
+    return {
+        "median": round(float(np.median(ratio)), 4) if len(ratio) else None,
+        "ci": [round(lo, 4), round(hi, 4)] if len(ratio) else [None, None],
+        "wins": int(np.sum(ratio < 1 - 1e-9)),
+        "losses": int(np.sum(ratio > 1 + 1e-9)),
+        "episodes": len(ratio),
+    }
+
+
+def episode_key(ep: S.Episode) -> tuple:
+    """What makes two episodes the same: room, target, start pose and budget."""
+    return (ep.style, ep.room_seed, ep.target, ep.start.x, ep.start.y, ep.start.yaw, ep.budget_s)
+
+
+def same_episodes(a: Sequence[S.Episode], b: Sequence[S.Episode], what: str) -> None:
+    """An error unless ``a`` and ``b`` are the same episodes (the pairing would be broken)."""
+    if [episode_key(e) for e in a] != [episode_key(e) for e in b]:
+        raise CtxsearchError(f"{what}: the episodes differ, the comparison would not be paired")
+
+
+def search(
+    base: SearchBenchConfig,
+    scenario: Scenario,
+    out: Path,
+    *,
+    policies: Sequence[str] | None = None,
+    kb: KnowledgeBase | None = None,
+    sweep: SweepOptions | None = None,
+    bar: bool = True,
+) -> BenchResult:
+    """``bench search`` of ``scenario`` (``policies``: a subset of its policies) on the store
+    ``base.kb`` or the in-memory ``kb`` (an empty store: k = 0), files in ``out``."""
+    config = scenario_config(base, scenario, policies)
+    return bench_search(config, out, progress=None, sweep=sweep, bar=bar, kb=kb)
+
+
+# Per-episode rows of the curve's and the transfer's CSVs (after their own key columns).
+RESULT_COLUMNS = (
+    "map",
+    "episode",
+    "room_seed",
+    "target",
+    "policy",
+    "role",  # baseline, context or asymptote
+    "success",
+    "sim_s",
+    "time_to_find_s",
+    "gazes",
+    "path_m",
+)
+
+
+def result_rows(scenario: Scenario, res: BenchResult, policy: str, role: str):
+    """One row (RESULT_COLUMNS) per episode of ``policy`` in ``res``."""
+    for ep, r in zip(res.episodes, res.results[policy], strict=True):
+        yield {
+            "map": scenario.name,
+            "episode": ep.index,
+            "room_seed": ep.room_seed,
+            "target": ep.target,
+            "policy": policy,
+            "role": role,
+            "success": bool(r.success),
+            "sim_s": float(r.sim_time),
+            "time_to_find_s": float(r.time_to_find),
+            "gazes": int(r.gazes),
+            "path_m": float(r.path_m),
+        }
