@@ -13,13 +13,12 @@ from knowledge.catalog import load_catalog
 from knowledge.store import EvidenceStore
 from scripts.cli import main
 
-# Policies that exist today for both scenarios (frontier and map-only arrive with issue 12's
-# other branch); the flags choose them per scenario.
+# The default scenarios' policies, named by the flags that choose them per scenario.
 POLICY_FLAGS = [
     "--built-policies",
-    "exhaustive,indirect,oracle-prior-indirect",
+    "frontier,indirect,oracle-prior-indirect",
     "--given-policies",
-    "exhaustive,location,oracle-prior",
+    "map-only,location,oracle-prior",
 ]
 SMALL = ["--perception", "oracle", "--budget-seconds", "20", "--truth-samples", "5", "--quiet"]
 CURVE = ["bench", "curve", "--style", "office", "--rooms", "0,1,2", "--episodes", "3"]
@@ -90,7 +89,7 @@ def test_curve_files_and_ratios(curve_dir):
     doc = json.loads((curve_dir / "curve.json").read_text())
     assert doc["scenarios"]["given"] == {
         "map": "given",
-        "baseline": "exhaustive",
+        "baseline": "map-only",
         "context": "location",
         "asymptote": "oracle-prior",
     }
@@ -118,7 +117,7 @@ def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_stor
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     base = SearchBenchConfig(style="office", policies=("exhaustive", "location"), kb=kb,
-                             episodes=3, budget_s=20.0)  # fmt: skip
+                             episodes=3, budget_s=20.0, map="given")  # fmt: skip
     both = bench_search(base, tmp_path / "a", progress=None, bar=False)
     alone = bench_search(
         replace(base, policies=("location",)), tmp_path / "b", progress=None, bar=False

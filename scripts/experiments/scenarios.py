@@ -69,9 +69,7 @@ def scenario_config(
     base: SearchBenchConfig, scenario: Scenario, policies: Sequence[str] | None = None
 ) -> SearchBenchConfig:
     """``base`` set up for ``scenario``: its policies (or ``policies``, a subset) and its map."""
-    # The map scenario joins here once SearchConfig has a ``map`` field (issue 12, wt12b):
-    # replace(..., map=scenario.name).
-    return replace(base, policies=tuple(policies or scenario.policies))
+    return replace(base, policies=tuple(policies or scenario.policies), map=scenario.name)
 
 
 def parse_scenarios(names: str, overrides: dict[str, str | None]) -> tuple[Scenario, ...]:
