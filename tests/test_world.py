@@ -244,3 +244,24 @@ def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
     assert (tmp_path / "bench_sim.md").read_text().startswith("# bench sim")
     assert (tmp_path / "bench_sim.png").stat().st_size > 1000
     assert "gazes per second" in capsys.readouterr().out
+
+
+@pytest.mark.render
+def test_task_exposes_the_head_camera_as_observables(layout, catalog):
+    from dm_control import composer
+
+    task = RoomTask(catalog, layout=layout, camera_size=(64, 48))
+    assert {"head_rgb", "head_depth"} <= set(task.observables)
+    env = composer.Environment(task, strip_singleton_obs_buffer_dim=True)
+    obs = env.reset().observation
+    assert obs["head_rgb"].shape == (48, 64, 3) and obs["head_rgb"].dtype == np.uint8
+    assert obs["head_depth"].shape == (48, 64, 1)
+    # The same picture as the World's head camera at the same pose (the robot's geoms hidden).
+    with World(layout, catalog, width=64, height=48) as world:
+        world.reset_pose(RobotPose(*env.physics.bind(task.robot.joints).qpos))
+        frame = world.capture(rgb=True, depth=True)
+    assert np.median(np.abs(obs["head_depth"][:, :, 0] - frame.depth)) < 0.01
+    assert np.abs(obs["head_rgb"].astype(int) - frame.rgb.astype(int)).mean() < 8
+    env.close()
+    with pytest.raises(CtxsearchError, match="image size"):
+        RoomTask(catalog, layout=layout, camera_size=(0, 48))
