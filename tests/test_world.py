@@ -233,14 +233,25 @@ def test_egl_failure_is_a_one_line_error(layout, catalog, monkeypatch):
 @pytest.mark.render
 def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
     """`ctxsearch bench sim` on a tiny run writes its three files with the issue's keys."""
+    import csv
     import json
+    import statistics
 
     from scripts.cli import main
 
-    assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "1", "--gazes", "5"]) == 0
+    assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "2", "--gazes", "5"]) == 0
     r = json.loads((tmp_path / "bench_sim.json").read_text())
     for key in ("layouts_per_s", "compile_ms", "gazes_per_s", "overhead_ratio"):
         assert r[key] > 0
+    with (tmp_path / "bench_sim.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))  # one per timed gaze: the JSON's medians are over them
+    assert [(int(x["room"]), int(x["gaze"])) for x in rows] == [
+        (i, g) for i in (0, 1) for g in range(5)
+    ]
+    assert statistics.median(float(x["gaze_ms"]) for x in rows) == pytest.approx(r["gaze_ms"])
+    assert statistics.median(float(x["compile_ms"]) for x in rows[::5]) == pytest.approx(
+        r["compile_ms"]
+    )
     assert (tmp_path / "bench_sim.md").read_text().startswith("# bench sim")
     assert (tmp_path / "bench_sim.png").stat().st_size > 1000
     assert "gazes per second" in capsys.readouterr().out

@@ -13,8 +13,9 @@ examination of room r for every r in ``room_marks``, against the ground truth (`
 
 for ``wilson`` and ``clustered``; and the bias per reference type: the mean of p0 - p_true over
 its informative entries (the detector's misses pull it down, its false positives and
-confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json and
-DIR/intervals.md.
+confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json,
+DIR/intervals.md, and the same figures per seed in DIR/intervals.csv (``RUN_COLUMNS``) and
+DIR/intervals_bias.csv (``BIAS_COLUMNS``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from knowledge import intervals
 from knowledge.catalog import load_catalog
 from scripts.experiments.bench_learning import TRUTH_SEED
 from scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
+from scripts.experiments.tables import write_csv
 
 # (label, detector preset, confirm): the detector settings compared.
 SETTINGS = (("perfect", "perfect", 1), ("realistic", "realistic", 1),
@@ -88,7 +90,8 @@ def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float)
 
 
 def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: bool = True) -> dict:
-    """Run the benchmark; write DIR/intervals.json and DIR/intervals.md; the JSON document."""
+    """Run the benchmark; write DIR/intervals.json, DIR/intervals.md, DIR/intervals.csv and
+    DIR/intervals_bias.csv; the JSON document."""
     catalog = load_catalog()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -103,6 +106,8 @@ def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: boo
         "perception": "camera",
         "rows": [],
     }
+    runs: list[dict] = []  # intervals.csv: one row per (style, detector, seed, room mark)
+    bias_rows: list[dict] = []  # intervals_bias.csv: one row per those and reference type
     for style in config.styles:
         truth = ground_truth(style, config.truth_samples, TRUTH_SEED, catalog)
         for setting in settings:
@@ -130,11 +135,51 @@ def bench_intervals(config: IntervalsBenchConfig, out: str | Path, progress: boo
                     r: float(np.median([b[r] for b in biases if r in b])) for r in types
                 }
                 doc["rows"].append(row)
+                _seed_rows(runs, bias_rows, row, traces, ks, truth_p, refs, config.alpha)
             if progress:
                 print(f"{style} {setting[0]}: {time.perf_counter() - t0:.0f} s wall", flush=True)
     (out / "intervals.json").write_text(json.dumps(doc, indent=1) + "\n")
     (out / "intervals.md").write_text(markdown(doc))
+    write_csv(out / "intervals.csv", RUN_COLUMNS, runs)
+    write_csv(out / "intervals_bias.csv", BIAS_COLUMNS, bias_rows)
     return doc
+
+
+# intervals.csv: the cells of intervals.json per seed (the JSON holds their medians).
+RUN_COLUMNS = (
+    "style",
+    "detector",
+    "seed",
+    "rooms",  # the room mark: figures after this many rooms
+    "examinations",
+    *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson")),
+)
+# intervals_bias.csv: mean p0 - p_true over a reference type's informative entries, per seed.
+BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type", "bias")
+
+
+def _seed_rows(
+    runs: list[dict],
+    biases: list[dict],
+    row: dict,
+    traces: list[Trace],
+    ks: list[int],
+    truth_p: np.ndarray,
+    refs: list[str],
+    alpha: float,
+) -> None:
+    """Append each seed's figures at ``row``'s room mark to ``runs`` and ``biases``."""
+    for seed, (tr, k) in enumerate(zip(traces, ks, strict=True)):
+        key = {"style": row["style"], "detector": row["detector"], "seed": seed,
+               "rooms": row["rooms"], "examinations": k}  # fmt: skip
+        cells = {
+            f"{name}_{ck}": float(tr.at_exam(k, wk if name == "wilson" else ck))
+            for ck, wk in CELLS
+            for name in ("clustered", "wilson")
+        }
+        runs.append({**key, **cells})
+        for ref, b in _bias(tr, k, truth_p, refs, alpha).items():
+            biases.append({**key, "ref_type": ref, "bias": b})
 
 
 def markdown(doc: dict) -> str:
