@@ -103,17 +103,16 @@ def _start_ray(workers: int, ray_address: str | None) -> bool:
 
     if ray.is_initialized():
         return False
-    env = {k: os.environ[k] for k in WORKER_ENV if k in os.environ}
-    kwargs = dict(
-        runtime_env={"env_vars": env},
-        log_to_driver=False,
-        configure_logging=False,
-        include_dashboard=False,
-    )
+    kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
     try:
         if ray_address:
-            ray.init(address=ray_address, **kwargs)
+            env = {k: os.environ[k] for k in WORKER_ENV if k in os.environ}
+            ray.init(address=ray_address, runtime_env={"env_vars": env}, **kwargs)
         else:
+            # No runtime_env for a local Ray: its workers inherit the driver's environment
+            # (WORKER_ENV included), and a job-level runtime_env would make Ray start new workers
+            # for the job instead of using the ones it prestarted (measured: the first task then
+            # waits 2.3-5.3 s instead of 0.4-0.8 s; the fixed cost of a sweep drops by ~4 s).
             # Ray runs its workers at nice 15 by default: on a machine others use too they then
             # get a fraction of the CPU the serial run gets (measured: 1.5x slower per unit at a
             # load of 8 on 2 cores), so a local sweep's workers run at the driver's priority.
