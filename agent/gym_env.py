@@ -211,13 +211,15 @@ class ObjectSearchEnv(gymnasium.Env):
     ) -> tuple[dict, dict]:
         """A new episode (see the module docstring): the observation and info."""
         super().reset(seed=seed)
-        index = int((options or {}).get("index", 0))
+        index = (options or {}).get("index", 0)
+        if not (isinstance(index, int | np.integer) and index >= 0):
+            raise CtxsearchError(f"options['index'] must be a whole number >= 0, got {index!r}")
         ep_seed = seed if seed is not None else int(self.np_random.integers(2**31))
         self.episode, self.layout = draw_episode(
             self.style,
             int(ep_seed),
             self.catalog,
-            index=index,
+            index=int(index),
             budget_s=self.budget_s,
             exclude_seeds=self.learned,
             spec=self.robot_spec,

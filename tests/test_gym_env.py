@@ -13,6 +13,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import agent.gym_env as G
+from agent import search as S
 from envs.houses import resolve_style
 from envs.robot_spec import TimeModel
 from knowledge.base import KnowledgeBase
@@ -54,6 +55,10 @@ def test_reset_draws_the_benchmarks_episodes(catalog):
         pose = env.unwrapped.world.pose()
         assert (pose.x, pose.y) == pytest.approx((want.start.x, want.start.y), abs=1e-3)
     env.close()
+    learned = {S.held_out_seed(0, 0), S.held_out_seed(0, 2)}  # rooms a store learned in
+    want = make_episodes(style, 3, 0, catalog, exclude_seeds=learned)
+    got = [G.draw_episode(style, 0, catalog, index=i, exclude_seeds=learned)[0] for i in range(3)]
+    assert got == want and not learned & {e.room_seed for e in got}
 
 
 def _run(env: gymnasium.Env, seed: int, actions) -> list:
@@ -181,6 +186,8 @@ def test_step_needs_a_reset_and_a_valid_action():
     env.reset(seed=0)
     with pytest.raises(CtxsearchError, match="invalid action"):
         env.step(len(G.ACTIONS))
+    with pytest.raises(CtxsearchError, match="index"):
+        env.reset(seed=0, options={"index": -1})
     env.close()
 
 

@@ -20,7 +20,8 @@ def square_with_pid(x: int) -> dict:
     import os
 
     gl = os.environ.get("MUJOCO_GL"), os.environ.get("PYOPENGL_PLATFORM")
-    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0), "gl": list(gl)}
+    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0), "gl": list(gl),
+            "own_session": os.getsid(0) == os.getpid()}  # fmt: skip
 
 
 def refuse_three(x: int) -> int:
@@ -46,9 +47,11 @@ def test_two_workers_give_the_serial_results_in_order():
     units = list(range(8))
     serial = run_units(square_with_pid, units, progress=False)
     parallel = run_units(square_with_pid, units, workers=2, progress=False)
-    strip = [{k: v for k, v in d.items() if k != "pid"} for d in parallel]
-    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]  # nice too:
+    drop = {"pid", "own_session"}
+    strip = [{k: v for k, v in d.items() if k not in drop} for d in parallel]
+    assert strip == [{k: v for k, v in d.items() if k not in drop} for d in serial]  # nice too:
     # the workers run at the driver's priority, not Ray's default nice 15
+    assert all(d["own_session"] for d in parallel)  # a CPU share each (scripts.sweep.own_session)
     assert {d["pid"] for d in parallel}.isdisjoint({d["pid"] for d in serial})  # other processes
     assert parallel[0]["gl"] == [os.environ.get(k) for k in ("MUJOCO_GL", "PYOPENGL_PLATFORM")]
     assert parallel[0]["gl"][0] == "egl"  # the workers render off-screen like the driver
