@@ -5,6 +5,11 @@ objects; everything but the robot is static, so this is cheap) and ``initialize_
 robot at its start pose. With a style, episode k uses seed ``seed + k``, so a task and a seed give
 the same sequence of rooms. The task works under ``composer.Environment`` (the action is the five
 position-servo targets x, y, yaw, pan, tilt) and is what ``envs.world.World`` drives directly.
+
+Its observables are the head camera's images, ``head_rgb`` (H, W, 3) uint8 and ``head_depth``
+(H, W, 1) float32 metres, at ``camera_size`` (width, height), rendered as the World's head camera
+renders them (the robot's own geoms hidden), so a dm_env user of ``composer.Environment`` sees
+what the robot sees; the World never evaluates them (it renders through its own renderer).
 """
 
 from __future__ import annotations
@@ -13,20 +18,44 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
 
+import collections
+
 import numpy as np
 from dm_control import composer, mjcf
+from dm_control.composer.observation import observable
+from dm_control.mujoco.wrapper import core
 
-from envs.arena import PHYSICS_TIMESTEP, RoomArena
+from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, PHYSICS_TIMESTEP, RoomArena
 from envs.entities import RoomObjects
 from envs.floorplan import generate_layout
 from envs.houses import resolve_style
 from envs.layout import RoomLayout
-from envs.robot import Robot
+from envs.robot import ROBOT_GEOM_GROUP, Robot
 from envs.robot_spec import RobotPose, RobotSpec
 from envs.rooms import door_entry
 from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
 
 CONTROL_TIMESTEP = 0.05  # s, composer.Environment's agent step (5 physics steps)
+CAMERA_SIZE = (320, 240)  # the head camera observables' default (width, height), as World's
+
+
+def check_camera_size(width: int, height: int) -> tuple[int, int]:
+    """(width, height) as ints, or a one-line error outside 1x1 .. ``MAX_IMAGE_SIZE``."""
+    w, h = MAX_IMAGE_SIZE
+    if not (isinstance(width, int | np.integer) and isinstance(height, int | np.integer)):
+        raise CtxsearchError(f"image size must be whole pixels, got {width!r}x{height!r}")
+    if not (0 < width <= w and 0 < height <= h):
+        raise CtxsearchError(f"image size {width}x{height} outside 1x1..{w}x{h}")
+    return int(width), int(height)
+
+
+def head_scene_option() -> core.MjvOption:
+    """The head camera's render option: the robot's own geoms hidden, the ceiling shown."""
+    option = core.MjvOption()
+    option.geomgroup[ROBOT_GEOM_GROUP] = 0
+    option.geomgroup[OVERHEAD_GEOM_GROUP] = 1
+    return option
 
 
 def start_pose(layout: RoomLayout) -> RobotPose:
@@ -45,9 +74,11 @@ class RoomTask(composer.Task):
         style: str | None = None,
         seed: int = 0,
         spec: RobotSpec | None = None,
+        camera_size: tuple[int, int] = CAMERA_SIZE,
     ) -> None:
         if (layout is None) == (style is None):
             raise ValueError("RoomTask needs exactly one of layout= or style=")
+        width, height = check_camera_size(*camera_size)
         self._catalog = catalog or load_catalog()
         self._fixed_layout, self._style, self._seed = layout, style, seed
         self._episode = 0
@@ -57,6 +88,23 @@ class RoomTask(composer.Task):
         self._objects: RoomObjects | None = None
         self._layout: RoomLayout | None = None
         self.set_timesteps(control_timestep=CONTROL_TIMESTEP, physics_timestep=PHYSICS_TIMESTEP)
+        self._camera_observables = self._head_camera(width, height)
+
+    def _head_camera(self, width: int, height: int) -> collections.OrderedDict:
+        cam = self._robot.camera
+        out = collections.OrderedDict()
+        for name, depth in (("head_rgb", False), ("head_depth", True)):
+            obs = observable.MJCFCamera(
+                cam, height=height, width=width, depth=depth, scene_option=head_scene_option()
+            )
+            obs.enabled = True
+            out[name] = obs
+        return out
+
+    @property
+    def task_observables(self) -> collections.OrderedDict:
+        """The head camera: ``head_rgb`` (H, W, 3) uint8 and ``head_depth`` (H, W, 1) metres."""
+        return self._camera_observables
 
     @property
     def root_entity(self) -> RoomArena:

@@ -191,7 +191,8 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
             score recomputed after a record_examination), one record_examination, and the peak
             traced memory; and, where it fits (T <= 1000), the same choice with a dense (T, 6, T)
             implementation. Medians over --reps repetitions. Writes DIR/bench_kb.json (a list of
-            rows), DIR/bench_kb.md and DIR/bench_kb.png, and prints the table."""
+            rows), DIR/bench_kb.csv (the same rows), DIR/bench_kb.md and DIR/bench_kb.png, and
+            prints the table."""
         ),
         epilog=BENCH_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -419,5 +420,5 @@ def run_bench(args: argparse.Namespace) -> int:
     )
     paths = bench.write_results(rows, args.out, command=command)
     print(bench.markdown_table(rows))
-    print(f"wrote {paths['json']}, {paths['md']} and {paths['png']}")
+    print(f"wrote {paths['json']}, {paths['csv']}, {paths['md']} and {paths['png']}")
     return 0

@@ -242,8 +242,8 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
         "truth: informative coverage, mean |p0 - p_true|, mean width, bias per type",
         description="HIF learns in camera mode with each detector setting over the same rooms "
         "and seeds; after the given room counts, the intervals (wilson and clustered, on the same "
-        "evidence) are measured against the ground truth. Writes DIR/intervals.json and "
-        "DIR/intervals.md.",
+        "evidence) are measured against the ground truth. Writes DIR/intervals.json, "
+        "DIR/intervals.md and, per seed, DIR/intervals.csv and DIR/intervals_bias.csv.",
     )
     p.add_argument("--styles", default="office,apartment", help="comma-separated styles")
     p.add_argument("--rooms", default="10,30", help="comma-separated room marks (default: 10,30)")

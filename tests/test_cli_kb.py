@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import json
 import sqlite3
@@ -241,6 +242,11 @@ def test_bench_kb_tiny(capsys, tmp_path):
     assert (tmp_path / "bench_kb.md").read_text().count("\n| ") >= 3
     assert (tmp_path / "bench_kb.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| types |" in out and "bench_kb.json" in out
+    with (tmp_path / "bench_kb.csv").open(newline="") as f:
+        table = list(csv.DictReader(f))
+    assert [int(r["types"]) for r in table] == [50, 100]
+    assert [float(r["choose_ms"]) for r in table] == [r["choose_ms"] for r in rows]
+    assert all(r["dense_ratio"] != "" for r in table)
 
 
 def test_bench_dense_and_sparse_agree():

@@ -3,6 +3,7 @@ backed-off counts, the experiment's never-seen Workbench, and ``bench hierarchy`
 
 from __future__ import annotations
 
+import csv
 import json
 from collections import Counter
 
@@ -158,6 +159,19 @@ def test_bench_hierarchy_writes_its_files(tmp_path):
     assert doc["hif_backoff_agreement"]["choices"] > 0
     assert "| k |" in (out / "hierarchy.md").read_text()
     assert (out / "hierarchy.png").stat().st_size > 1000
+    with (out / "hierarchy.csv").open(newline="") as f:
+        errors = list(csv.DictReader(f))
+    assert len(errors) == 2 * len(doc["types"])
+    desk = [r for r in errors if r["ref_type"] == doc["types"][0]]
+    assert [float(r["coverage_flat"]) for r in desk] == doc["per_type"][doc["types"][0]][
+        "coverage_flat"
+    ]
+    with (out / "hierarchy_search.csv").open(newline="") as f:
+        searches = list(csv.DictReader(f))
+    assert len(searches) == 2 * 2 * 2  # (workbench, control) x 2 episodes x (flat, backoff)
+    first = doc["search"]["episode_list"][0]
+    assert float(searches[1]["time_to_find_s"]) == first["backoff_s"]
+    assert {r["part"] for r in searches} == {"workbench", "control"}
 
 
 @pytest.mark.parametrize(

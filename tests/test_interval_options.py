@@ -199,21 +199,3 @@ def test_min_score_outside_0_1_is_refused(capsys, tmp_path, bad):
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--min-score" in err and "[0, 1]" in err
     assert not kb.exists()
-
-
-def test_intervals_csv_has_one_column_per_bias_type(tmp_path):
-    import csv
-
-    from scripts.experiments.bench_intervals import write_csv_rows
-
-    rows = [
-        {"style": "office", "detector": "perfect", "rooms": 10, "examinations": 300.0,
-         "wilson_coverage_informative": 0.9, "bias_by_type": {"Desk": 0.01, "Cup": -0.02}},
-        {"style": "office", "detector": "realistic", "rooms": 10, "examinations": 310.0,
-         "wilson_coverage_informative": 0.8, "bias_by_type": {"Desk": 0.03}},
-    ]  # fmt: skip
-    path = write_csv_rows(tmp_path / "intervals.csv", rows)
-    got = list(csv.DictReader(path.open()))
-    assert [r["detector"] for r in got] == ["perfect", "realistic"]
-    assert list(got[0])[-2:] == ["bias_Cup", "bias_Desk"]
-    assert got[1]["bias_Cup"] == "" and float(got[1]["bias_Desk"]) == 0.03

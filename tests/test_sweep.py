@@ -3,6 +3,7 @@ one worker."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +19,9 @@ ROOT = Path(__file__).resolve().parents[1]
 def square_with_pid(x: int) -> dict:
     import os
 
-    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0)}
+    gl = os.environ.get("MUJOCO_GL"), os.environ.get("PYOPENGL_PLATFORM")
+    return {"x": x, "y": x * x, "pid": os.getpid(), "nice": os.nice(0), "gl": list(gl),
+            "own_session": os.getsid(0) == os.getpid()}  # fmt: skip
 
 
 def refuse_three(x: int) -> int:
@@ -44,10 +47,14 @@ def test_two_workers_give_the_serial_results_in_order():
     units = list(range(8))
     serial = run_units(square_with_pid, units, progress=False)
     parallel = run_units(square_with_pid, units, workers=2, progress=False)
-    strip = [{k: v for k, v in d.items() if k != "pid"} for d in parallel]
-    assert strip == [{k: v for k, v in d.items() if k != "pid"} for d in serial]  # nice too:
+    drop = {"pid", "own_session"}
+    strip = [{k: v for k, v in d.items() if k not in drop} for d in parallel]
+    assert strip == [{k: v for k, v in d.items() if k not in drop} for d in serial]  # nice too:
     # the workers run at the driver's priority, not Ray's default nice 15
+    assert all(d["own_session"] for d in parallel)  # a CPU share each (scripts.sweep.own_session)
     assert {d["pid"] for d in parallel}.isdisjoint({d["pid"] for d in serial})  # other processes
+    assert parallel[0]["gl"] == [os.environ.get(k) for k in ("MUJOCO_GL", "PYOPENGL_PLATFORM")]
+    assert parallel[0]["gl"][0] == "egl"  # the workers render off-screen like the driver
     with pytest.raises(CtxsearchError, match="unit 3: bad input"):
         run_units(refuse_three, units, workers=2, progress=False)
 

@@ -233,14 +233,46 @@ def test_egl_failure_is_a_one_line_error(layout, catalog, monkeypatch):
 @pytest.mark.render
 def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
     """`ctxsearch bench sim` on a tiny run writes its three files with the issue's keys."""
+    import csv
     import json
+    import statistics
 
     from scripts.cli import main
 
-    assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "1", "--gazes", "5"]) == 0
+    assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "2", "--gazes", "5"]) == 0
     r = json.loads((tmp_path / "bench_sim.json").read_text())
     for key in ("layouts_per_s", "compile_ms", "gazes_per_s", "overhead_ratio"):
         assert r[key] > 0
+    with (tmp_path / "bench_sim.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))  # one per timed gaze: the JSON's medians are over them
+    assert [(int(x["room"]), int(x["gaze"])) for x in rows] == [
+        (i, g) for i in (0, 1) for g in range(5)
+    ]
+    assert statistics.median(float(x["gaze_ms"]) for x in rows) == pytest.approx(r["gaze_ms"])
+    assert statistics.median(float(x["compile_ms"]) for x in rows[::5]) == pytest.approx(
+        r["compile_ms"]
+    )
     assert (tmp_path / "bench_sim.md").read_text().startswith("# bench sim")
     assert (tmp_path / "bench_sim.png").stat().st_size > 1000
     assert "gazes per second" in capsys.readouterr().out
+
+
+@pytest.mark.render
+def test_task_exposes_the_head_camera_as_observables(layout, catalog):
+    from dm_control import composer
+
+    task = RoomTask(catalog, layout=layout, camera_size=(64, 48))
+    assert {"head_rgb", "head_depth"} <= set(task.observables)
+    env = composer.Environment(task, strip_singleton_obs_buffer_dim=True)
+    obs = env.reset().observation
+    assert obs["head_rgb"].shape == (48, 64, 3) and obs["head_rgb"].dtype == np.uint8
+    assert obs["head_depth"].shape == (48, 64, 1)
+    # The same picture as the World's head camera at the same pose (the robot's geoms hidden).
+    with World(layout, catalog, width=64, height=48) as world:
+        world.reset_pose(RobotPose(*env.physics.bind(task.robot.joints).qpos))
+        frame = world.capture(rgb=True, depth=True)
+    assert np.median(np.abs(obs["head_depth"][:, :, 0] - frame.depth)) < 0.01
+    assert np.abs(obs["head_rgb"].astype(int) - frame.rgb.astype(int)).mean() < 8
+    env.close()
+    with pytest.raises(CtxsearchError, match="image size"):
+        RoomTask(catalog, layout=layout, camera_size=(0, 48))

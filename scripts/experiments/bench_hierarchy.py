@@ -38,7 +38,9 @@ Also measured, along the way: at every choice of the ``hif`` learning run, wheth
 ``hif-backoff`` (agent.strategies: impact on the backed-off pseudo-counts) would have chosen the
 same type from the same knowledge and candidates.
 
-Writes DIR/hierarchy.json, DIR/hierarchy.md and DIR/hierarchy.png.
+Writes DIR/hierarchy.json, DIR/hierarchy.md and DIR/hierarchy.png, and the per-unit rows as
+DIR/hierarchy.csv (per reference type and k) and DIR/hierarchy_search.csv (per episode and
+estimate).
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ from knowledge.pooling import Backoff, PooledCounts
 from knowledge.store import EvidenceStore
 from scripts.experiments.bench_search import aggregate, bootstrap_ci
 from scripts.experiments.episodes import SearchConfig, load_priors, make_episodes, search_room
+from scripts.experiments.tables import write_csv
 
 NEW_TYPE = "Workbench"
 NEW_SHAPE = "table"
@@ -368,7 +371,8 @@ class HierarchyResult:
 def bench_hierarchy(
     config: HierarchyBenchConfig, out: Path, progress: Callable[[str], None] | None = None
 ) -> HierarchyResult:
-    """Run both parts (module docstring) and write hierarchy.json / .md / .png to ``out``."""
+    """Run both parts (module docstring) and write hierarchy.json / .md / .png / .csv and
+    hierarchy_search.csv to ``out``."""
     t0 = time.perf_counter()
     style = resolve_style(config.style)
     if not isinstance(style, Style):
@@ -530,4 +534,52 @@ def _write(doc: dict, out: Path) -> HierarchyResult:
     md = format_markdown(doc)
     files[1].write_text(md)
     plot(doc, files[2])
+    files.append(write_csv(out / "hierarchy.csv", ERROR_COLUMNS, error_rows(doc)))
+    files.append(write_csv(out / "hierarchy_search.csv", SEARCH_COLUMNS, search_rows(doc)))
     return HierarchyResult(doc, md, files)
+
+
+# hierarchy.csv: one row per held-out reference type and k (its examinations kept), both
+# estimates side by side (the JSON's per_type lists).
+ERROR_COLUMNS = (
+    "style",
+    "ref_type",
+    "k",
+    "abs_error_flat",
+    "abs_error_backoff",
+    "coverage_flat",
+    "coverage_backoff",
+)
+# hierarchy_search.csv: one row per search episode and estimate, for the styles with the new
+# type ("workbench") and without it ("control").
+SEARCH_COLUMNS = (
+    "part",
+    "style",
+    "policy",
+    "episode",
+    "room_seed",
+    "target",
+    "estimate",
+    "time_to_find_s",
+)
+
+
+def error_rows(doc: dict):
+    """The rows of hierarchy.csv (``ERROR_COLUMNS``), type by type, k by k."""
+    for t, d in doc["per_type"].items():
+        for i, k in enumerate(doc["k"]):
+            yield {"style": doc["style"], "ref_type": t, "k": k,
+                   **{c: d[c][i] for c in ERROR_COLUMNS[3:]}}  # fmt: skip
+
+
+def search_rows(doc: dict):
+    """The rows of hierarchy_search.csv (``SEARCH_COLUMNS``)."""
+    for part, key in (("workbench", "search"), ("control", "search_control")):
+        s = doc.get(key)
+        if s is None:
+            continue
+        for e in s["episode_list"]:
+            for estimate in ("flat", "backoff"):
+                yield {"part": part, "style": s["style"], "policy": s["policy"],
+                       "episode": e["index"], "room_seed": e["room_seed"], "target": e["target"],
+                       "estimate": estimate, "time_to_find_s": e[f"{estimate}_s"]}  # fmt: skip

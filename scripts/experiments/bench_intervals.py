@@ -15,7 +15,8 @@ examination of room r for every r in ``room_marks``, against the ground truth (`
 for ``wilson`` and ``clustered``; and the bias per reference type: the mean of p0 - p_true over
 its informative entries (the detector's misses pull it down, its false positives and
 confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json,
-DIR/intervals.md and DIR/intervals.csv.
+DIR/intervals.md, and the same figures per seed in DIR/intervals.csv (``RUN_COLUMNS``) and
+DIR/intervals_bias.csv (``BIAS_COLUMNS``).
 """
 
 from __future__ import annotations
@@ -105,8 +106,8 @@ def bench_intervals(
     progress: bool = True,
     sweep: SweepOptions | None = None,
 ) -> dict:
-    """Run the benchmark; write DIR/intervals.json, DIR/intervals.md and DIR/intervals.csv
-    (one row per style, setting and room mark); the JSON document. The runs (style x setting x
+    """Run the benchmark; write DIR/intervals.json, DIR/intervals.md, DIR/intervals.csv and
+    DIR/intervals_bias.csv; the JSON document. The runs (style x setting x
     seed) are the units of a sweep (scripts.sweep: serial, or Ray tasks with ``sweep.workers``);
     the files are the same either way."""
     catalog = load_catalog()
@@ -138,6 +139,8 @@ def bench_intervals(
         progress=progress,
     )
     by_unit = dict(zip(units, done, strict=True))
+    runs: list[dict] = []  # intervals.csv: one row per (style, detector, seed, room mark)
+    bias_rows: list[dict] = []  # intervals_bias.csv: one row per those and reference type
     for style in config.styles:
         for setting in settings:
             traces = [by_unit[(style, setting, s)] for s in range(config.seeds)]
@@ -160,24 +163,51 @@ def bench_intervals(
                     r: float(np.median([b[r] for b in biases if r in b])) for r in types
                 }
                 doc["rows"].append(row)
+                _seed_rows(runs, bias_rows, row, traces, ks, truth_p, refs, config.alpha)
     if progress:
         print(f"bench intervals: {time.perf_counter() - t0:.0f} s wall", flush=True)
     (out / "intervals.json").write_text(json.dumps(doc, indent=1) + "\n")
     (out / "intervals.md").write_text(markdown(doc))
-    write_csv_rows(out / "intervals.csv", doc["rows"])
+    write_csv(out / "intervals.csv", RUN_COLUMNS, runs)
+    write_csv(out / "intervals_bias.csv", BIAS_COLUMNS, bias_rows)
     return doc
 
 
-def write_csv_rows(path: Path, rows: list[dict]) -> Path:
-    """intervals.csv: one row per (style, setting, room mark), its numbers, and its bias per
-    reference type as ``bias_<Type>`` (empty where the type had no informative entry)."""
-    types = sorted({t for r in rows for t in r["bias_by_type"]})
-    base = [k for k in (rows[0] if rows else {}) if k != "bias_by_type"]
-    flat = [
-        {**{k: r[k] for k in base}, **{f"bias_{t}": r["bias_by_type"].get(t) for t in types}}
-        for r in rows
-    ]
-    return write_csv(path, base + [f"bias_{t}" for t in types], flat)
+# intervals.csv: the cells of intervals.json per seed (the JSON holds their medians).
+RUN_COLUMNS = (
+    "style",
+    "detector",
+    "seed",
+    "rooms",  # the room mark: figures after this many rooms
+    "examinations",
+    *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson")),
+)
+# intervals_bias.csv: mean p0 - p_true over a reference type's informative entries, per seed.
+BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type", "bias")
+
+
+def _seed_rows(
+    runs: list[dict],
+    biases: list[dict],
+    row: dict,
+    traces: list[Trace],
+    ks: list[int],
+    truth_p: np.ndarray,
+    refs: list[str],
+    alpha: float,
+) -> None:
+    """Append each seed's figures at ``row``'s room mark to ``runs`` and ``biases``."""
+    for seed, (tr, k) in enumerate(zip(traces, ks, strict=True)):
+        key = {"style": row["style"], "detector": row["detector"], "seed": seed,
+               "rooms": row["rooms"], "examinations": k}  # fmt: skip
+        cells = {
+            f"{name}_{ck}": float(tr.at_exam(k, wk if name == "wilson" else ck))
+            for ck, wk in CELLS
+            for name in ("clustered", "wilson")
+        }
+        runs.append({**key, **cells})
+        for ref, b in _bias(tr, k, truth_p, refs, alpha).items():
+            biases.append({**key, "ref_type": ref, "bias": b})
 
 
 def markdown(doc: dict) -> str:

@@ -37,6 +37,7 @@ from matplotlib.figure import Figure
 from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, ObjectType, RelationSpec
+from scripts.experiments.tables import write_csv
 
 DEFAULT_SIZES = (100, 1000, 10_000, 30_000)
 RELATION_PREFIXES = ("ON-TOP-OF", "UNDER", "NEAR", "LEFT-OF", "RIGHT-OF", "BEHIND")
@@ -319,14 +320,37 @@ def _environment() -> str:
     )
 
 
+# bench_kb.csv: one row per catalog size, the keys of ``bench_size``'s row (empty: not run).
+KB_COLUMNS = (
+    "types",
+    "relations_per_type",
+    "nonzero",
+    "density",
+    "candidates",
+    "reps",
+    "choose_ms",
+    "choose_cached_ms",
+    "record_ms",
+    "peak_mb",
+    "rss_mb",
+    "build_s",
+    "dense_choose_ms",
+    "dense_record_ms",
+    "dense_ratio",
+    "dense_mb",
+)
+
+
 def write_results(
     rows: list[dict], out_dir: str | Path, command: str = "ctxsearch bench kb"
 ) -> dict[str, Path]:
-    """Write bench_kb.json (the rows), bench_kb.md (table + method) and bench_kb.png (plot)."""
+    """Write bench_kb.json (the rows), bench_kb.csv (the same rows: one per catalog size,
+    ``KB_COLUMNS``), bench_kb.md (table + method) and bench_kb.png (plot)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "bench_kb.json", "md": out / "bench_kb.md", "png": out / "bench_kb.png"}
     paths["json"].write_text(json.dumps(rows, indent=2) + "\n")
+    paths["csv"] = write_csv(out / "bench_kb.csv", KB_COLUMNS, rows)
     r0 = rows[0] if rows else {}
     md = [
         "# Knowledge-base benchmark",

@@ -9,6 +9,9 @@
 - the same images with a bare ``mujoco.Renderer`` on the same model and scene options: head
   joints written to qpos, ``mj_forward``, a segmentation render and a depth render. The overhead
   ratio is our gaze time over that bare time.
+
+``bench_sim.csv`` holds every timed gaze, one row each, with its room's build figures
+(``GAZE_COLUMNS``).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from envs.task import RoomTask, start_pose
 from envs.world import World, gl_renderer
 from knowledge.catalog import Catalog, load_catalog
 from scripts.experiments.bench_map import explore_results
+from scripts.experiments.tables import write_csv
 
 TARGETS = {"compile_ms": 150.0, "gazes_per_s": 60.0, "overhead_ratio": 1.3}
 WARMUP_GAZES = 5
@@ -97,6 +101,8 @@ class _Times:
     bare: list[float] = field(default_factory=list)
     geoms: list[int] = field(default_factory=list)
     objects: list[int] = field(default_factory=list)
+    room_seeds: list[int] = field(default_factory=list)
+    targets: list[np.ndarray] = field(default_factory=list)  # (gazes, 2) pan, tilt per room
 
 
 def run(
@@ -110,9 +116,9 @@ def run(
     explore: int = 1,
     frontier_rule: str = "info",
 ) -> dict:
-    """Run the benchmark, write ``bench_sim.json``, ``bench_sim.md`` and ``bench_sim.png`` to
-    ``out_dir``, and return the results (``size``: the head camera's width and height). The
-    first ``explore`` worlds are also explored fully with the robot's own map
+    """Run the benchmark, write ``bench_sim.json``, ``bench_sim.csv``, ``bench_sim.md`` and
+    ``bench_sim.png`` to ``out_dir``, and return the results (``size``: the head camera's width
+    and height). The first ``explore`` worlds are also explored fully with the robot's own map
     (scripts.experiments.bench_map; ``map_overview.png``)."""
     width, height = size
     load_before = os.getloadavg()[0]
@@ -133,7 +139,10 @@ def run(
         ms, world = _ms(lambda lay=lay: World(lay, catalog, width=width, height=height))
         times.world.append(ms)
         with world:
-            _time_gazes(times, world, lay, catalog, _gaze_targets(rng, gazes, world))
+            targets = _gaze_targets(rng, gazes, world)
+            times.room_seeds.append(int(lay.seed))
+            times.targets.append(targets)
+            _time_gazes(times, world, lay, catalog, targets)
     results = _results(times, gen_ms)
     if explore:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -157,7 +166,60 @@ def run(
         }
     )
     _write(results, out_dir)
+    write_csv(out_dir / "bench_sim.csv", GAZE_COLUMNS, gaze_rows(times, style, gazes))
     return results
+
+
+# bench_sim.csv: one row per timed gaze, with its room's build figures (the JSON's medians are
+# over these rows, and over the rooms for the build columns).
+GAZE_COLUMNS = (
+    "style",
+    "room",  # 0-based index of the room
+    "room_seed",
+    "geoms",
+    "objects",
+    "compile_ms",  # the room's fresh build + MJCF compile
+    "episode_compile_ms",  # the same room as a new episode of one task
+    "world_ms",
+    "renderer_init_ms",
+    "gaze",  # 0-based index of the gaze in its room
+    "pan_rad",
+    "tilt_rad",
+    "move_head_ms",
+    "capture_ms",
+    "detect_ms",
+    "gaze_ms",
+    "bare_render_ms",  # the bare mujoco.Renderer's two draws for the same gaze
+)
+
+
+def gaze_rows(times: _Times, style: str, gazes: int):
+    """The rows of bench_sim.csv (``GAZE_COLUMNS``), room by room, gaze by gaze."""
+    for i, (seed, targets) in enumerate(zip(times.room_seeds, times.targets, strict=True)):
+        room = {
+            "style": style,
+            "room": i,
+            "room_seed": seed,
+            "geoms": times.geoms[i],
+            "objects": times.objects[i],
+            "compile_ms": times.compile[i],
+            "episode_compile_ms": times.episode[i],
+            "world_ms": times.world[i],
+            "renderer_init_ms": times.renderer[i],
+        }
+        for g in range(gazes):
+            k = i * gazes + g
+            yield {
+                **room,
+                "gaze": g,
+                "pan_rad": float(targets[g, 0]),
+                "tilt_rad": float(targets[g, 1]),
+                "move_head_ms": times.move[k],
+                "capture_ms": times.capture[k],
+                "detect_ms": times.detect[k],
+                "gaze_ms": times.gaze[k],
+                "bare_render_ms": times.bare[k],
+            }
 
 
 def _time_builds(times: _Times, lay: RoomLayout, catalog: Catalog, episode_task: RoomTask) -> None:

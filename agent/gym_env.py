@@ -1,0 +1,381 @@
+"""The search task as a Gymnasium environment: ``ctxsearch/ObjectSearch-v0``.
+
+``import agent.gym_env`` registers it; then ::
+
+    env = gymnasium.make("ctxsearch/ObjectSearch-v0", style="office", detector="perfect",
+                         kb="build/kb_office.sqlite", width=64, height=48)
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+
+An episode is the benchmark's (``ctxsearch bench search``, ``scripts.experiments.episodes``):
+``reset(seed=s)`` draws held-out room ``agent.search.held_out_seed(s, i)`` for the first i whose
+room holds a small object and that the store (``kb``) did not learn in, a start pose (a uniformly
+drawn free cell, random heading: ``agent.search.random_start``) and a target type drawn among the
+room's small types, from the same random stream as the benchmark's episode 0 for seed s
+(``options={"index": k}``: its episode k). ``reset()`` without a seed draws the seed from the
+environment's own generator, so one seeded reset fixes every later episode.
+
+Actions (``Discrete(8)``, ``ACTIONS``), each charged by the one time model
+(``envs.robot_spec.TimeModel``) through the World, as every search policy is:
+
+====  ==========  ======================================================================
+ 0    forward     drive 0.5 m straight ahead (as far as the occupancy grid is free; 0 s
+                  when blocked)
+ 1    turn_left   turn the base +30 degrees
+ 2    turn_right  turn the base -30 degrees
+ 3    pan_left    pan the head +30 degrees (within its limits)
+ 4    pan_right   pan the head -30 degrees
+ 5    tilt_up     tilt the head +15 degrees (within its limits)
+ 6    tilt_down   tilt the head -15 degrees
+ 7    look        take an image (``image_cost``) and run the detector on it
+====  ==========  ======================================================================
+
+Reward: minus the simulated seconds the action took. ``terminated``: the detector reported a
+true instance of the target (a false positive or a look-alike reported as the target does not
+end the episode); ``truncated``: the budget (``budget_s``) is spent, or ``MAX_EPISODE_STEPS``
+steps were taken (Gymnasium's TimeLimit: a blocked forward or a head at its limit costs 0 s).
+
+Observations (a Dict): ``rgb`` (H, W, 3) uint8 and ``depth`` (H, W, 1) float32 metres (clipped
+to ``DEPTH_MAX``) of the last ``look`` (zeros before the first: images cost time), ``pose`` (x,
+y, yaw), ``head`` (pan, tilt), ``elapsed`` simulated seconds (saturating at twice the budget), ``target`` (the target's index in
+the catalog's types), ``detected`` (which types the detector has reported so far) and, with a
+store, ``context``: the ``top_k`` relation volumes v_rel(b) of the objects detected so far,
+best first by the lower bound of P(rel(target)) (``knowledge.ranking.candidate_volumes``), one
+row each of ``CONTEXT_FEATURES`` (centre, yaw, half extents, the interval's bounds, 1), zero
+rows after the last.
+
+It lives in ``agent/``, not ``envs/``: the start pose and ``forward``'s collision test need the
+occupancy grid (agent.navigation) and the held-out rooms are the search's (agent.search).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from agent import search as S
+from agent.navigation import OccupancyGrid
+from agent.perception_modes import DEFAULT_DETECTOR
+from envs.camera import Frame
+from envs.detector import Detection, DetectorModel, SimDetector, default_or_named
+from envs.floorplan import generate_layout
+from envs.houses import WorldStyle, resolve_style
+from envs.layout import RoomLayout
+from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
+from envs.task import CAMERA_SIZE, check_camera_size
+from envs.world import World
+from knowledge.base import KnowledgeBase
+from knowledge.catalog import Catalog, load_catalog
+from knowledge.errors import CtxsearchError
+from knowledge.geometry import ObjectInstance
+from knowledge.ranking import KBProbabilities, candidate_volumes
+
+ENV_ID = "ctxsearch/ObjectSearch-v0"
+ACTIONS = (
+    "forward",
+    "turn_left",
+    "turn_right",
+    "pan_left",
+    "pan_right",
+    "tilt_up",
+    "tilt_down",
+    "look",
+)
+FORWARD_M = 0.5
+TURN_RAD = math.radians(30.0)
+PAN_RAD = math.radians(30.0)
+TILT_RAD = math.radians(15.0)
+DEPTH_MAX = 20.0  # m: depth beyond (the background) reads as this
+POSITION_LIMIT = 100.0  # m: |x|, |y| of any room or house the generators make
+ELAPSED_LIMIT = 2.0  # the ``elapsed`` observation saturates at this many budgets
+MAX_EPISODE_STEPS = 2000
+DEFAULT_TOP_K = 8
+CONTEXT_FEATURES = ("cx", "cy", "cz", "yaw", "hx", "hy", "hz", "p_low", "p_high", "valid")
+EPISODE_TAG = 0xE915  # the benchmark's episode stream (scripts.experiments.episodes)
+
+
+def draw_episode(
+    style: WorldStyle,
+    seed: int,
+    catalog: Catalog,
+    *,
+    index: int = 0,
+    budget_s: float = S.DEFAULT_BUDGET_S,
+    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    spec: RobotSpec | None = None,
+) -> tuple[S.Episode, RoomLayout]:
+    """Episode ``index`` of the benchmark's episodes for ``seed`` (``make_episodes(style,
+    index + 1, seed, ...)[index]``) and its room's layout."""
+    spec = spec or RobotSpec()
+    n, i = 0, 0
+    limit = 50 * (index + 1) + 100
+    while i < limit:
+        room_seed = S.held_out_seed(seed, i)
+        rng = np.random.default_rng([int(seed), i, EPISODE_TAG])
+        i += 1
+        if room_seed in exclude_seeds:
+            continue
+        layout = generate_layout(style, room_seed, catalog)
+        small = S.small_types_present(layout, catalog)
+        if not small:
+            continue
+        target = small[int(rng.integers(len(small)))]
+        start = S.random_start(layout, OccupancyGrid.from_layout(layout, spec), rng)
+        if n == index:
+            return S.Episode(index, style.name, room_seed, target, start, float(budget_s)), layout
+        n += 1
+    raise CtxsearchError(
+        f"no held-out room of style '{style.name}' holds a small object (tried {limit} rooms)"
+    )
+
+
+def _box(low, high, shape: tuple[int, ...] | None = None) -> spaces.Box:
+    """A float32 Box (bounds broadcast to ``shape`` when one is given)."""
+    lo, hi = np.asarray(low, np.float32), np.asarray(high, np.float32)
+    if shape is not None:
+        lo, hi = np.full(shape, lo, np.float32), np.full(shape, hi, np.float32)
+    return spaces.Box(lo, hi, dtype=np.float32)
+
+
+class ObjectSearchEnv(gymnasium.Env):
+    """Find an object of the target type in a held-out room (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self,
+        style: str = "office",
+        detector: str | Path | None = None,
+        kb: str | Path | KnowledgeBase | None = None,
+        *,
+        width: int = CAMERA_SIZE[0],
+        height: int = CAMERA_SIZE[1],
+        budget_s: float = S.DEFAULT_BUDGET_S,
+        top_k: int = DEFAULT_TOP_K,
+        render_mode: str | None = None,
+    ) -> None:
+        self.catalog = load_catalog()
+        self.style = resolve_style(style, self.catalog)
+        self.detector_model: DetectorModel = default_or_named(
+            detector, self.catalog, DEFAULT_DETECTOR
+        )
+        self.width, self.height = check_camera_size(width, height)
+        if not (isinstance(budget_s, int | float) and budget_s > 0):
+            raise CtxsearchError(f"budget_s must be a positive number of seconds, got {budget_s!r}")
+        if not (isinstance(top_k, int) and top_k > 0):
+            raise CtxsearchError(f"top_k must be a positive whole number, got {top_k!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise CtxsearchError(f"unknown render_mode '{render_mode}' (known: rgb_array)")
+        self.budget_s, self.top_k, self.render_mode = float(budget_s), top_k, render_mode
+        self.kb, self.learned = self._knowledge(kb)
+        self.robot_spec, self.time_model = RobotSpec(), TimeModel()
+        self._types = [t.name for t in self.catalog.types]
+        self.action_space = spaces.Discrete(len(ACTIONS))
+        self.observation_space = self._observation_space()
+        self.world: World | None = None
+        self.episode: S.Episode | None = None
+        self.layout: RoomLayout | None = None
+
+    # ----------------------------------------------------------------- construction
+    def _knowledge(self, kb) -> tuple[KnowledgeBase | None, frozenset[int]]:
+        if kb is None or isinstance(kb, KnowledgeBase):
+            return kb, frozenset()
+        knowledge, learned = S.open_knowledge(kb, self.catalog)
+        return knowledge, frozenset(learned)
+
+    def _observation_space(self) -> spaces.Dict:
+        h, w, n = self.height, self.width, len(self._types)
+        (pan_lo, pan_hi), (tilt_lo, tilt_hi) = self.robot_spec.pan_range, self.robot_spec.tilt_range
+        lim = POSITION_LIMIT
+        d: dict[str, spaces.Space] = {
+            "rgb": spaces.Box(0, 255, (h, w, 3), np.uint8),
+            "depth": _box(0.0, DEPTH_MAX, (h, w, 1)),
+            "pose": _box([-lim, -lim, -math.pi], [lim, lim, math.pi]),
+            "head": _box([pan_lo, tilt_lo], [pan_hi, tilt_hi]),
+            "elapsed": _box([0.0], [ELAPSED_LIMIT * self.budget_s]),
+            "target": spaces.Discrete(n),
+            "detected": spaces.MultiBinary(n),
+        }
+        if self.kb is not None:
+            d["context"] = _box(-lim, lim, (self.top_k, len(CONTEXT_FEATURES)))
+        return spaces.Dict(d)
+
+    # ----------------------------------------------------------------- the Gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict, dict]:
+        """A new episode (see the module docstring): the observation and info."""
+        super().reset(seed=seed)
+        index = (options or {}).get("index", 0)
+        if not (isinstance(index, int | np.integer) and index >= 0):
+            raise CtxsearchError(f"options['index'] must be a whole number >= 0, got {index!r}")
+        ep_seed = seed if seed is not None else int(self.np_random.integers(2**31))
+        self.episode, self.layout = draw_episode(
+            self.style,
+            int(ep_seed),
+            self.catalog,
+            index=int(index),
+            budget_s=self.budget_s,
+            exclude_seeds=self.learned,
+            spec=self.robot_spec,
+        )
+        self.close()
+        self.world = World(
+            self.layout, self.catalog, width=self.width, height=self.height, spec=self.robot_spec,
+            time_model=self.time_model,
+        )  # fmt: skip
+        self.world.reset_pose(self.episode.start)
+        self.grid = OccupancyGrid.from_layout(self.layout, self.robot_spec)
+        self._detect = SimDetector(self.detector_model, self.layout, self.catalog, self.layout.seed)
+        self._true_ids = {o.id for o in self.layout.objects if o.type == self.episode.target}
+        self._t0 = self.world.sim_time
+        self._rgb = np.zeros((self.height, self.width, 3), np.uint8)
+        self._depth = np.zeros((self.height, self.width, 1), np.float32)
+        self._detected = np.zeros(len(self._types), np.int8)
+        self._known: dict[int, ObjectInstance] = {}
+        self.found_id: int | None = None
+        return self._observation(), self._info([])
+
+    def step(self, action) -> tuple[dict, float, bool, bool, dict]:
+        """Do ``ACTIONS[action]``; observation, reward (minus its seconds), terminated,
+        truncated, info."""
+        if self.world is None or self.episode is None:
+            raise CtxsearchError("call reset() before step()")
+        if not self.action_space.contains(action):
+            raise CtxsearchError(
+                f"invalid action {action!r} (0..{len(ACTIONS) - 1}: {', '.join(ACTIONS)})"
+            )
+        name = ACTIONS[int(action)]
+        t = self.world.sim_time
+        dets = self._look() if name == "look" else self._move(name)
+        seconds = float(self.world.sim_time - t)
+        terminated = self.found_id is not None
+        truncated = not terminated and self.elapsed >= self.budget_s
+        info = self._info(dets)
+        info.update(action=name, seconds=seconds)
+        return self._observation(), -seconds, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """With ``render_mode="rgb_array"``: a top-down view of the room and the robot."""
+        if self.render_mode != "rgb_array" or self.world is None:
+            return None
+        return self.world.render_overview(320, 240)
+
+    def close(self) -> None:
+        """Free the World (its renderer); safe to call twice."""
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+
+    # ----------------------------------------------------------------- acting
+    @property
+    def elapsed(self) -> float:
+        """Simulated seconds since the episode began."""
+        return float(self.world.sim_time - self._t0) if self.world is not None else 0.0
+
+    def _move(self, name: str) -> list[Detection]:
+        world = self.world
+        p = world.pose()
+        if name == "forward":
+            goal = self._free_ahead(p.xy, p.yaw)
+            if goal is not None:
+                world.drive(goal[None, :])
+        elif name in ("turn_left", "turn_right"):
+            step = TURN_RAD if name == "turn_left" else -TURN_RAD
+            world.drive(p.xy[None, :], wrap_angle(p.yaw + step))
+        elif name in ("pan_left", "pan_right"):
+            world.move_head(p.pan + (PAN_RAD if name == "pan_left" else -PAN_RAD), p.tilt)
+        else:
+            world.move_head(p.pan, p.tilt + (TILT_RAD if name == "tilt_up" else -TILT_RAD))
+        return []
+
+    def _free_ahead(self, xy: np.ndarray, yaw: float) -> np.ndarray | None:
+        """The farthest point up to ``FORWARD_M`` ahead with a free grid all the way (None: not
+        even 1 cm)."""
+        step = 0.25 * self.grid.resolution
+        ts = np.append(np.arange(step, FORWARD_M, step), FORWARD_M)
+        pts = xy[None, :] + ts[:, None] * np.array([math.cos(yaw), math.sin(yaw)])
+        free = self.grid.free_mask(pts)
+        n = len(free) if free.all() else int(np.argmin(free))
+        return pts[n - 1] if n > 0 and ts[n - 1] >= 0.01 else None
+
+    def _look(self) -> list[Detection]:
+        frame: Frame = self.world.capture(rgb=True, depth=True)
+        dets = self._detect(frame, float(self.world.sim_time))
+        self._rgb = frame.rgb.copy()
+        depth = np.nan_to_num(frame.depth, nan=DEPTH_MAX, posinf=DEPTH_MAX)
+        self._depth = np.clip(depth, 0.0, DEPTH_MAX).astype(np.float32)[:, :, None]
+        for d in dets:
+            self._known.setdefault(d.instance_id, d.pose)
+            self._detected[self._types.index(d.type)] = 1
+        hit = next(
+            (d for d in dets if d.type == self.episode.target and d.instance_id in self._true_ids),
+            None,
+        )
+        if hit is not None and self.found_id is None:
+            self.found_id = hit.instance_id
+        return dets
+
+    # ----------------------------------------------------------------- observing
+    def _observation(self) -> dict:
+        p = self.world.pose()
+        obs = {
+            "rgb": self._rgb.copy(),
+            "depth": self._depth.copy(),
+            "pose": np.array([p.x, p.y, wrap_angle(p.yaw)], np.float32),
+            "head": np.clip(
+                np.array([p.pan, p.tilt], np.float32),
+                self.observation_space["head"].low,
+                self.observation_space["head"].high,
+            ),
+            "elapsed": np.array([min(self.elapsed, ELAPSED_LIMIT * self.budget_s)], np.float32),
+            "target": self._types.index(self.episode.target),
+            "detected": self._detected.copy(),
+        }
+        if self.kb is not None:
+            obs["context"] = self.context_feature()
+        return obs
+
+    def context_feature(self) -> np.ndarray:
+        """(top_k, len(CONTEXT_FEATURES)) float32: the best relation volumes of the objects
+        detected so far for the target, with the learned interval's bounds; zero-padded."""
+        out = np.zeros((self.top_k, len(CONTEXT_FEATURES)), np.float32)
+        if self.kb is None:
+            return out
+        probs = KBProbabilities(self.kb, "low", rooms=len(self.learned) or None)
+        target = self.episode.target
+        cands = candidate_volumes(self._known.values(), target, self.catalog, probs)
+        for row, c in zip(out, cands[: self.top_k], strict=False):
+            lo, hi = self.kb.interval(c.relation, target)
+            b = c.box
+            row[:] = [*b.center, wrap_angle(b.yaw), *b.half, lo, hi, 1.0]
+        return np.clip(out, -POSITION_LIMIT, POSITION_LIMIT)
+
+    def _info(self, dets: list[Detection]) -> dict:
+        ep = self.episode
+        return {
+            "style": ep.style,
+            "room_seed": ep.room_seed,
+            "target": ep.target,
+            "elapsed": self.elapsed,
+            "found_id": self.found_id,
+            "detections": [(d.type, d.instance_id) for d in dets],
+        }
+
+
+def register() -> None:
+    """Register ``ENV_ID`` with Gymnasium (once; importing this module does it)."""
+    if ENV_ID not in gymnasium.registry:
+        gymnasium.register(
+            id=ENV_ID,
+            entry_point="agent.gym_env:ObjectSearchEnv",
+            max_episode_steps=MAX_EPISODE_STEPS,
+        )
+
+
+register()

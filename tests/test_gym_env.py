@@ -1,0 +1,199 @@
+"""The Gymnasium search task (agent.gym_env): registration, Gymnasium's own checker, the
+benchmark's episodes, the time model's seconds as reward, termination and truncation, the
+learned context, one-line errors, and the example script."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import agent.gym_env as G
+from agent import search as S
+from envs.houses import resolve_style
+from envs.robot_spec import TimeModel
+from knowledge.base import KnowledgeBase
+from knowledge.errors import CtxsearchError
+from scripts.examples import gym_random_agent
+
+pytestmark = pytest.mark.render
+SIZE = {"width": 64, "height": 48}
+
+
+def make(**kw) -> gymnasium.Env:
+    return gymnasium.make(G.ENV_ID, style="office", detector="perfect", **SIZE, **kw)
+
+
+def test_registered_on_import_and_passes_gymnasiums_checker():
+    assert G.ENV_ID in gymnasium.registry
+    env = make(render_mode="rgb_array")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    assert [str(w.message) for w in caught] == []
+    frame = env.unwrapped.render()
+    assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
+    env.close()
+    env.close()  # twice is fine
+
+
+def test_reset_draws_the_benchmarks_episodes(catalog):
+    from scripts.experiments.episodes import make_episodes
+
+    style = resolve_style("office", catalog)
+    env = make()
+    for seed, index in ((0, 0), (7, 0), (3, 2)):
+        want = make_episodes(style, index + 1, seed, catalog)[index]
+        _, info = env.reset(seed=seed, options={"index": index})
+        ep = env.unwrapped.episode
+        assert (ep.room_seed, ep.target, ep.start) == (want.room_seed, want.target, want.start)
+        assert info["room_seed"] == want.room_seed and info["target"] == want.target
+        pose = env.unwrapped.world.pose()
+        assert (pose.x, pose.y) == pytest.approx((want.start.x, want.start.y), abs=1e-3)
+    env.close()
+    learned = {S.held_out_seed(0, 0), S.held_out_seed(0, 2)}  # rooms a store learned in
+    want = make_episodes(style, 3, 0, catalog, exclude_seeds=learned)
+    got = [G.draw_episode(style, 0, catalog, index=i, exclude_seeds=learned)[0] for i in range(3)]
+    assert got == want and not learned & {e.room_seed for e in got}
+
+
+def _run(env: gymnasium.Env, seed: int, actions) -> list:
+    out = [env.reset(seed=seed)[0]]
+    for a in actions:
+        out.append(env.step(a)[0])
+    return out
+
+
+def test_same_seed_same_world_start_target_and_observations():
+    actions = [7, 3, 7, 1, 0, 7, 6, 7]
+    a, b = make(), make()
+    ra, rb = _run(a, 5, actions), _run(b, 5, actions)
+    for oa, ob in zip(ra, rb, strict=True):
+        assert oa.keys() == ob.keys()
+        for k in oa:
+            np.testing.assert_array_equal(oa[k], ob[k])
+    assert ra[-1]["rgb"].any()  # a look really shows the room
+    other = _run(a, 6, actions)
+    assert a.unwrapped.episode.room_seed != b.unwrapped.episode.room_seed
+    assert not np.array_equal(other[-1]["pose"], ra[-1]["pose"])
+    a.close()
+    b.close()
+
+
+def test_reward_is_minus_the_time_models_seconds():
+    env = make()
+    obs, _ = env.reset(seed=1)
+    tm = TimeModel()
+    yaw = float(obs["pose"][2])
+    _, r, *_ = env.step(G.ACTIONS.index("turn_left"))
+    assert r == pytest.approx(-tm.turn_time(yaw, yaw + G.TURN_RAD), rel=1e-6)
+    _, r, *_ = env.step(G.ACTIONS.index("tilt_down"))
+    assert r == pytest.approx(-tm.head_time(0.0, 0.0, 0.0, -G.TILT_RAD), abs=2e-3)
+    charged = -r
+    obs, r, *_, info = env.step(G.ACTIONS.index("look"))
+    assert r == pytest.approx(-tm.image_cost)
+    charged += -r + tm.turn_time(yaw, yaw + G.TURN_RAD)
+    assert info["action"] == "look" and info["seconds"] == pytest.approx(-r)
+    assert obs["elapsed"][0] == pytest.approx(charged, rel=1e-5) == info["elapsed"]
+    before = obs["pose"].copy()
+    obs, r, *_ = env.step(G.ACTIONS.index("forward"))
+    moved = float(np.hypot(*(obs["pose"][:2] - before[:2])))
+    assert moved <= G.FORWARD_M + 0.02
+    assert r == pytest.approx(-tm.travel_time(moved), abs=0.02) if moved > 0 else r == 0.0
+    env.close()
+
+
+def test_terminates_on_a_true_target_and_truncates_at_the_budget():
+    env = make()
+    env.reset(seed=0)  # the benchmark's office episode 0: the target is in view at the start
+    terminated = False
+    for a in [7, 3, 7, 3, 7, 4, 4, 4, 7, 4, 7]:
+        _, _, terminated, truncated, info = env.step(a)
+        if terminated:
+            break
+    assert terminated and not truncated
+    base = env.unwrapped
+    assert info["found_id"] in {o.id for o in base.layout.objects if o.type == base.episode.target}
+    env.close()
+
+    env = make(budget_s=2.0)
+    env.reset(seed=0)
+    steps, truncated = 0, False
+    while not truncated:
+        _, _, terminated, truncated, info = env.step(G.ACTIONS.index("turn_left"))
+        steps += 1
+        assert not terminated and steps < 20
+    assert info["elapsed"] >= 2.0 > info["elapsed"] - TimeModel().turn_time(0.0, G.TURN_RAD) - 1e-9
+    env.close()
+
+
+def test_context_feature_ranks_the_learned_relation_volumes(catalog):
+    kb = KnowledgeBase(catalog)
+    for _ in range(20):  # desks always had a cup on top, never one under them
+        kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
+    env = make(kb=kb, top_k=4)
+    assert env.observation_space["context"].shape == (4, len(G.CONTEXT_FEATURES))
+    seed = next(s for s in range(40) if env.reset(seed=s)[1]["target"] == "Cup")
+    obs, _ = env.reset(seed=seed)
+    base = env.unwrapped
+    np.testing.assert_array_equal(obs["context"], 0.0)  # nothing detected yet
+    for a in [7, 3, 7, 3, 7, 3, 7, 4, 4, 4, 4, 7, 4, 7, 4, 7]:
+        obs, _, terminated, *_ = env.step(a)
+        if any(o.type == "Desk" for o in base._known.values()) or terminated:
+            break
+    ctx = obs["context"]
+    desks = [o for o in base._known.values() if o.type == "Desk"]
+    assert desks, "the office episode shows a desk"
+    valid = ctx[ctx[:, -1] == 1.0]
+    assert len(valid) >= 1
+    lo, hi = kb.interval("ON-TOP-OF-DESK", "Cup")
+    assert valid[0, 7:9] == pytest.approx((lo, hi))  # the best row: on top of a desk
+    assert any(
+        np.allclose(valid[0, :2], d.position[:2], atol=max(d.size) / 2 + 1e-3) for d in desks
+    )
+    assert (valid[:, 7] <= valid[:, 8]).all() and list(valid[:, 7]) == sorted(valid[:, 7])[::-1]
+    assert env.observation_space["context"].contains(ctx)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [
+        ({"style": "no_such_style"}, "no_such_style"),
+        ({"detector": "no_such_detector"}, "no_such_detector"),
+        ({"width": 0}, "image size"),
+        ({"width": 5000}, "image size"),
+        ({"budget_s": -1.0}, "budget_s"),
+        ({"top_k": 0}, "top_k"),
+        ({"kb": "/nonexistent/kb.sqlite"}, "no such knowledge store"),
+    ],
+)
+def test_bad_input_is_one_line_error(kwargs, needle):
+    args = {"style": "office", "detector": "perfect", **SIZE, **kwargs}
+    with pytest.raises(CtxsearchError) as err:
+        gymnasium.make(G.ENV_ID, **args)
+    assert needle in str(err.value) and "\n" not in str(err.value)
+
+
+def test_step_needs_a_reset_and_a_valid_action():
+    env = G.ObjectSearchEnv("office", "perfect", **SIZE)
+    with pytest.raises(CtxsearchError, match="reset"):
+        env.step(0)
+    env.reset(seed=0)
+    with pytest.raises(CtxsearchError, match="invalid action"):
+        env.step(len(G.ACTIONS))
+    with pytest.raises(CtxsearchError, match="index"):
+        env.reset(seed=0, options={"index": -1})
+    env.close()
+
+
+def test_example_runs_a_random_agent_and_exhaustive(capsys):
+    assert gym_random_agent.main(["--steps", "30", "--seed", "2"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("random agent: ") and "simulated s" in out[0]
+    assert out[1].startswith("exhaustive: ") and "simulated s" in out[1]
+    assert math.isfinite(float(out[0].split(", ")[-1].split()[0]))
