@@ -416,3 +416,38 @@ def test_search_recording_shows_candidates_path_and_camera_views(catalog, tmp_pa
         "/log",
     }
     assert expected <= entities, expected - entities
+
+
+@pytest.mark.render
+def test_a_detection_of_the_target_ends_the_search_only_once_a_second_image_confirms_it(catalog):
+    """A false positive of the target type seen once is forgotten (the search goes on and finds
+    the real cup); the confirming image costs one image's seconds."""
+    from dataclasses import replace as dc_replace
+
+    from envs.detector import Detection
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP)
+    fake_pose = dc_replace(CUP, id=-7, position=(-1.5, 1.0, 0.79))
+    fake = Detection(-7, "Cup", fake_pose, 0, 2.0, (0, 0, 0, 0), 0.3)
+    with World(layout, catalog) as world:
+        ep = S.Episode(0, "test", 0, "Cup", START, 120.0)
+        ctx = S.SearchContext(ep, layout, catalog, world, policy="exhaustive")
+        real = ctx.detector
+        calls = []
+
+        def detector(frame):
+            calls.append(ctx.elapsed)
+            dets = [d for d in real(frame) if d.type != "Cup"] if len(calls) == 1 else real(frame)
+            return [fake, *dets] if len(calls) == 1 else dets
+
+        ctx.detector = detector
+        res = S.make_policy("exhaustive").run(ctx)
+    assert res.unconfirmed == 1 and len(calls) >= 4
+    assert res.success and res.found_id == CUP.id
+    assert -7 not in ctx.known
+    assert any("not confirmed" in line for line in res.log)
+    # the last two images: the one that saw the cup and the one that confirmed it
+    assert [g.purpose for g in res.trace[-1:]] == ["confirm"]
+    assert ("Cup", CUP.id) in res.trace[-2].detections
+    assert res.trace[-1].t - res.trace[-2].t == pytest.approx(TimeModel().image_cost)
