@@ -319,9 +319,15 @@ def _entrance_door(p: Passage, W: float, D: float) -> Door:
 
 
 def generate_house(
-    house: HouseStyle, seed: int, catalog: Catalog | None = None, robot: RobotSpec | None = None
+    house: HouseStyle,
+    seed: int,
+    catalog: Catalog | None = None,
+    robot: RobotSpec | None = None,
+    day: int = 0,
 ) -> RoomLayout:
-    """A furnished house of ``house`` style, the same for the same (house, seed)."""
+    """A furnished house of ``house`` style, the same for the same (house, seed, day); on a later
+    ``day`` its plan and furniture stay and every room's small objects are placed anew
+    (``generate_room``'s day)."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
@@ -345,7 +351,7 @@ def generate_house(
             continue
         doors = tuple(_room_door(outline, p) for p in passages if i in p.rooms)
         shell = RoomShell(outline[2] - outline[0], outline[3] - outline[1], height, doors)
-        room = generate_room(cell.style, room_seed, catalog, robot, shell)
+        room = generate_room(cell.style, room_seed, catalog, robot, shell, day)
         cx, cy = (outline[0] + outline[2]) / 2, (outline[1] + outline[3]) / 2
         base = len(objects)
         for o in room.objects:
@@ -584,9 +590,11 @@ def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | No
     return frozenset(seen)
 
 
-def generate_layout(style: WorldStyle, seed: int, catalog: Catalog | None = None) -> RoomLayout:
+def generate_layout(
+    style: WorldStyle, seed: int, catalog: Catalog | None = None, day: int = 0
+) -> RoomLayout:
     """The world of a room style (``generate_room``) or a house style (``generate_house``), the
-    same for the same (style, seed)."""
+    same for the same (style, seed, day); day 0 is the world as first generated."""
     if isinstance(style, HouseStyle):
-        return generate_house(style, seed, catalog)
-    return generate_room(style, seed, catalog)
+        return generate_house(style, seed, catalog, day=day)
+    return generate_room(style, seed, catalog, day=day)
