@@ -160,8 +160,7 @@ _OLD_SCHEMAS = {
         _META_SQL,
         _V3_ROOMS_SQL,
         _V3_EXAMINATIONS_SQL,
-        "CREATE UNIQUE INDEX examinations_key ON examinations "
-        f"({', '.join(_V3_EXAM_KEY)})",
+        f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(_V3_EXAM_KEY)})",
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
@@ -729,6 +728,18 @@ class EvidenceStore:
                 "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?"
                 + where,
                 (run, style, int(room_seed), *args),
+            )
+            return {self._integer(r[0], "object id") for r in cur}
+
+    def examined_before(self, run: str, style: str, room_seed: int, day: int) -> set[int]:
+        """Ids of the objects of that room examined in the run on a day before ``day``."""
+        if self.version < 4 or day <= 0:
+            return self.examined(run, style, room_seed) if day > 0 else set()
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ? "
+                "AND day < ?",
+                (run, style, int(room_seed), int(day)),
             )
             return {self._integer(r[0], "object id") for r in cur}
 

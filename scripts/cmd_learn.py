@@ -122,13 +122,40 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         "(default: 1, at once)",
     )
     argtypes.add_interval_argument(p)
+    p.add_argument(
+        "--days",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="D",
+        help="visit the same rooms on D days (furniture stays, small objects are placed anew "
+        "each day by the style's rules and its [[drift]] schedule); a later call with more days "
+        "adds the days not yet done (default: 1, the paper's single visit)",
+    )
+    p.add_argument(
+        "--reexamine",
+        choices=("never", "impact"),
+        default="never",
+        help="on a later day, may an object examined before be examined again? never (the "
+        "paper, default); impact: when its type's impact under the --forget counts, per second "
+        "of examining it, is at least --reexamine-rate",
+    )
+    p.add_argument(
+        "--reexamine-rate",
+        type=argtypes.non_negative_float,
+        default=None,
+        metavar="IMPACT_PER_S",
+        help="impact (eq. 3) per simulated second worth a re-examination (default: 1e-3)",
+    )
+    argtypes.add_forget_arguments(p)
 
 
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
     # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from agent.learning import LearnConfig, learn
+    from agent.run_state import DEFAULT_REEXAMINE_RATE
 
+    rate = DEFAULT_REEXAMINE_RATE if args.reexamine_rate is None else args.reexamine_rate
     s = learn(
         LearnConfig(
             args.style,
@@ -146,12 +173,19 @@ def run_learn(args: argparse.Namespace) -> int:
             frontier_rule=args.frontier_rule,
             detector=args.detector,
             confirm=args.confirm,
+            days=args.days,
+            reexamine=args.reexamine,
+            reexamine_rate=rate,
+            forgetting=argtypes.forgetting(args),
         )
     )
     for line in s.lines():
         print(line)
     if args.interval != "wilson":
         print(f"mean interval width ({args.interval}): {_mean_width(args.kb, args.interval):.4f}")
+    if args.forget != "none":
+        width = _forget_width(args.kb, s.run, argtypes.forgetting(args))
+        print(f"mean interval width ({args.forget}, the run's evidence): {width:.4f}")
     for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
@@ -165,6 +199,18 @@ def _mean_width(kb_path: Path, interval: str) -> float:
 
     with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
         return store.knowledge_base(interval=interval).mean_width()
+
+
+def _forget_width(kb_path: Path, run: str, forgetting) -> float:
+    """The run's mean interval width on its last day, read with ``forgetting``."""
+    from knowledge.catalog import load_catalog
+    from knowledge.drift import ForgetKnowledgeBase, evidence_of
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
+        ev = evidence_of(store.examinations(run))
+        kb = ForgetKnowledgeBase(store.catalog, store.alpha, ev, ev.last_day, forgetting)
+        return kb.mean_width()
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
