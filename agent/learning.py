@@ -54,8 +54,8 @@ from envs.houses import resolve_style
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
-from knowledge.drift import Forgetting
 from knowledge.catalog import Catalog, load_catalog
+from knowledge.drift import Forgetting
 from knowledge.errors import CtxsearchError
 from knowledge.store import EvidenceStore
 

@@ -16,8 +16,8 @@ import pytest
 from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.errors import CtxsearchError, StoreError
-from tests.old_stores import as_version
 from knowledge.store import SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
+from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from knowledge.errors import CtxsearchError, StoreError
-from tests.old_stores import as_version
 from knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
 from scripts.cli import main
+from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
 
