@@ -79,6 +79,7 @@ from knowledge import geometry
 from knowledge.drift import ForgetKnowledgeBase
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
+from knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
 
@@ -353,16 +354,18 @@ class RoomLearner:
         counts in the knowledge base and the strategy."""
         obj, run = choice.obj, self.run
         if stored is None:
-            run.store.record(
-                run=run.run,
-                style=run.style,
-                room_seed=self.layout.seed,
-                object_id=obj.id,
-                ref_type=obj.type,
-                sim_time=self.clock,
-                strategy=run.strategy.name,
-                related=sorted({(r, o.type, o.id) for r, o in related}),
-                day=self.day,
+            run.store.append(
+                NewExamination(
+                    run.run,
+                    run.style,
+                    self.layout.seed,
+                    obj.id,
+                    obj.type,
+                    self.clock,
+                    run.strategy.name,
+                    tuple(sorted({(r, o.type, o.id) for r, o in related})),
+                    self.day,
+                )  # fmt: skip
             )
         self.kb.record_examination(obj.type, geometry.related_pairs(related))
         run.evidence.add(obj.type, self.day, geometry.related_pairs(related))

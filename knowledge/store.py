@@ -373,6 +373,23 @@ def _schema_problem(conn: sqlite3.Connection, version: int) -> str | None:
 
 
 @dataclass(frozen=True)
+class NewExamination:
+    """An examination to append (``EvidenceStore.append``): the visit (run, style, room seed,
+    day), the object and its type, the run clock, the strategy and RELATED-OBJECTS as
+    (relation, related type, related object id)."""
+
+    run: str
+    style: str
+    room_seed: int
+    object_id: int
+    ref_type: str
+    sim_time: float
+    strategy: str
+    related: tuple[tuple[str, str, int], ...]
+    day: int = 0
+
+
+@dataclass(frozen=True)
 class Examination:
     """One examination of the log with its observation rows (``EvidenceStore.examinations``)."""
 
@@ -533,19 +550,35 @@ class EvidenceStore:
         sim_time: float,
         strategy: str,
         related: Iterable[tuple[str, str, int]],
-        day: int = 0,
     ) -> int:
-        """Append one examination and its observations in one transaction; returns its id.
+        """Append one examination (of day 0) and its observations in one transaction; returns
+        its id.
 
         ``related`` lists (relation, related type, related object id) for every object found in
         one of the examined object's relation volumes (the same pair may appear for several
         objects: the counts treat it as "at least one"). Everything is validated against the
         catalog before anything is written (CtxsearchError). An examination whose EXAM_KEY is
         already in the store (another process learning the same run) is a StoreError and
-        nothing is written. ``day`` is the day of the world's visit (``learn --days``).
+        nothing is written. ``append`` records one of any day.
         """
+        return self.append(
+            NewExamination(
+                run, style, room_seed, object_id, ref_type, sim_time, strategy, tuple(related)
+            )  # fmt: skip
+        )
+
+    def append(self, e: NewExamination) -> int:
+        """``record`` for an examination of any day (``NewExamination.day``)."""
+        run, style, room_seed, object_id, ref_type = (
+            e.run,
+            e.style,
+            e.room_seed,
+            e.object_id,
+            e.ref_type,
+        )
+        sim_time, strategy, related = e.sim_time, e.strategy, e.related
         self.catalog.type(ref_type)
-        day = _day(day)
+        day = _day(e.day)
         rows = []
         for item in related:
             try:
