@@ -269,6 +269,97 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
     register_intervals(bench_sub)
+    register_drift(bench_sub)
+
+
+def register_drift(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench drift``."""
+    p = bench_sub.add_parser(
+        "drift",
+        help="a world set that changes over days: how fast none / half-life / detect notice it, "
+        "their false alarms and errors, and the search on the last day with each",
+        description="Learn in --rooms rooms of a style on --days days (the furniture stays, small "
+        "objects are placed anew each day) while the style drifts (its [[drift]] schedule, or "
+        "--drift RULE:P:FROM_DAY, applied in memory), once re-examining every known object daily "
+        "(one store read by each forgetting method) and once per method with --reexamine impact. "
+        "Writes DIR/drift.json, DIR/drift.md, DIR/drift.csv (per day x entry x method) and "
+        "DIR/drift.png (p_true(day) against each method's interval for the changed entries).",
+    )
+    p.add_argument(
+        "--style", default="office", help="room style: name or TOML path (default: office)"
+    )
+    p.add_argument("--days", type=argtypes.positive_int, default=12, help="days (default: 12)")
+    p.add_argument(
+        "--rooms", type=argtypes.positive_int, default=4, help="rooms visited per day (default: 4)"
+    )
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="run seed (default: 0)")
+    p.add_argument(
+        "--drift",
+        action="append",
+        default=None,
+        metavar="RULE:P:FROM_DAY",
+        help="a change (repeatable): from FROM_DAY on (an integer, or 'half' for days // 2) the "
+        "rule REF/RELATION/TYPE places with probability P (default: the style's own schedule, "
+        "else Desk/ON-TOP-OF-DESK/Laptop:0.9:half and Desk/ON-TOP-OF-DESK/Monitor:0.3:half)",
+    )
+    p.add_argument(
+        "--half-life", type=argtypes.positive_float, default=3.0, metavar="DAYS",
+        help="half-life of the half-life method (default: 3)",
+    )  # fmt: skip
+    p.add_argument(
+        "--false-alarm", type=argtypes.alpha, default=0.05, metavar="RATE",
+        help="detect's false-alarm rate per entry and run (default: 0.05)",
+    )  # fmt: skip
+    p.add_argument(
+        "--truth-samples", type=argtypes.positive_int, default=30,
+        help="day draws of the bench's worlds per phase of the schedule for p_true (default: 30)",
+    )  # fmt: skip
+    p.add_argument(
+        "--episodes", type=argtypes.non_negative_int, default=4,
+        help="search episodes on the last day per method (default: 4; 0: no search)",
+    )  # fmt: skip
+    p.add_argument(
+        "--perception",
+        default="oracle",
+        choices=("camera", "oracle"),
+        help="perception mode (default: oracle: D days of camera learning are slow on 2 cores)",
+    )
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    add_sweep_arguments(p)
+    p.set_defaults(func=run_drift)
+
+
+def run_drift(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench drift``."""
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from knowledge.catalog import load_catalog
+    from scripts.experiments.bench_drift import (
+        DriftBenchConfig,
+        bench_drift,
+        drifting_style,
+        markdown,
+    )
+
+    config = DriftBenchConfig(
+        style=args.style,
+        days=args.days,
+        rooms=args.rooms,
+        seed=args.seed,
+        drift=tuple(args.drift or ()),
+        half_life=args.half_life,
+        false_alarm=args.false_alarm,
+        truth_samples=args.truth_samples,
+        episodes=args.episodes,
+        perception=args.perception,
+    )
+    if args.days < 2:
+        raise CtxsearchError("--days: a world that changes needs at least 2 days")
+    drifting_style(config, load_catalog())  # one-line errors before anything runs
+    doc = bench_drift(config, args.out, sweep=SweepOptions.from_args(args))
+    print(markdown(doc))
+    for name in ("drift.json", "drift.md", "drift.csv", "drift.png"):
+        print(f"wrote {args.out / name}")
+    return 0
 
 
 def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
