@@ -156,7 +156,7 @@ class Truth:
         start = max(d for d in self.phases if d <= day)
         return self.phases[start].get(key, 0.0)
 
-    def keys(self) -> list[tuple[str, str, str]]:
+    def entries(self) -> list[tuple[str, str, str]]:
         """Every entry with an instance of its reference type in some phase."""
         return sorted(set().union(*(set(p) for p in self.phases.values())))
 
@@ -185,7 +185,7 @@ def classify(truth: Truth, last_day: int) -> dict[tuple[str, str, str], str]:
     must also exceed 3 standard errors of the two truths' difference."""
     out = {}
     last = max(d for d in truth.phases if d <= last_day)
-    for key in truth.keys():
+    for key in truth.entries():
         p0, p1 = truth.p(key, 0), truth.p(key, last_day)
         ps = [truth.p(key, d) for d in truth.phases]
         noise = 3 * np.hypot(truth.se[0].get(key, 0.0), truth.se[last].get(key, 0.0))
@@ -285,7 +285,7 @@ def _search(st_last: Style, config: DriftBenchConfig, kbs: dict, learned: set, c
                 "episodes": len(eps)} for m in kbs}  # fmt: skip
 
 
-def bench_drift(config: DriftBenchConfig, out: Path, sweep: SweepOptions = SweepOptions()) -> dict:
+def bench_drift(config: DriftBenchConfig, out: Path, sweep: SweepOptions | None = None) -> dict:
     """Run the benchmark (see the module docstring); writes its four files into ``out``."""
     catalog = load_catalog()
     st = drifting_style(config, catalog)
