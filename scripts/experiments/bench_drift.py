@@ -23,6 +23,8 @@ teach nothing about false alarms). For each method and entry:
 
 - ``detection_delay_days`` (changed): days from the change until the method's interval (at the
   store's alpha) first excludes the old value p_true(from_day - 1); None if it never did;
+- ``recovery_delay_days`` (changed): days from the change until the interval first contains the
+  new value (the knowledge is right again); None if it never did within the run;
 - ``false_alarm_rate`` (unchanged): the share of (entry, day) pairs, from the first change on,
   whose interval excludes the entry's (constant) true value;
 - ``alarm_rate`` (detect only, unchanged): the share of entries on which the change test raised
@@ -235,7 +237,7 @@ def _first_change(truth: Truth, key) -> int:
 def measure(tr: Trace, truth: Truth, status: dict, days: int, f: Forgetting) -> dict:
     """The method's figures on one store (see the module docstring)."""
     change_day = min((d for d in truth.phases if d > 0), default=days)
-    delays, fa, err = {}, [], {"changed": [], "unchanged": []}
+    delays, recover, fa, err = {}, {}, [], {"changed": [], "unchanged": []}
     for key, st in status.items():
         rows = tr.rows[key]
         err[st].append(np.mean([abs(r[2] - truth.p(key, d)) for d, r in enumerate(rows)]))
@@ -244,16 +246,23 @@ def measure(tr: Trace, truth: Truth, status: dict, days: int, f: Forgetting) -> 
             old = truth.p(key, start - 1)
             hit = [d for d in range(start, days) if not rows[d][3] <= old <= rows[d][4]]
             delays["/".join(key)] = hit[0] - start if hit else None
+            new = truth.p(key, days - 1)
+            ok = [d for d in range(start, days) if rows[d][3] <= new <= rows[d][4]]
+            recover["/".join(key)] = ok[0] - start if ok else None
         else:
             p = truth.p(key, 0)
             fa += [not rows[d][3] <= p <= rows[d][4] for d in range(change_day, days)]
     unchanged = [k for k, s in status.items() if s == "unchanged"]
     found = [v for v in delays.values() if v is not None]
+    back = [v for v in recover.values() if v is not None]
     out = {
         "detection_delay_days": delays,
         "detected": len(found),
         "changed": len(delays),
         "mean_delay_days": float(np.mean(found)) if found else None,
+        "recovery_delay_days": recover,
+        "recovered": len(back),
+        "mean_recovery_days": float(np.mean(back)) if back else None,
         "false_alarm_rate": float(np.mean(fa)) if fa else 0.0,
         "abs_error_changed": float(np.mean(err["changed"])) if err["changed"] else None,
         "abs_error_unchanged": float(np.mean(err["unchanged"])) if err["unchanged"] else None,
@@ -287,6 +296,7 @@ def _search(st_last: Style, config: DriftBenchConfig, kbs: dict, learned: set, c
 
 def bench_drift(config: DriftBenchConfig, out: Path, sweep: SweepOptions | None = None) -> dict:
     """Run the benchmark (see the module docstring); writes its four files into ``out``."""
+    sweep = sweep or SweepOptions()
     catalog = load_catalog()
     st = drifting_style(config, catalog)
     out = Path(out)
@@ -389,7 +399,7 @@ def _plot(path: Path, traces, truth: Truth, status, config) -> None:
     for r, ev_name in enumerate(EVIDENCE):
         for c, key in enumerate(changed):
             ax = axes[r, c]
-            ax.plot(xs, [truth.p(key, d) for d in xs], "k-", lw=2, label="p_true")
+            ax.step(xs, [truth.p(key, d) for d in xs], "k-", lw=2, where="post", label="p_true")
             for m, col in colours.items():
                 seq = traces[(ev_name, m)].rows[key]
                 ax.fill_between(xs, [s[3] for s in seq], [s[4] for s in seq], color=col, alpha=0.2)
@@ -401,7 +411,7 @@ def _plot(path: Path, traces, truth: Truth, status, config) -> None:
     axes[0, 0].set_ylabel("P(rel(B)): truth and interval")
     axes[0, 0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=80)
 
 
 def _fmt(v, spec: str = ".3f") -> str:
@@ -422,13 +432,15 @@ def markdown(doc: dict) -> str:
         f"Entries: {doc['entries']['changed']} changed, {doc['entries']['unchanged']} unchanged "
         f"(half-life {c['half_life']:g} days, detect false-alarm rate {c['false_alarm']:g}).",
         "",
-        "| evidence / method | detected | mean delay (days) | false-alarm rate | alarm rate | "
-        "abs error changed | abs error unchanged | examinations | re-examined |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| evidence / method | detected | mean delay (days) | recovered | mean recovery (days) | "
+        "false-alarm rate | alarm rate | abs error changed | abs error unchanged | examinations | "
+        "re-examined |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in doc["results"].items():
         lines.append(
             f"| {name} | {r['detected']}/{r['changed']} | {_fmt(r['mean_delay_days'], '.1f')} | "
+            f"{r['recovered']}/{r['changed']} | {_fmt(r['mean_recovery_days'], '.1f')} | "
             f"{r['false_alarm_rate']:.3f} | {_fmt(r.get('alarm_rate'))} | "
             f"{_fmt(r['abs_error_changed'])} | {_fmt(r['abs_error_unchanged'])} | "
             f"{r['examinations']} | {r['revisits']} |"
