@@ -286,7 +286,10 @@ def register_drift(bench_sub: argparse._SubParsersAction) -> None:
         "DIR/drift.png (p_true(day) against each method's interval for the changed entries).",
     )
     p.add_argument(
-        "--style", default="office", help="room style: name or TOML path (default: office)"
+        "--style",
+        default="office",
+        help="room style: name or TOML path (default: office); not a house style (a drift "
+        "schedule belongs to a room style: the rooms of a house drift with theirs in learn --days)",
     )
     p.add_argument("--days", type=argtypes.positive_int, default=12, help="days (default: 12)")
     p.add_argument(
