@@ -32,7 +32,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes (about 40 minutes on 2 cores). The sweeps (truth,
+# Regenerates every result the README quotes (about 46 minutes on 2 cores). The sweeps (truth,
 # bench learning, bench search) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray);
 # the results are the same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
@@ -51,6 +51,8 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
+# A drifting world set: forgetting methods (about 6 minutes on 2 loaded cores, oracle perception).
+	$(VENV)/bin/ctxsearch bench drift --out results/drift --workers $(WORKERS)
 # Detector x interval against the truth, camera mode (about 22 minutes on 2 shared cores).
 	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals
 # Does learning pay? The paired search ratio after k learned houses, built and given map (issue 12),

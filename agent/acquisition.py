@@ -34,6 +34,16 @@ Without a budget every room is run to completion as in Figure 2.
 A room in progress in the store is replayed (agent.resume): its stored examinations are read
 back instead of perceived, with the same choices, motions and clock.
 
+Days (``learn --days``). A world persists across days: its furniture stays (same ids and poses),
+its small objects are placed anew. On a later day the objects of the room examined on earlier
+days (``known``: furniture) start in EXAMINED (lines 1-2): the paper's robot never examines an
+object twice in a run (``Run.reexamine`` ``never``). With ``impact``, a known object starts in
+UNEXAMINED instead when its type's d_A (eq. 3 averaged as in line 11) under the run's forgetting
+counts today (knowledge.drift, ``ForgetKnowledgeBase.type_impact_now``), per simulated second
+of examining it from the door (a straight-line estimate, ``EuclideanCosts``), is at least
+``Run.reexamine_rate``: yesterday's desk is worth a look today when what one more trial would
+teach, as the knowledge stands now, pays for the trip.
+
 The map (``Run.map_mode``). ``given``: the occupancy grid of the true layout (the oracle's, and an
 ablation of the camera mode). ``built``: the robot starts knowing only its pose; every depth image
 updates its own map (agent.mapping's ``BuiltMap``), navigation, gaze planning and the cost model
@@ -59,15 +69,17 @@ from agent.mapping import BuiltMap
 from agent.navigation import OccupancyGrid, drive_along, nearest_free
 from agent.resume import ReplayBody, replayed_related, resume_error
 from agent.run_state import ExamResult, Run, StoredExam, room_rng
-from agent.strategies import Choice
+from agent.strategies import Choice, EuclideanCosts
 from agent.viewplan import Gaze, execute_gaze, plan_gazes
 from envs.camera import Frame
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose
 from envs.rooms import door_entry
 from knowledge import geometry
+from knowledge.drift import ForgetKnowledgeBase
 from knowledge.errors import CtxsearchError
 from knowledge.geometry import ObjectInstance
+from knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
 
@@ -82,8 +94,11 @@ class RoomLearner:
         layout: RoomLayout,
         room_index: int,
         prior: Sequence[StoredExam] = (),
+        day: int = 0,
+        known: Sequence[ObjectInstance] = (),
     ):
         self.run, self.log, self.layout, self.room_index = run, log, layout, room_index
+        self.day = int(day)
         self.catalog, self.kb, self.spec = run.catalog, run.kb, run.spec
         self.prior = list(prior)  # stored examinations to replay
         self.given_grid = OccupancyGrid.from_layout(layout, self.spec)  # the true layout's
@@ -97,7 +112,7 @@ class RoomLearner:
         self.body = self.perception.body
         self.body.reset_pose(self.start_pose)
         self._t0 = self.body.sim_time
-        self.rng = room_rng(run.seed, room_index)
+        self.rng = room_rng(run.seed, room_index, self.day)
         self._gaze_s: dict[int, float] = {}
         self._costs = GridCosts(self.grid, run.time_model, self._gaze_seconds)
         self.explorer: Explorer | FrontierExplorer = (
@@ -107,10 +122,32 @@ class RoomLearner:
         )
         self.examined: set[int] = set()  # line 1
         self.unexamined: dict[int, ObjectInstance] = {}  # line 2
+        self.revisits = self._remember(known)  # known objects back in UNEXAMINED
         self.n_room = 0  # examinations made in this room
         self.last_exam_clock = self.clock  # the run clock after the room's last examination
         self.new_since = self.clock  # the run clock when the replay (if any) was over
         self.left_early = False  # the budget ended the room (objects may be left unexamined)
+
+    def _remember(self, known: Sequence[ObjectInstance]) -> int:
+        """Lines 1-2 on a later day (see the module docstring): each known object goes into
+        EXAMINED, or (``reexamine`` ``impact``) into UNEXAMINED when it is worth examining again;
+        returns how many did."""
+        if not known:
+            return 0
+        run = self.run
+        if run.reexamine == "never":
+            self.examined.update(o.id for o in known)
+            return 0
+        kb = ForgetKnowledgeBase(self.catalog, self.kb.alpha, run.evidence, self.day,
+                                 run.forgetting, last_day=run.days - 1)  # fmt: skip
+        costs = EuclideanCosts(self.start_pose, run.time_model)
+        for o in sorted(known, key=lambda o: o.id):
+            rate = kb.type_impact_now(o.type) / max(costs.examine_s(o), 1e-6)
+            if rate >= run.reexamine_rate:
+                self.unexamined[o.id] = o
+            else:
+                self.examined.add(o.id)
+        return len(self.unexamined)
 
     # ---- the map -----------------------------------------------------------------------------
     @property
@@ -319,17 +356,21 @@ class RoomLearner:
         counts in the knowledge base and the strategy."""
         obj, run = choice.obj, self.run
         if stored is None:
-            run.store.record(
-                run=run.run,
-                style=run.style,
-                room_seed=self.layout.seed,
-                object_id=obj.id,
-                ref_type=obj.type,
-                sim_time=self.clock,
-                strategy=run.strategy.name,
-                related=sorted({(r, o.type, o.id) for r, o in related}),
+            run.store.append(
+                NewExamination(
+                    run.run,
+                    run.style,
+                    self.layout.seed,
+                    obj.id,
+                    obj.type,
+                    self.clock,
+                    run.strategy.name,
+                    tuple(sorted({(r, o.type, o.id) for r, o in related})),
+                    self.day,
+                )  # fmt: skip
             )
         self.kb.record_examination(obj.type, geometry.related_pairs(related))
+        run.evidence.add(obj.type, self.day, geometry.related_pairs(related))
         run.strategy.observe(obj.type)
 
     def _done_exam(

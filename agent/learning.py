@@ -7,7 +7,11 @@ world and renderer are closed when the room is done, so memory stays flat over a
 rooms.
 
 A run is identified by (strategy, perception, seed, room budget) (``run_id``): runs with another
-budget are separate runs in the same store. Rooms done in the store are skipped and a room in
+budget are separate runs in the same store. With ``days`` the run visits the same rooms (worlds)
+on days 0 .. days-1, day after day (the furniture stays, the small objects are placed anew: envs
+``generate_layout``'s day); the number of days is not part of the run key, so ``--days 5``
+after ``--days 3`` adds days 3 and 4. Re-examination of known objects on later days
+(``reexamine`` other than ``never``) is part of the key, with its rate and forgetting method. Rooms done in the store are skipped and a room in
 progress is replayed (agent.resume), so a resumed run makes exactly the choices of an
 uninterrupted one. Every examination is one store transaction: Ctrl-C or a kill loses at most
 the one in flight. With ``record``, agent.learn_log's ``RunLog`` writes the run to rerun.
@@ -35,6 +39,8 @@ from agent.mapping import MAP_MODES, default_map_mode
 from agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
 from agent.resume import RunHistory
 from agent.run_state import (
+    DEFAULT_REEXAMINE_RATE,
+    REEXAMINE_POLICIES,
     ROOM_DONE,
     ROOM_STARTED,
     ChoiceCallback,
@@ -49,11 +55,13 @@ from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
+from knowledge.drift import Forgetting
 from knowledge.errors import CtxsearchError
 from knowledge.store import EvidenceStore
 
 ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
-LayoutFn = Callable[[int, int], RoomLayout]  # (room index, room seed) -> layout
+# (room index, room seed[, day]) -> layout; the day (>= 1) only in runs over several days
+LayoutFn = Callable[..., RoomLayout]
 
 
 # =========================================================================== seeds and run ids
@@ -80,7 +88,7 @@ def run_id(
 def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
     """The style's name and its world generator (a room style's rooms or a house style's houses)."""
     st = resolve_style(style, catalog)
-    return st.name, lambda index, seed: generate_layout(st, seed, catalog)
+    return st.name, lambda index, seed, day=0: generate_layout(st, seed, catalog, day)
 
 
 def release_memory() -> None:
@@ -124,6 +132,10 @@ class LearnConfig:
     ``confirm``: camera mode counts an object as related once that many images of the room
     detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
     detections scored at least that confidence (0: any detection counts).
+    ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
+    ``reexamine`` (agent.run_state.REEXAMINE_POLICIES) and ``reexamine_rate``: whether a known
+    object is examined again on a later day; ``forgetting``: how old evidence counts for that
+    decision (knowledge.drift).
     """
 
     style: str
@@ -144,6 +156,10 @@ class LearnConfig:
     detector: str | None = None
     confirm: int = 1
     min_score: float = 0.0
+    days: int = 1
+    reexamine: str = "never"
+    reexamine_rate: float = DEFAULT_REEXAMINE_RATE
+    forgetting: Forgetting = field(default_factory=Forgetting)
 
     @property
     def map_used(self) -> str:
@@ -179,6 +195,17 @@ class LearnConfig:
             raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
         if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
             raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
+        if self.days < 1:
+            raise CtxsearchError(f"days must be >= 1, got {self.days}")
+        if self.reexamine not in REEXAMINE_POLICIES:
+            raise CtxsearchError(
+                f"unknown re-examination policy '{self.reexamine}' "
+                f"(known: {', '.join(REEXAMINE_POLICIES)})"
+            )
+        if not (math.isfinite(self.reexamine_rate) and self.reexamine_rate >= 0):
+            raise CtxsearchError(
+                f"re-examination rate must be a number >= 0, got {self.reexamine_rate}"
+            )
         if not own_perception and self.perception not in PERCEPTION_MODES:
             raise CtxsearchError(
                 f"unknown perception mode '{self.perception}' "
@@ -195,6 +222,14 @@ class LearnConfig:
                 f"unknown frontier rule '{self.frontier_rule}' (known: {', '.join(FRONTIER_RULES)})"
             )
         return replace(self, room_budget_s=budget, map_mode=self.map_used)
+
+    def run_key(self, label: str) -> str:
+        """The store's run key (``run_id``, and the re-examination policy where it is not the
+        paper's) for the perception ``label``."""
+        rid = run_id(self.strategy, label, self.seed, self.room_budget_s, self.map_used)
+        if self.reexamine == "never":
+            return rid
+        return f"{rid}/reexamine={self.reexamine}:{self.reexamine_rate:g}/forget={self.forgetting.label}"
 
     def limit_reached(self, examinations: int) -> bool:
         """Whether ``examinations`` new examinations end the call."""
@@ -220,6 +255,8 @@ class Summary:
     rooms_left_early: int = 0  # rooms done now that the budget ended (objects left unexamined)
     map_mode: str = "given"  # the grid the robot planned on (agent.mapping.MAP_MODES)
     detector: str | None = None  # camera mode's detector preset (None: the oracle has none)
+    days: int = 1  # days the rooms were visited on
+    revisits: int = 0  # known objects examined again on a later day (this call)
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -228,8 +265,15 @@ class Summary:
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
+        days = (
+            [f"days: {self.days} (known objects put back for re-examination in this call: "
+             f"{self.revisits})"]
+            if self.days > 1
+            else []
+        )  # fmt: skip
         return [
             f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
+            *days,
             f"map: {self.map_mode}",
             f"detector: {self.detector or 'none (oracle perception reads the layout)'}",
             f"examinations: {self.examinations} now, {self.total_examinations} in the store",
@@ -279,10 +323,11 @@ def learn(
     map_mode = config.map_used
     detector = config.detector_model(catalog) if perceive is None else None
     label = perception_label(config.perception, detector, config.confirm, config.min_score)
-    rid = run_id(config.strategy, label, config.seed, config.room_budget_s, map_mode)
+    rid = config.run_key(label)
     t_wall = time.perf_counter()
     summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode,
-                      detector=detector.name if detector is not None else None)  # fmt: skip
+                      detector=detector.name if detector is not None else None,
+                      days=config.days)  # fmt: skip
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)
@@ -291,7 +336,9 @@ def learn(
                   config.spec, config.time_model, room_budget_s=config.room_budget_s,
                   on_choice=on_choice, perceive=perceive, map_mode=map_mode,
                   frontier_rule=config.frontier_rule, detector=detector,
-                  confirm=config.confirm, min_score=config.min_score)  # fmt: skip
+                  confirm=config.confirm, min_score=config.min_score, reexamine=config.reexamine,
+                  reexamine_rate=config.reexamine_rate, forgetting=config.forgetting,
+                  evidence=history.evidence, days=config.days)  # fmt: skip
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):
@@ -310,7 +357,9 @@ def _progress(config: LearnConfig, style: str):
     """The progress bar over the rooms, or a context giving None."""
     if not config.progress:
         return nullcontext(None)
-    return tqdm(total=config.rooms, unit="room", desc=f"learn {style}", dynamic_ncols=True)
+    return tqdm(
+        total=config.rooms * config.days, unit="room", desc=f"learn {style}", dynamic_ncols=True
+    )
 
 
 @dataclass
@@ -327,31 +376,48 @@ class _Rooms:
     _last_post: float = 0.0
 
     def learn(self, config: LearnConfig) -> bool:
-        """Go through rooms 0 .. rooms-1 (seeds made one at a time); True when all were gone
-        through, False when ``max_examinations`` stopped the call."""
+        """Go through rooms 0 .. rooms-1 (seeds made one at a time) on day 0, then on each later
+        day; True when all were gone through, False when ``max_examinations`` stopped the call."""
         run, summary = self.run, self.summary
-        for i in range(config.rooms):
-            s = room_seed(config.seed, i)
-            if self.history.is_done(s):
-                run.clock_offset = self.history.done_clock(run.store, run.run, run.style, s,
-                                                           run.clock_offset)  # fmt: skip
-                summary.rooms += 1
-                self._advance(run.clock_offset)
-                continue
-            if config.limit_reached(summary.examinations):
-                return False
-            if not self.room(config, i, s):
-                return False
+        for day in range(config.days):
+            for i in range(config.rooms):
+                s = room_seed(config.seed, i)
+                if self.history.is_done(s, day):
+                    run.clock_offset = self.history.done_clock(run.store, run.run, run.style, s,
+                                                               run.clock_offset, day)  # fmt: skip
+                    summary.rooms += int(day == 0)
+                    self._advance(run.clock_offset)
+                    continue
+                if config.limit_reached(summary.examinations):
+                    return False
+                if not self.room(config, i, s, day):
+                    return False
         return True
 
-    def room(self, config: LearnConfig, index: int, seed: int) -> bool:
-        """Learn in room ``index`` (a replay first, if it is in progress); False when the call's
-        examination limit stopped it before the room was done."""
+    def _layout(self, index: int, seed: int, day: int) -> RoomLayout:
+        return self.layouts(index, seed) if day == 0 else self.layouts(index, seed, day)
+
+    def _known(self, layout: RoomLayout, seed: int, day: int) -> list:
+        """The room's objects examined on an earlier day of the run that are still there (its
+        furniture: small objects are placed anew every day)."""
+        run = self.run
+        if day == 0:
+            return []
+        ids = run.store.examined_before(run.run, run.style, seed, day)
+        return [o for o in layout.objects
+                if o.id in ids and run.catalog.type(o.type).is_furniture]  # fmt: skip
+
+    def room(self, config: LearnConfig, index: int, seed: int, day: int = 0) -> bool:
+        """Learn in room ``index`` on ``day`` (a replay first, if it is in progress); False when
+        the call's examination limit stopped it before the room was done."""
         run, store, summary = self.run, self.run.store, self.summary
-        L = RoomLearner(run, self.log, self.layouts(index, seed), index, self.history.replay(seed))
+        layout = self._layout(index, seed, day)
+        L = RoomLearner(run, self.log, layout, index, self.history.replay(seed, day), day,
+                        self._known(layout, seed, day))  # fmt: skip
+        summary.revisits += L.revisits
         try:
-            if store.room_status(run.run, run.style, seed) is None:
-                store.mark_room(run.run, run.style, seed, ROOM_STARTED)
+            if store.room_status(run.run, run.style, seed, day) is None:
+                store.mark_room(run.run, run.style, seed, ROOM_STARTED, day=day)
             self.log.start_room(L)
             stopped = False
             for res in L.run_room():
@@ -367,9 +433,9 @@ class _Rooms:
         summary.sim_s = run.sim_new
         if stopped:
             return False
-        store.mark_room(run.run, run.style, seed, ROOM_DONE, end_time=L.clock)
+        store.mark_room(run.run, run.style, seed, ROOM_DONE, end_time=L.clock, day=day)
         run.clock_offset = L.clock
-        summary.rooms += 1
+        summary.rooms += int(day == 0)
         summary.rooms_done_now += 1
         summary.rooms_left_early += int(L.left_early)
         self._advance(run.clock_offset)

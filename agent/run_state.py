@@ -19,20 +19,32 @@ from envs.layout import RoomLayout
 from envs.robot_spec import RobotSpec, TimeModel
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog
+from knowledge.drift import DayEvidence, Forgetting
 from knowledge.geometry import ObjectInstance
 from knowledge.store import EvidenceStore
 
 ROOM_DONE = "done"
 ROOM_STARTED = "started"
+# Whether a known object (examined on an earlier day of the run) may be examined again: never
+# (the paper: EXAMINED is never emptied within a run) or when its type's impact under the
+# (possibly forgetting) counts is worth the seconds to examine it (agent.acquisition).
+REEXAMINE_POLICIES = ("never", "impact")
+# impact / second below which a known object is not examined again (``--reexamine-rate``): d_A
+# is mostly eq. 3's impact(0, n) of the entries never seen (0.058 at n = 20, 0.015 at n = 100),
+# an examination costs 5-20 s from the door, so under ``none`` a type stops being re-examined
+# after about 100 examinations; forgetting keeps its effective n (and so d_A) from growing.
+DEFAULT_REEXAMINE_RATE = 1e-3
 
 ChoiceCallback = Callable[[KnowledgeBase, Choice], None]
 # (layout, catalog, spec, time model, render RGB) -> the robot's perception in that room
 PerceptionFactory = Callable[[RoomLayout, Catalog, RobotSpec, TimeModel, bool], Perception]
 
 
-def room_rng(seed: int, index: int) -> np.random.Generator:
-    """The strategy's rng for room ``index`` (fresh per room, so a replayed room draws the same)."""
-    return np.random.default_rng([int(seed), int(index), 0x51])
+def room_rng(seed: int, index: int, day: int = 0) -> np.random.Generator:
+    """The strategy's rng for room ``index`` on ``day`` (fresh per visit, so a replayed visit
+    draws the same; day 0's is the one of runs without days)."""
+    key = [int(seed), int(index), 0x51] + ([int(day)] if day else [])
+    return np.random.default_rng(key)
 
 
 @dataclass(frozen=True)
@@ -89,6 +101,11 @@ class Run:
     detector: DetectorModel | None = None  # camera mode's preset (None: perfect)
     confirm: int = 1  # camera mode: images of a room that must detect an object to count it
     min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
+    reexamine: str = "never"  # REEXAMINE_POLICIES
+    reexamine_rate: float = DEFAULT_REEXAMINE_RATE  # impact per second worth a re-examination
+    forgetting: Forgetting = field(default_factory=Forgetting)  # how old evidence counts
+    evidence: DayEvidence = field(default_factory=DayEvidence.empty)  # the run's, by day
+    days: int = 1  # days the run visits its rooms on (the change test's looks)
 
     def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
         """The robot's perception (and body) in the room ``layout``."""

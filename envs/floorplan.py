@@ -319,9 +319,15 @@ def _entrance_door(p: Passage, W: float, D: float) -> Door:
 
 
 def generate_house(
-    house: HouseStyle, seed: int, catalog: Catalog | None = None, robot: RobotSpec | None = None
+    house: HouseStyle,
+    seed: int,
+    catalog: Catalog | None = None,
+    robot: RobotSpec | None = None,
+    day: int = 0,
 ) -> RoomLayout:
-    """A furnished house of ``house`` style, the same for the same (house, seed)."""
+    """A furnished house of ``house`` style, the same for the same (house, seed, day); on a later
+    ``day`` its plan and furniture stay and every room's small objects are placed anew
+    (``generate_room``'s day)."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
@@ -336,6 +342,8 @@ def generate_house(
     support: dict[int, int | None] = {}
     placed_by: dict[int, tuple[int, str]] = {}
     room_of: dict[int, int] = {}
+    furnished = []  # (room index, its layout, its id base on day 0, its centre)
+    base = 0
     for i, cell in enumerate(cells):
         ix0, iy0, ix1, iy1 = _interior(cell.rect, W, D)
         outline = (float(ix0 - ox), float(iy0 - oy), float(ix1 - ox), float(iy1 - oy))
@@ -345,18 +353,22 @@ def generate_house(
             continue
         doors = tuple(_room_door(outline, p) for p in passages if i in p.rooms)
         shell = RoomShell(outline[2] - outline[0], outline[3] - outline[1], height, doors)
-        room = generate_room(cell.style, room_seed, catalog, robot, shell)
-        cx, cy = (outline[0] + outline[2]) / 2, (outline[1] + outline[3]) / 2
-        base = len(objects)
+        room = generate_room(cell.style, room_seed, catalog, robot, shell, day)
+        centre = ((outline[0] + outline[2]) / 2, (outline[1] + outline[3]) / 2)
+        furnished.append((i, room, base, centre))
+        day0 = room if not day else generate_room(cell.style, room_seed, catalog, robot, shell)
+        base += len(day0.objects)
+    for i, room, base, (cx, cy) in furnished:
+        ids = _house_ids(room, base, catalog, day, furnished)
         for o in room.objects:
             x, y, z = o.position
-            obj = ObjectInstance(o.type, o.id + base, (x + cx, y + cy, z), o.yaw, o.size)
+            obj = ObjectInstance(o.type, ids[o.id], (x + cx, y + cy, z), o.yaw, o.size)
             objects.append(obj)
             room_of[obj.id] = i
             sup = room.support.get(o.id)
-            support[obj.id] = None if sup is None else sup + base
+            support[obj.id] = None if sup is None else ids[sup]
         for oid, (ref, rel) in room.placed_by.items():
-            placed_by[oid + base] = (ref + base, rel)
+            placed_by[ids[oid]] = (ids[ref], rel)
     entrance = next(p for p in passages if p.rooms[1] == -1)
     return RoomLayout(
         style=house.name,
@@ -372,6 +384,28 @@ def generate_house(
         doors=passages,
         room_of=room_of,
     )
+
+
+def _house_ids(room: RoomLayout, base: int, catalog: Catalog, day: int, furnished) -> dict:
+    """Room-local id -> house id. Day 0: local + the room's base (the rooms' ids in turn). A
+    later day: furniture keeps its day-0 house id; small objects take the ids no furniture of
+    the house holds, in order (rooms in turn), so ids stay 1..N."""
+    if not day:
+        return {o.id: o.id + base for o in room.objects}
+    taken = {o.id + b for _i, r, b, _c in furnished for o in r.objects
+             if catalog.type(o.type).is_furniture}  # fmt: skip
+    earlier = sum(
+        sum(1 for o in r.objects if not catalog.type(o.type).is_furniture)
+        for _i, r, b, _c in furnished
+        if b < base
+    )
+    free = (k for k in range(1, 10**9) if k not in taken)
+    for _ in range(earlier):  # the free ids the small objects of earlier rooms took
+        next(free)
+    ids = {}
+    for o in room.objects:
+        ids[o.id] = o.id + base if catalog.type(o.type).is_furniture else next(free)
+    return ids
 
 
 # -- walls and free space -------------------------------------------------------------------------
@@ -584,9 +618,11 @@ def visible_rooms(layout: RoomLayout, x: float, y: float) -> frozenset[int] | No
     return frozenset(seen)
 
 
-def generate_layout(style: WorldStyle, seed: int, catalog: Catalog | None = None) -> RoomLayout:
+def generate_layout(
+    style: WorldStyle, seed: int, catalog: Catalog | None = None, day: int = 0
+) -> RoomLayout:
     """The world of a room style (``generate_room``) or a house style (``generate_house``), the
-    same for the same (style, seed)."""
+    same for the same (style, seed, day); day 0 is the world as first generated."""
     if isinstance(style, HouseStyle):
-        return generate_house(style, seed, catalog)
-    return generate_room(style, seed, catalog)
+        return generate_house(style, seed, catalog, day=day)
+    return generate_room(style, seed, catalog, day=day)

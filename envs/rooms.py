@@ -62,6 +62,7 @@ MIN_POCKET_CELLS = 10  # free components smaller than this (0.1 m^2) are ignored
 # finds open stays open on any other grid (navigation may discretise differently).
 GRID_SLACK = 0.07
 MAX_ROOM_ATTEMPTS = 12
+DAY_TAG = 0xDA75  # the day stream's hash tag (``day_rng``)
 FURNITURE_TRIES = 60
 OBJECT_TRIES = 30
 # Probability that a piece of furniture of this shape stands with its back to a wall.
@@ -133,6 +134,8 @@ class _Builder:
             self.doors = shell.doors
             self.door = shell.doors[0]
         self.objects: list[ObjectInstance] = []
+        self._ids: set[int] = set()
+        self._free = 1
         self.support: dict[int, int | None] = {}
         self.placed_by: dict[int, tuple[int, str]] = {}
         self.resting: dict[int, WorldSurface | None] = {}  # the surface each object rests on
@@ -201,7 +204,11 @@ class _Builder:
 
     # -- bookkeeping --------------------------------------------------------------------------
     def next_id(self) -> int:
-        return len(self.objects) + 1
+        """The smallest id not in use (1, 2, ...: on a later day the gaps the furniture kept
+        leaves, so ids stay 1..N)."""
+        while self._free in self._ids:
+            self._free += 1
+        return self._free
 
     @property
     def parts(self) -> BoxArray:
@@ -260,6 +267,7 @@ class _Builder:
         placed_by: tuple[int, str] | None = None,
     ) -> None:
         self.objects.append(obj)
+        self._ids.add(obj.id)
         self._parts.append(parts)
         self._parts_cache = None
         self.support[obj.id] = None if surface is None else surface.owner
@@ -556,9 +564,20 @@ def _build(
             placed[tname] = placed.get(tname, 0) + 1
     if strict and any(placed.get(t, 0) < lo for t, (lo, _) in style.furniture):
         return None
+    _place_small(b, style, catalog, rng, furniture_rules=True)
+    return b
+
+
+def _place_small(
+    b: _Builder, style: Style, catalog: Catalog, rng: np.random.Generator, furniture_rules: bool
+) -> None:
+    """The rules in file order (those placing furniture only with ``furniture_rules``), then the
+    clutter."""
     for rule in style.rules:
         refs = [o for o in b.objects if o.type == rule.ref]
         is_furniture = catalog.type(rule.type).is_furniture
+        if is_furniture and not furniture_rules:
+            continue
         for ref in refs:
             if rng.random() >= rule.p:
                 continue
@@ -570,6 +589,29 @@ def _build(
     for tname, (lo, hi) in style.clutter:
         for _ in range(int(rng.integers(lo, hi + 1))):
             b.place_clutter(tname)
+
+
+def day_rng(style: Style, seed: int, day: int) -> np.random.Generator:
+    """The random stream that places a world's small objects on ``day`` >= 1 (its own hash tag,
+    so it shares no draws with the world's own stream)."""
+    return np.random.default_rng(
+        [int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name), int(day), DAY_TAG]
+    )
+
+
+def _next_day(
+    b0: _Builder, style: Style, catalog: Catalog, robot: RobotSpec, seed: int, day: int
+) -> _Builder:
+    """The room of ``b0`` on ``day``: the same shell and furniture (same ids and poses), its small
+    objects placed anew by ``style.on_day(day)``'s rules from the day's stream."""
+    shell = RoomShell(b0.width, b0.depth, b0.height, b0.doors)
+    rng = day_rng(style, seed, day)
+    b = _Builder(style.on_day(day), catalog, rng, robot, shell)
+    for obj in b0.objects:
+        if catalog.type(obj.type).is_furniture:
+            obstacle = b.make_obstacle(obj, furniture=True)
+            b.add(obj, world_parts_array(obj, catalog), None, obstacle, b0.placed_by.get(obj.id))
+    _place_small(b, style.on_day(day), catalog, rng, furniture_rules=False)
     return b
 
 
@@ -591,9 +633,12 @@ def generate_room(
     catalog: Catalog | None = None,
     robot: RobotSpec | None = None,
     shell: RoomShell | None = None,
+    day: int = 0,
 ) -> RoomLayout:
-    """A furnished room of ``style``, the same for the same (style, seed, shell). With ``shell``
-    (a room of a house) its size and doors are given instead of drawn."""
+    """A furnished room of ``style``, the same for the same (style, seed, shell, day). With
+    ``shell`` (a room of a house) its size and doors are given instead of drawn. On ``day`` >= 1
+    the room persists: the same size, doors and furniture as on day 0, its small objects placed
+    anew (``day_rng``) by the style's rules as they stand that day (``Style.on_day``)."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name)])
@@ -603,6 +648,8 @@ def generate_room(
         if b is not None:
             break
     assert b is not None
+    if day:
+        b = _next_day(b, style, catalog, robot, seed, day)
     return RoomLayout(
         style=style.name,
         seed=int(seed),

@@ -19,9 +19,11 @@ from knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
 from knowledge.errors import CtxsearchError
 
 STYLES_DIR = ASSETS_DIR / "styles"
-TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter"}
+TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter", "drift"}
 ROOM_FIELDS = {"width", "depth", "height", "door_width"}
 RULE_FIELDS = {"ref", "relation", "type", "p", "count", "on"}
+DRIFT_FIELDS = {"rule", "p", "from_day"}
+MAX_DAY = 100_000
 ON_CHOICES = ("auto", "floor", "surface")
 MAX_COUNT = 50
 MAX_ROOM_SIDE = 50.0  # metres: width, depth (and door width) of a room
@@ -60,6 +62,22 @@ class Rule:
     on: str = "auto"
 
 
+def rule_name(rule: Rule) -> str:
+    """A rule's name in drift schedules: ``REF/RELATION/TYPE`` (e.g. Desk/ON-TOP-OF-DESK/Laptop)."""
+    return f"{rule.ref}/{rule.relation}/{rule.type}"
+
+
+@dataclass(frozen=True)
+class Drift:
+    """From day ``from_day`` on (days of a world's visits, ``learn --days``), the placement rule
+    named ``rule`` (``rule_name``: every rule of that name) places with probability ``p``. The
+    furniture of a world stays across days, so only rules placing small objects may drift."""
+
+    rule: str
+    p: float
+    from_day: int
+
+
 @dataclass(frozen=True)
 class Style:
     """A validated room style."""
@@ -74,6 +92,30 @@ class Style:
     furniture: tuple[tuple[str, tuple[int, int]], ...]  # (type, [min, max]) in file order
     rules: tuple[Rule, ...]
     clutter: tuple[tuple[str, tuple[int, int]], ...]
+    drift: tuple[Drift, ...] = ()  # the schedule of changes over days (empty: none)
+
+    def on_day(self, day: int) -> Style:
+        """The style as it places small objects on ``day``: every drift entry with ``from_day
+        <= day`` applied in order (a later entry for the same rule wins). Day 0 is the style."""
+        active = [d for d in self.drift if d.from_day <= day]
+        if not active:
+            return self
+        p = {d.rule: d.p for d in sorted(active, key=lambda d: d.from_day)}
+        rules = tuple(
+            Rule(r.ref, r.relation, r.type, p.get(rule_name(r), r.p), r.count, r.on)
+            for r in self.rules
+        )
+        return Style(self.name, self.path, self.description, self.width, self.depth,
+                     self.height, self.door_width, self.furniture, rules, self.clutter,
+                     self.drift)  # fmt: skip
+
+    def with_drift(self, drift: tuple[Drift, ...], catalog: Catalog | None = None) -> Style:
+        """The style with another drift schedule (checked like a file's: ``check_drift_rule``)."""
+        for i, d in enumerate(drift):
+            check_drift_rule(self.path, f"drift[{i}]", d, self, catalog)
+        return Style(self.name, self.path, self.description, self.width, self.depth,
+                     self.height, self.door_width, self.furniture, self.rules, self.clutter,
+                     tuple(drift))  # fmt: skip
 
     @property
     def types(self) -> tuple[str, ...]:
@@ -216,6 +258,54 @@ def _rule(path, i: int, raw, catalog: Catalog, present: set[str]) -> Rule:
     return Rule(ref=ref, relation=rel, type=tname, p=float(p), count=count, on=on)
 
 
+def check_drift_rule(path, where: str, d: Drift, style: Style, catalog: Catalog | None = None):
+    """StyleError unless ``d.rule`` names a rule of ``style`` that places a small object."""
+    rules = [r for r in style.rules if rule_name(r) == d.rule]
+    if not rules:
+        names = ", ".join(dict.fromkeys(rule_name(r) for r in style.rules)) or "none"
+        raise StyleError(
+            path, f"no placement rule named {d.rule!r} (its rules: {names})", field=f"{where}.rule"
+        )
+    catalog = catalog or load_catalog()
+    if catalog.type(rules[0].type).is_furniture:
+        raise StyleError(
+            path,
+            f"{d.rule} places furniture, which stays across days: only small objects may drift",
+            field=f"{where}.rule",
+        )
+
+
+def _drift(path, i: int, raw, style: Style, catalog: Catalog) -> Drift:
+    where = f"drift[{i}]"
+    if not isinstance(raw, dict):
+        raise StyleError(path, "a drift entry must be a table [[drift]]", field=where)
+    unknown = set(raw) - DRIFT_FIELDS
+    if unknown:
+        raise StyleError(
+            path,
+            f"unknown field(s) {sorted(unknown)} (allowed: {sorted(DRIFT_FIELDS)})",
+            field=f"{where}.{sorted(unknown)[0]}",
+        )
+    for req in ("rule", "p", "from_day"):
+        if req not in raw:
+            raise StyleError(path, "missing", field=f"{where}.{req}")
+    rule, p, day = raw["rule"], raw["p"], raw["from_day"]
+    if not isinstance(rule, str):
+        raise StyleError(path, f"must be a rule name REF/RELATION/TYPE, got {rule!r}",
+                         field=f"{where}.rule")  # fmt: skip
+    if isinstance(p, bool) or not isinstance(p, int | float) or not (0.0 <= p <= 1.0):
+        raise StyleError(path, f"probability must be in [0, 1], got {p!r}", field=f"{where}.p")
+    if isinstance(day, bool) or not isinstance(day, int) or not 1 <= day <= MAX_DAY:
+        raise StyleError(
+            path,
+            f"must be an integer day in [1, {MAX_DAY}] (day 0 is the style as written), got {day!r}",
+            field=f"{where}.from_day",
+        )
+    d = Drift(rule, float(p), int(day))
+    check_drift_rule(path, where, d, style, catalog)
+    return d
+
+
 def _check_fill(path, style: Style, catalog: Catalog, clearance: float) -> None:
     """Raise if the expected furniture (largest sizes) cannot fit in the smallest room with room
     for the robot to drive, or a single piece cannot fit at all."""
@@ -335,6 +425,12 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
         clutter=clutter,
     )
     _check_fill(path, style, catalog, RobotSpec().clearance)
+    raw_drift = doc.get("drift", [])
+    if not isinstance(raw_drift, list):
+        raise StyleError(path, "must be an array of tables [[drift]]", field="drift")
+    if raw_drift:
+        drift = tuple(_drift(path, i, raw, style, catalog) for i, raw in enumerate(raw_drift))
+        style = style.with_drift(drift, catalog)
     return style
 
 

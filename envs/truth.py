@@ -126,9 +126,12 @@ def ground_truth(
     seed: int = 0,
     catalog: Catalog | None = None,
     progress: bool = False,
+    day: int = 0,
 ) -> dict:
     """P(rel(B)) for every (A, rel, B) over ``samples`` rooms of ``style`` (seeds seed .. seed+N-1);
-    for a house style over the rooms of ``samples`` houses (then ``"rooms"`` says how many).
+    for a house style over the rooms of ``samples`` houses (then ``"rooms"`` says how many). On
+    ``day`` >= 1 the worlds are those of that day (their small objects placed anew by the
+    style's rules as its drift schedule has them that day); the document then says ``"day"``.
 
     Returns ``{"style", "samples", "seed", "catalog", "entries": [{"ref", "relation", "type",
     "p", "se", "n", "y", "se_room"}]}`` (``catalog`` is the catalog's fingerprint).
@@ -140,15 +143,20 @@ def ground_truth(
     if progress:
         unit = "house" if isinstance(style, HouseStyle) else "room"
         seeds = tqdm(seeds, desc=f"truth {style.name}", unit=unit)
-    return truth_document(style, samples, seed, catalog, sample_counts(style, seeds, catalog))
+    doc = truth_document(style, samples, seed, catalog, sample_counts(style, seeds, catalog, day))
+    if day:
+        doc["day"] = int(day)
+    return doc
 
 
 def sample_counts(
-    style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog
+    style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog, day: int = 0
 ) -> list[tuple[dict[str, int], dict[tuple[str, str, str], int]]]:
-    """The per-room counts (``world_counts``) of the worlds of ``seeds``, in seed order: the
-    independent part of ``ground_truth`` (a sweep can split the seeds)."""
-    return [c for s in seeds for c in world_counts(generate_layout(style, s, catalog), catalog)]
+    """The per-room counts (``world_counts``) of the worlds of ``seeds`` (on ``day``), in seed
+    order: the independent part of ``ground_truth`` (a sweep can split the seeds)."""
+    return [
+        c for s in seeds for c in world_counts(generate_layout(style, s, catalog, day), catalog)
+    ]
 
 
 def truth_document(

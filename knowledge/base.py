@@ -44,8 +44,8 @@ class IntervalRow:
     ref: str
     relation: str
     type: str
-    y: int
-    n: int
+    y: int | float  # counts; effective (float) counts under forgetting (knowledge.drift)
+    n: int | float
     p0: float
     low: float
     high: float

@@ -21,7 +21,10 @@ A (their day and whether a B stood in rel), into counts for the paper's interval
                monitoring restarts from there.
 
 Everything is derived from the evidence log's day stamps, so one store can be re-read with any
-method. Pure numpy.
+method: ``DayEvidence`` (built by ``evidence_of`` from ``EvidenceStore.examinations()``) holds
+a run's examinations by day, ``Forgetting`` names a method and its parameters, and
+``ForgetKnowledgeBase`` is a KnowledgeBase whose intervals read the method's counts (``kb show
+--forget``, the search, re-examination in ``learn --reexamine impact``). Pure numpy.
 """
 
 from __future__ import annotations
@@ -31,6 +34,9 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
+
+from knowledge import intervals
+from knowledge.base import IntervalRow, KnowledgeBase
 
 FORGET_METHODS = ("none", "half-life", "detect")
 DEFAULT_HALF_LIFE = 7.0  # days
@@ -181,3 +187,198 @@ def forget_counts(
         y, n = (detector or ChangeDetector()).counts(s, first_day, today)
         return float(y), float(n)
     raise ValueError(f"unknown forgetting method '{method}' (known: {', '.join(FORGET_METHODS)})")
+
+
+# =========================================================================== a run's evidence by day
+@dataclass(frozen=True)
+class Forgetting:
+    """How counts become intervals over days (``--forget``): ``method`` (FORGET_METHODS), the
+    half-life in days, and the change test's false-alarm rate per entry and run over ``looks``
+    days tested (the Bonferroni divisor; None: the days the evidence spans)."""
+
+    method: str = "none"
+    half_life: float = DEFAULT_HALF_LIFE
+    false_alarm: float = DEFAULT_FALSE_ALARM
+    window: int = DEFAULT_WINDOW
+    looks: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.method not in FORGET_METHODS:
+            raise ValueError(
+                f"unknown forgetting method '{self.method}' (known: {', '.join(FORGET_METHODS)})"
+            )
+        if not self.half_life > 0 or not math.isfinite(self.half_life):
+            raise ValueError(f"half-life must be a positive number of days, got {self.half_life}")
+        if not 0.0 < self.false_alarm < 1.0:
+            raise ValueError(f"false-alarm rate must be in (0, 1), got {self.false_alarm}")
+
+    @property
+    def label(self) -> str:
+        """The method with its parameter (``half-life:7``, ``detect:0.05``, ``none``)."""
+        if self.method == "half-life":
+            return f"half-life:{self.half_life:g}"
+        if self.method == "detect":
+            return f"detect:{self.false_alarm:g}"
+        return "none"
+
+    def detector(self, last_day: int) -> ChangeDetector:
+        """The change test for evidence up to ``last_day``."""
+        looks = self.looks if self.looks is not None else max(1, last_day + 1)
+        return ChangeDetector(self.window, self.false_alarm, looks)
+
+    def counts(self, series: EntrySeries, today: int, last_day: int) -> tuple[float, float]:
+        """The (y, n) this method makes of ``series`` on ``today``."""
+        return forget_counts(
+            series,
+            today,
+            self.method,
+            half_life=self.half_life,
+            detector=self.detector(last_day) if self.method == "detect" else None,
+        )
+
+
+@dataclass
+class DayEvidence:
+    """Evidence by day: per reference type, the day of each of its examinations and the
+    (relation, B) pairs each found (at least one B in rel). Built from the evidence log's day
+    stamps; examinations may be added in any order (series are ordered by day, stably)."""
+
+    days: dict[str, list[int]]
+    pairs: dict[str, list[frozenset[tuple[str, str]]]]
+
+    @classmethod
+    def empty(cls) -> DayEvidence:
+        """No evidence yet."""
+        return cls({}, {})
+
+    def add(self, ref: str, day: int, pairs) -> None:
+        """One examination of a ``ref`` on ``day`` and the (relation, B) pairs it found."""
+        self.days.setdefault(ref, []).append(int(day))
+        self.pairs.setdefault(ref, []).append(frozenset(pairs))
+
+    @property
+    def last_day(self) -> int:
+        """The latest day with evidence (0 without any)."""
+        return max((max(d) for d in self.days.values() if d), default=0)
+
+    def keys(self, ref: str) -> list[tuple[str, str]]:
+        """The (relation, B) pairs found at least once in examinations of ``ref``, sorted."""
+        return sorted(set().union(*self.pairs.get(ref, [])))
+
+    def series(self, ref: str, key: tuple[str, str] | None) -> EntrySeries:
+        """The entry (ref, key)'s series, ordered by day (``key`` None or unseen: all misses)."""
+        days = np.asarray(self.days.get(ref, []), np.int64)
+        order = np.argsort(days, kind="stable")
+        found = self.pairs.get(ref, [])
+        hits = np.array([key is not None and key in found[i] for i in order], bool)
+        return EntrySeries(days[order], hits.reshape(len(order)))
+
+    def table(
+        self, forgetting: Forgetting, today: int, last_day: int | None = None
+    ) -> dict[str, tuple[float, dict[tuple[str, str], tuple[float, float]]]]:
+        """Per examined reference type: (n of an entry never hit, {(rel, B): (y, n)} of its
+        entries with a hit), as ``forgetting`` counts them on ``today``."""
+        last = self.last_day if last_day is None else last_day
+        out = {}
+        for ref in self.days:
+            _y0, n0 = forgetting.counts(self.series(ref, None), today, last)
+            entries = {
+                key: forgetting.counts(self.series(ref, key), today, last) for key in self.keys(ref)
+            }
+            out[ref] = (n0, entries)
+        return out
+
+    def alarms(
+        self, forgetting: Forgetting, ref: str, key: tuple[str, str], today: int
+    ) -> list[int]:
+        """The days ``detect`` raised an alarm on entry (ref, key) up to ``today``."""
+        det = forgetting.detector(self.last_day)
+        return det.changes(self.series(ref, key).until(today), 0, today)
+
+
+class ForgetKnowledgeBase(KnowledgeBase):
+    """A KnowledgeBase whose intervals (``interval``, ``rows``, ``mean_width``, and so the search's
+    P(rel(T))) read the counts a forgetting method makes of the evidence on ``today``; its raw
+    counts (``n``, ``y``, the HIF choice) are the paper's, all evidence counted."""
+
+    def __init__(
+        self,
+        catalog,
+        alpha: float,
+        evidence: DayEvidence,
+        today: int,
+        forgetting: Forgetting,
+        last_day: int | None = None,
+    ):
+        super().__init__(catalog, alpha)
+        self.evidence, self.today, self.forgetting = evidence, int(today), forgetting
+        for ref, days in evidence.days.items():
+            now = [i for i, d in enumerate(days) if d <= today]
+            ys: dict[tuple[str, str], int] = {}
+            for i in now:
+                for key in evidence.pairs[ref][i]:
+                    ys[key] = ys.get(key, 0) + 1
+            self.add_counts(ref, len(now), ys)
+        self.table = evidence.table(forgetting, today, last_day)
+
+    def counts(self, ref: str, key: tuple[str, str]) -> tuple[float, float]:
+        """(y, n) of entry (ref, key) under the forgetting method."""
+        n0, entries = self.table.get(ref, (0.0, {}))
+        return entries.get(key, (0.0, n0))
+
+    def interval(self, relation: str, type_name: str) -> tuple[float, float]:
+        """Wilson's interval on the forgetting method's counts ([0, 1] without evidence)."""
+        ref = self.catalog.relation(relation).ref
+        y, n = self.counts(ref, (relation, type_name))
+        lo, hi = intervals.interval(y, n, self.alpha)
+        return float(lo), float(hi)
+
+    def rows(self, ref_type: str | None = None, include_zero: bool = True) -> list[IntervalRow]:
+        """``KnowledgeBase.rows`` on the forgetting method's (effective) counts."""
+        refs = [ref_type] if ref_type is not None else list(self.catalog.type_names)
+        out = []
+        for ref in refs:
+            t = self.catalog.type(ref)
+            n0, entries = self.table.get(ref, (0.0, {}))
+            keys = (
+                [(r, b) for r in t.relation_names for b in self.catalog.type_names]
+                if include_zero
+                else [k for k, (y, _n) in entries.items() if y > 0]
+            )
+            for key in keys:
+                y, n = entries.get(key, (0.0, n0))
+                lo, hi = intervals.interval(y, n, self.alpha)
+                c = float(intervals.p0(y, n, self.alpha))
+                out.append(IntervalRow(ref, key[0], key[1], y, n, c, float(lo), float(hi)))
+        out.sort(key=lambda row: (-row.low, row.relation, row.type))
+        return out
+
+    def mean_width(self) -> float:
+        """Mean interval width over every (A, rel, B) of the catalog, on the forgetting counts."""
+        rows = self.rows(include_zero=True)
+        return float(np.mean([r.width for r in rows])) if rows else 0.0
+
+    def type_impact_now(self, ref: str) -> float:
+        """Figure 2's d_A (average eq. 3 impact over RELATIONS(A) x TYPES) on the forgetting
+        method's counts: what one more examination of an A would teach today."""
+        t = self.catalog.type(ref)
+        m = len(t.relation_names) * len(self.catalog.type_names)
+        if m == 0:
+            return 0.0
+        n0, entries = self.table.get(ref, (0.0, {}))
+        ys = np.array([y for y, _ in entries.values()], float)
+        ns = np.array([n for _, n in entries.values()], float)
+        total = (m - len(entries)) * float(intervals.impact(0.0, n0, self.alpha))
+        if len(entries):
+            total += float(np.sum(intervals.impact(ys, ns, self.alpha)))
+        return total / m
+
+
+def evidence_of(examinations, run: str | None = None) -> DayEvidence:
+    """The DayEvidence of an evidence log's examinations (``EvidenceStore.examinations()``), of
+    one run or all, ordered by day (stable within a day)."""
+    ev = DayEvidence.empty()
+    for e in examinations:
+        if run is None or e.run == run:
+            ev.add(e.type, e.day, {(r, t) for r, t, _ in e.related})
+    return ev

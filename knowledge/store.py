@@ -5,32 +5,38 @@ strategy) and one row per observed (relation, related type, related object id); 
 knowledge base, hence its intervals, are rebuilt from this log, so runs resume, stores from several
 robots merge (``merge_stores``), and the same evidence can be re-read with another alpha.
 
-Tables (schema version 3)::
+Tables (schema version 4)::
 
     meta          (key TEXT PRIMARY KEY, value TEXT)   app='ctxsearch', schema_version,
                                                        catalog_fingerprint, catalog_path, alpha,
                                                        created
-    rooms         (run, style, seed, status, end_time) status 'started' | 'done';
-                                                       end_time: the run's simulated clock when
-                                                       the room was done (NULL if not recorded);
-                                                       PRIMARY KEY (run, style, seed)
-    examinations  (id INTEGER PRIMARY KEY, run, style, room_seed, object_id, type, sim_time,
-                   strategy, created)                  UNIQUE (EXAM_KEY): one examination of an
-                                                       object per room and run
+    rooms         (run, style, seed, day, status,      one row per visit of a world: status
+                   end_time)                           'started' | 'done'; end_time: the run's
+                                                       simulated clock when the visit was done
+                                                       (NULL if not recorded);
+                                                       PRIMARY KEY (run, style, seed, day)
+    examinations  (id INTEGER PRIMARY KEY, run, style, room_seed, day, object_id, type,
+                   sim_time, strategy, created)        UNIQUE (EXAM_KEY): one examination of an
+                                                       object per world, day and run
     observations  (examination_id REFERENCES examinations, relation, type, related_id)
 
-The uniqueness key ``EXAM_KEY`` (run, style, room_seed, object_id) is what identifies an
+The uniqueness key ``EXAM_KEY`` (run, style, room_seed, day, object_id) is what identifies an
 examination of a run: a second process learning the same run on the same store cannot add an
 examination twice (its write fails with a one-line StoreError and nothing of it is written);
-different runs on one store never collide. A later key (e.g. a day stamp) is one more column in
-``EXAM_KEY`` and a new schema version.
+different runs on one store never collide. ``day`` (version 4) is the day of the world's visit
+(``learn --days``): a world persists across days (its furniture stays, its small objects are
+placed anew every day), so a desk examined yesterday is a new trial today, and still at most one
+per day.
 
-Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time) and
-version 2 (no uniqueness key). The first write to one (``record``, ``mark_room``, a merge into
-it) upgrades it in place to version 3 in one transaction: the tables are rebuilt in this
-version's exact schema and duplicate examinations (same ``EXAM_KEY``, written by two processes
-before version 3) are dropped, keeping the first; older ctxsearch then refuses the store with its
-one-line "newer schema" error. ``examinations()`` reads the log back, examination by examination.
+Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time),
+version 2 (no uniqueness key) and version 3 (no day stamps: every examination and visit is of day
+0). Reading (``open(..., read_only=True)``: ``kb show``, ``kb stats``, search) never migrates. The
+first write to one (``record``, ``mark_room``, a merge into it) upgrades it in place to version 4
+in the same transaction as the write: the tables are rebuilt in this version's exact schema
+(older rows get day 0) and duplicate examinations (same ``EXAM_KEY``, written by two processes
+before version 3) are dropped, keeping the first; a failure anywhere rolls the whole transaction
+back, leaving the file as it was. Older ctxsearch then refuses the store with its one-line
+"newer schema" error. ``examinations()`` reads the log back, examination by examination.
 
 A store's schema (tables, columns, indexes, triggers, views) must be exactly what this version (or
 the older version it claims) writes: anything else, e.g. a trigger that would add evidence on
@@ -76,22 +82,39 @@ from knowledge.clustered import (
 )
 from knowledge.errors import CtxsearchError, StoreError
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
-# What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on).
-EXAM_KEY = ("run", "style", "room_seed", "object_id")
+# What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on;
+# the day from v4 on).
+EXAM_KEY = ("run", "style", "room_seed", "day", "object_id")
+_V3_EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _TABLES = ("meta", "rooms", "examinations", "observations")
 
 _META_SQL = "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)"
 _ROOMS_SQL = """CREATE TABLE rooms (
     run TEXT NOT NULL, style TEXT NOT NULL, seed INTEGER NOT NULL,
+    day INTEGER NOT NULL DEFAULT 0 CHECK (day >= 0),
+    status TEXT NOT NULL CHECK (status IN ('started', 'done')),
+    end_time REAL,
+    PRIMARY KEY (run, style, seed, day)
+)"""
+_EXAMINATIONS_SQL = """CREATE TABLE examinations (
+    id INTEGER PRIMARY KEY,
+    run TEXT NOT NULL, style TEXT NOT NULL, room_seed INTEGER NOT NULL,
+    day INTEGER NOT NULL DEFAULT 0 CHECK (day >= 0),
+    object_id INTEGER NOT NULL, type TEXT NOT NULL,
+    sim_time REAL NOT NULL, strategy TEXT NOT NULL, created REAL NOT NULL
+)"""
+# The version-3 tables (no day stamps).
+_V3_ROOMS_SQL = """CREATE TABLE rooms (
+    run TEXT NOT NULL, style TEXT NOT NULL, seed INTEGER NOT NULL,
     status TEXT NOT NULL CHECK (status IN ('started', 'done')),
     end_time REAL,
     PRIMARY KEY (run, style, seed)
 )"""
-_EXAMINATIONS_SQL = """CREATE TABLE examinations (
+_V3_EXAMINATIONS_SQL = """CREATE TABLE examinations (
     id INTEGER PRIMARY KEY,
     run TEXT NOT NULL, style TEXT NOT NULL, room_seed INTEGER NOT NULL,
     object_id INTEGER NOT NULL, type TEXT NOT NULL,
@@ -114,28 +137,38 @@ _SCHEMA_STATEMENTS = (
     _OBSERVATIONS_SQL,
     _OBSERVATIONS_INDEX,
 )
-# The schemas of older versions, still read (and upgraded to version 3 on the first write).
+# The schemas of older versions, still read (and upgraded to version 4 on the first write).
 _OLD_ROOM_INDEX = "CREATE INDEX examinations_room ON examinations (run, style, room_seed)"
 _OLD_SCHEMAS = {
     1: (
         _META_SQL,
-        _ROOMS_SQL.replace("    end_time REAL,\n", ""),
-        _EXAMINATIONS_SQL,
+        _V3_ROOMS_SQL.replace("    end_time REAL,\n", ""),
+        _V3_EXAMINATIONS_SQL,
         _OLD_ROOM_INDEX,
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
     2: (
         _META_SQL,
-        _ROOMS_SQL,
-        _EXAMINATIONS_SQL,
+        _V3_ROOMS_SQL,
+        _V3_EXAMINATIONS_SQL,
         _OLD_ROOM_INDEX,
+        _OBSERVATIONS_SQL,
+        _OBSERVATIONS_INDEX,
+    ),
+    3: (
+        _META_SQL,
+        _V3_ROOMS_SQL,
+        _V3_EXAMINATIONS_SQL,
+        f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(_V3_EXAM_KEY)})",
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
 }
 
-_EXAM_COLS = "run, style, room_seed, object_id, type, sim_time, strategy, created"
+_EXAM_COLS = "run, style, room_seed, day, object_id, type, sim_time, strategy, created"
+# The same columns read from a store older than version 4 (no day stamps: day 0).
+_OLD_EXAM_COLS = _EXAM_COLS.replace("day,", "0,")
 
 
 def _not_a_store(path: Path, why: str = "") -> StoreError:
@@ -340,6 +373,23 @@ def _schema_problem(conn: sqlite3.Connection, version: int) -> str | None:
 
 
 @dataclass(frozen=True)
+class NewExamination:
+    """An examination to append (``EvidenceStore.append``): the visit (run, style, room seed,
+    day), the object and its type, the run clock, the strategy and RELATED-OBJECTS as
+    (relation, related type, related object id)."""
+
+    run: str
+    style: str
+    room_seed: int
+    object_id: int
+    ref_type: str
+    sim_time: float
+    strategy: str
+    related: tuple[tuple[str, str, int], ...]
+    day: int = 0
+
+
+@dataclass(frozen=True)
 class Examination:
     """One examination of the log with its observation rows (``EvidenceStore.examinations``)."""
 
@@ -352,6 +402,7 @@ class Examination:
     sim_time: float
     strategy: str
     related: tuple[tuple[str, str, int], ...]  # (relation, related type, related object id)
+    day: int = 0  # the day of the world's visit (0 in stores older than version 4)
 
 
 def _migrate(cur: sqlite3.Cursor, version: int) -> int:
@@ -360,18 +411,19 @@ def _migrate(cur: sqlite3.Cursor, version: int) -> int:
     EXAM_KEY: keep the first and its observations). Returns how many were dropped."""
     end = "end_time" if version >= 2 else "NULL"
     cur.execute("DROP INDEX IF EXISTS examinations_room")
+    cur.execute("DROP INDEX IF EXISTS examinations_key")
     cur.execute("DROP INDEX IF EXISTS observations_pair")
     for t in ("observations", "examinations", "rooms"):
         cur.execute(f"ALTER TABLE {t} RENAME TO _old_{t}")
     for stmt in _SCHEMA_STATEMENTS[1:]:
         cur.execute(stmt)
     cur.execute(
-        "INSERT INTO rooms (run, style, seed, status, end_time) "
-        f"SELECT run, style, seed, status, {end} FROM _old_rooms"
+        "INSERT INTO rooms (run, style, seed, day, status, end_time) "
+        f"SELECT run, style, seed, 0, status, {end} FROM _old_rooms"
     )
-    keep = f"SELECT MIN(id) FROM _old_examinations GROUP BY {', '.join(EXAM_KEY)}"
+    keep = f"SELECT MIN(id) FROM _old_examinations GROUP BY {', '.join(_V3_EXAM_KEY)}"
     cur.execute(
-        f"INSERT INTO examinations (id, {_EXAM_COLS}) SELECT id, {_EXAM_COLS} "
+        f"INSERT INTO examinations (id, {_EXAM_COLS}) SELECT id, {_OLD_EXAM_COLS} "
         f"FROM _old_examinations WHERE id IN ({keep}) ORDER BY id"
     )
     total = int(cur.execute("SELECT COUNT(*) FROM _old_examinations").fetchone()[0])
@@ -499,16 +551,34 @@ class EvidenceStore:
         strategy: str,
         related: Iterable[tuple[str, str, int]],
     ) -> int:
-        """Append one examination and its observations in one transaction; returns its id.
+        """Append one examination (of day 0) and its observations in one transaction; returns
+        its id.
 
         ``related`` lists (relation, related type, related object id) for every object found in
         one of the examined object's relation volumes (the same pair may appear for several
         objects: the counts treat it as "at least one"). Everything is validated against the
         catalog before anything is written (CtxsearchError). An examination whose EXAM_KEY is
         already in the store (another process learning the same run) is a StoreError and
-        nothing is written.
+        nothing is written. ``append`` records one of any day.
         """
+        return self.append(
+            NewExamination(
+                run, style, room_seed, object_id, ref_type, sim_time, strategy, tuple(related)
+            )  # fmt: skip
+        )
+
+    def append(self, e: NewExamination) -> int:
+        """``record`` for an examination of any day (``NewExamination.day``)."""
+        run, style, room_seed, object_id, ref_type = (
+            e.run,
+            e.style,
+            e.room_seed,
+            e.object_id,
+            e.ref_type,
+        )
+        sim_time, strategy, related = e.sim_time, e.strategy, e.related
         self.catalog.type(ref_type)
+        day = _day(e.day)
         rows = []
         for item in related:
             try:
@@ -526,6 +596,7 @@ class EvidenceStore:
             _text(run, "run"),
             _text(style, "style"),
             _int(room_seed, "room_seed"),
+            day,
             _int(object_id, "object_id"),
             ref_type,
             _float(sim_time, "sim_time"),
@@ -535,14 +606,16 @@ class EvidenceStore:
         try:
             with self._transaction() as cur:
                 cur.execute(
-                    f"INSERT INTO examinations ({_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?)", exam
+                    f"INSERT INTO examinations ({_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    exam,
                 )
                 eid = int(cur.lastrowid)
                 self._insert_observations(cur, eid, rows)
         except sqlite3.IntegrityError:
             raise StoreError(
-                f"{self.path}: object {exam[3]} of room {exam[1]}/{exam[2]} is already examined "
-                f"in run {exam[0]!r}: another process is learning the same run on this store "
+                f"{self.path}: object {exam[4]} of room {exam[1]}/{exam[2]} is already examined "
+                f"in run {exam[0]!r} on day {day}: another process is learning the same run on "
+                "this store "
                 "(nothing was written; its evidence is kept once)"
             ) from None
         return eid
@@ -556,38 +629,52 @@ class EvidenceStore:
         )
 
     def mark_room(
-        self, run: str, style: str, seed: int, status: str, end_time: float | None = None
+        self,
+        run: str,
+        style: str,
+        seed: int,
+        status: str,
+        end_time: float | None = None,
+        day: int = 0,
     ) -> None:
-        """Set a room's status: 'started' when the robot enters it (a room already done stays
-        done), 'done' when it is finished; ``end_time`` (the run's simulated clock when it was
-        done) replaces the stored one."""
+        """Set the status of a room's visit on ``day``: 'started' when the robot enters it (a
+        visit already done stays done), 'done' when it is finished; ``end_time`` (the run's
+        simulated clock when it was done) replaces the stored one."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
-        key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), status)
+        key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), _day(day), status)
         end = None if end_time is None else _float(end_time, "end_time")
         with self._transaction() as cur:
             if end is not None:
                 cur.execute(
-                    "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
-                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status, "
+                    "INSERT INTO rooms (run, style, seed, day, status, end_time) "
+                    "VALUES (?, ?, ?, ?, ?, ?) "
+                    "ON CONFLICT (run, style, seed, day) DO UPDATE SET status = excluded.status, "
                     "end_time = excluded.end_time",
                     (*key, end),
                 )
             else:  # a room done stays done (another writer of the run may have finished it)
                 cur.execute(
-                    "INSERT INTO rooms (run, style, seed, status) VALUES (?, ?, ?, ?) "
-                    "ON CONFLICT (run, style, seed) DO UPDATE SET status = excluded.status "
+                    "INSERT INTO rooms (run, style, seed, day, status) VALUES (?, ?, ?, ?, ?) "
+                    "ON CONFLICT (run, style, seed, day) DO UPDATE SET status = excluded.status "
                     "WHERE rooms.status != 'done'",
                     key,
                 )
 
     # ---- reading ------------------------------------------------------------------------------
-    def room_status(self, run: str, style: str, seed: int) -> str | None:
-        """'started', 'done', or None for a room never entered."""
+    def _visit(self, day: int) -> tuple[str, tuple]:
+        """The WHERE part selecting one day's visit (older stores hold only day 0)."""
+        if self.version >= 4:
+            return " AND day = ?", (int(day),)
+        return ("", ()) if int(day) == 0 else (" AND 0", ())
+
+    def room_status(self, run: str, style: str, seed: int, day: int = 0) -> str | None:
+        """'started', 'done', or None for a room never entered (on ``day``)."""
+        where, args = self._visit(day)
         with self._reading():
             row = self.conn.execute(
-                "SELECT status FROM rooms WHERE run = ? AND style = ? AND seed = ?",
-                (run, style, int(seed)),
+                "SELECT status FROM rooms WHERE run = ? AND style = ? AND seed = ?" + where,
+                (run, style, int(seed), *args),
             ).fetchone()
         if row is None:
             return None
@@ -595,15 +682,16 @@ class EvidenceStore:
             raise self._bad(f"room {style}/{seed} of run {run!r} has status {row[0]!r}")
         return str(row[0])
 
-    def room_end_time(self, run: str, style: str, seed: int) -> float | None:
-        """The run's simulated clock when the room was done, or None (not done, not recorded,
-        or a version-1 store)."""
+    def room_end_time(self, run: str, style: str, seed: int, day: int = 0) -> float | None:
+        """The run's simulated clock when the room's visit on ``day`` was done, or None (not
+        done, not recorded, or a version-1 store)."""
         if self.version < 2:
             return None
+        where, args = self._visit(day)
         with self._reading():
             row = self.conn.execute(
-                "SELECT end_time FROM rooms WHERE run = ? AND style = ? AND seed = ?",
-                (run, style, int(seed)),
+                "SELECT end_time FROM rooms WHERE run = ? AND style = ? AND seed = ?" + where,
+                (run, style, int(seed), *args),
             ).fetchone()
         if row is None or row[0] is None:
             return None
@@ -615,7 +703,11 @@ class EvidenceStore:
         examinations are read first, the examinations then streamed; do not write to the store
         while iterating. A row that does not fit the catalog or holds a bad value is a
         StoreError naming the store."""
-        exams = "SELECT id, run, style, room_seed, object_id, type, sim_time, strategy FROM examinations"
+        day = "day" if self.version >= 4 else "0"
+        exams = (
+            "SELECT id, run, style, room_seed, object_id, type, sim_time, strategy, "
+            f"{day} FROM examinations"
+        )
         obs = "SELECT examination_id, relation, type, related_id FROM observations"
         args: tuple = ()
         if run is not None:
@@ -632,7 +724,7 @@ class EvidenceStore:
                         self._integer(rid, "related object id"),
                     )
                 )
-            for i, r, st, seed, oid, t, sim, strategy in self.conn.execute(
+            for i, r, st, seed, oid, t, sim, strategy, d in self.conn.execute(
                 exams + " ORDER BY id", args
             ):
                 i = self._integer(i, "examination id")
@@ -658,14 +750,29 @@ class EvidenceStore:
                     self._number(sim, f"{where}: sim_time"),
                     self._name(strategy, f"{where}: strategy"),
                     rows,
+                    self._integer(d, f"{where}: day"),
                 )
 
-    def examined(self, run: str, style: str, room_seed: int) -> set[int]:
-        """Ids of the objects already examined in that room (to resume without re-examining)."""
+    def examined(self, run: str, style: str, room_seed: int, day: int | None = None) -> set[int]:
+        """Ids of the objects already examined in that room (on ``day``, or on any day)."""
+        where, args = ("", ()) if day is None else self._visit(day)
         with self._reading():
             cur = self.conn.execute(
-                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?",
-                (run, style, int(room_seed)),
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?"
+                + where,
+                (run, style, int(room_seed), *args),
+            )
+            return {self._integer(r[0], "object id") for r in cur}
+
+    def examined_before(self, run: str, style: str, room_seed: int, day: int) -> set[int]:
+        """Ids of the objects of that room examined in the run on a day before ``day``."""
+        if self.version < 4 or day <= 0:
+            return self.examined(run, style, room_seed) if day > 0 else set()
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ? "
+                "AND day < ?",
+                (run, style, int(room_seed), int(day)),
             )
             return {self._integer(r[0], "object id") for r in cur}
 
@@ -686,18 +793,43 @@ class EvidenceStore:
             return [self._name(r[0], "run") for r in cur]
 
     def rooms(self, run: str | None = None) -> list[tuple[str, str, int, str]]:
-        """(run, style, seed, status) of every room entered (of one run, or all), sorted."""
-        sql = "SELECT run, style, seed, status FROM rooms"
+        """(run, style, seed, status) of every room entered (of one run, or all), sorted; a room
+        visited on several days is 'done' once every visit is."""
+        sql = "SELECT run, style, seed, MAX(status) FROM rooms"  # 'started' > 'done'
         args: tuple = ()
         if run is not None:
             sql, args = sql + " WHERE run = ?", (run,)
         out = []
         with self._reading():
-            for a, b, c, d in self.conn.execute(sql + " ORDER BY 1, 2, 3", args):
+            for a, b, c, d in self.conn.execute(sql + " GROUP BY 1, 2, 3 ORDER BY 1, 2, 3", args):
                 if d not in ROOM_STATUSES:
                     raise self._bad(f"a room of run {a!r} has status {d!r}")
                 out.append(
                     (self._name(a, "run"), self._name(b, "style"), self._integer(c, "seed"), d)
+                )
+        return out
+
+    def visits(self, run: str | None = None) -> list[tuple[str, str, int, int, str]]:
+        """(run, style, seed, day, status) of every visit of a room (of one run, or all),
+        sorted."""
+        day = "day" if self.version >= 4 else "0"
+        sql = f"SELECT run, style, seed, {day}, status FROM rooms"
+        args: tuple = ()
+        if run is not None:
+            sql, args = sql + " WHERE run = ?", (run,)
+        out = []
+        with self._reading():
+            for a, b, c, d, st in self.conn.execute(sql + " ORDER BY 1, 2, 3, 4", args):
+                if st not in ROOM_STATUSES:
+                    raise self._bad(f"a room of run {a!r} has status {st!r}")
+                out.append(
+                    (
+                        self._name(a, "run"),
+                        self._name(b, "style"),
+                        self._integer(c, "seed"),
+                        self._integer(d, "day"),
+                        st,
+                    )
                 )
         return out
 
@@ -917,7 +1049,7 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
     Every input must be a store built on ``catalog`` (StoreError naming the file otherwise); all
     inputs are checked before anything is written, and the whole merge is one transaction.
     Examination ids are renumbered; a room marked 'done' in any input is 'done' in the output,
-    with the first end time any of them recorded. An output older than version 3 is upgraded. An
+    with the first end time any of them recorded. An output older than version 4 is upgraded. An
     examination that is already in the output (same EXAM_KEY) is a StoreError: nothing is merged.
     A new output gets the first input's alpha. Returns the number of examinations appended.
     """
@@ -939,8 +1071,6 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
         out_path, catalog, alpha=float(metas[0]["alpha"]) if new_out else None
     )
     appended = 0
-    # Duplicates within an input (a store older than version 3) are read once, the first kept.
-    keep = f"SELECT MIN(id) FROM examinations GROUP BY {', '.join(EXAM_KEY)}"
     try:
         with store, store._transaction() as cur:
             for p, meta in zip(ins, metas, strict=True):
@@ -950,12 +1080,18 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                     offset = int(
                         cur.execute("SELECT COALESCE(MAX(id), 0) FROM examinations").fetchone()[0]
                     )
+                    new_in = int(meta["schema_version"]) >= 4
+                    # Duplicates within an input (older than version 3) are read once, the first.
+                    key = EXAM_KEY if new_in else _V3_EXAM_KEY
+                    keep = f"SELECT MIN(id) FROM examinations GROUP BY {', '.join(key)}"
+                    cols = _EXAM_COLS if new_in else _OLD_EXAM_COLS
                     rows = src.execute(
-                        f"SELECT id, {_EXAM_COLS} FROM examinations WHERE id IN ({keep}) ORDER BY id"
+                        f"SELECT id, {cols} FROM examinations WHERE id IN ({keep}) ORDER BY id"
                     )
                     while batch := rows.fetchmany(10_000):
                         cur.executemany(
-                            f"INSERT INTO examinations (id, {_EXAM_COLS}) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            f"INSERT INTO examinations (id, {_EXAM_COLS}) "
+                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                             [(r[0] + offset, *r[1:]) for r in batch],
                         )
                         appended += len(batch)
@@ -969,13 +1105,15 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                             [(r[0] + offset, *r[1:]) for r in batch],
                         )
                     end = "end_time" if int(meta["schema_version"]) >= 2 else "NULL"
+                    day = "day" if new_in else "0"
                     cur.executemany(
-                        "INSERT INTO rooms (run, style, seed, status, end_time) VALUES (?, ?, ?, ?, ?) "
-                        "ON CONFLICT (run, style, seed) DO UPDATE SET status = "
+                        "INSERT INTO rooms (run, style, seed, day, status, end_time) "
+                        "VALUES (?, ?, ?, ?, ?, ?) "
+                        "ON CONFLICT (run, style, seed, day) DO UPDATE SET status = "
                         "CASE WHEN rooms.status = 'done' OR excluded.status = 'done' THEN 'done' ELSE 'started' END, "
                         "end_time = COALESCE(rooms.end_time, excluded.end_time)",
                         src.execute(
-                            f"SELECT run, style, seed, status, {end} FROM rooms"
+                            f"SELECT run, style, seed, {day}, status, {end} FROM rooms"
                         ).fetchall(),
                     )
                 except sqlite3.IntegrityError:
@@ -1011,6 +1149,13 @@ def _int(v: object, what: str) -> int:
     if iv != v:
         raise CtxsearchError(f"{what} must be an integer, got {v!r}")
     return iv
+
+
+def _day(v: object) -> int:
+    d = _int(v, "day")
+    if d < 0:
+        raise CtxsearchError(f"day must be >= 0, got {d}")
+    return d
 
 
 def _float(v: object, what: str) -> float:

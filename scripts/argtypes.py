@@ -80,6 +80,28 @@ def seconds(text: str) -> float:
     return v
 
 
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return v
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return v
+
+
 def alpha(text: str) -> float:
     """A confidence parameter alpha in (0, 1)."""
     try:
@@ -123,6 +145,43 @@ INTERVAL_HELP = (
 def add_detector_argument(p: argparse.ArgumentParser) -> None:
     """``--detector NAME|FILE`` (checked by the handler: a bad file gets the one-line error)."""
     p.add_argument("--detector", default=None, metavar="NAME|FILE", help=DETECTOR_HELP)
+
+
+FORGET_HELP = (
+    "how evidence of earlier days counts (knowledge/drift.py): none (the paper: forever), "
+    "half-life (an examination d days old weighs 2^(-d/H), --half-life H), detect (a per-entry "
+    "change test at --false-alarm rate per entry and run; on an alarm only the evidence since the "
+    "change counts) (default: none)"
+)
+
+
+def add_forget_arguments(p: argparse.ArgumentParser) -> None:
+    """``--forget none|half-life|detect``, ``--half-life H``, ``--false-alarm RATE``."""
+    p.add_argument(
+        "--forget", default="none", choices=("none", "half-life", "detect"), help=FORGET_HELP
+    )
+    p.add_argument(
+        "--half-life",
+        type=positive_float,
+        default=7.0,
+        metavar="DAYS",
+        help="half-life: days after which an examination weighs half (default: 7)",
+    )
+    p.add_argument(
+        "--false-alarm",
+        type=alpha,
+        default=0.05,
+        metavar="RATE",
+        help="detect: probability that an entry which does not change raises an alarm in a run "
+        "(default: 0.05)",
+    )
+
+
+def forgetting(args: argparse.Namespace):
+    """The knowledge.drift.Forgetting of ``add_forget_arguments``'s options."""
+    from knowledge.drift import Forgetting
+
+    return Forgetting(args.forget, args.half_life, args.false_alarm)
 
 
 def add_interval_argument(p: argparse.ArgumentParser) -> None:

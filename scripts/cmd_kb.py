@@ -11,6 +11,7 @@ import textwrap
 from pathlib import Path
 
 from knowledge.catalog import load_catalog
+from knowledge.drift import ForgetKnowledgeBase, evidence_of
 from knowledge.errors import CatalogError, CtxsearchError, StoreError
 from knowledge.pooling import PooledCounts, interval_rows
 from knowledge.store import EvidenceStore, merge_stores
@@ -130,8 +131,22 @@ def _register_show(kb_sub: argparse._SubParsersAction) -> None:
         help="alpha of the intervals (default: the store's)",
     )
     argtypes.add_interval_argument(show)
+    _add_forget_args(show)
     _add_catalog_arg(show)
     show.set_defaults(func=run_show)
+
+
+def _add_forget_args(p: argparse.ArgumentParser) -> None:
+    """``--forget`` and its parameters, and ``--day`` (when the intervals are read)."""
+    argtypes.add_forget_arguments(p)
+    p.add_argument(
+        "--day",
+        type=argtypes.non_negative_int,
+        default=None,
+        metavar="T",
+        help="with --forget: read the intervals as they stood at the end of day T (default: the "
+        "last day in the store); the evidence of every run, by its day stamps",
+    )
 
 
 def _register_stats(kb_sub: argparse._SubParsersAction) -> None:
@@ -156,6 +171,7 @@ def _register_stats(kb_sub: argparse._SubParsersAction) -> None:
         help="alpha of the intervals (default: the store's)",
     )
     argtypes.add_interval_argument(stats)
+    _add_forget_args(stats)
     _add_catalog_arg(stats)
     stats.set_defaults(func=run_stats)
 
@@ -227,7 +243,7 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
     catalog = load_catalog(args.catalog)
     try:
         with EvidenceStore.open(args.path, catalog, read_only=True) as store:
-            kb = store.knowledge_base(args.alpha, interval=args.interval)
+            kb = _forget_kb(args, store) or store.knowledge_base(args.alpha, interval=args.interval)
             pc = PooledCounts.from_store(store) if pooled else None
             info = {
                 "path": str(args.path),
@@ -247,6 +263,27 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
     return info, kb, pc
 
 
+def _forget_kb(args: argparse.Namespace, store: EvidenceStore):
+    """The store read with ``--forget`` (None for ``none``, the paper's counts)."""
+    if args.forget == "none":
+        if args.day is not None:
+            raise CtxsearchError("--day reads the intervals of a day: give it with --forget")
+        return None
+    if args.interval != "wilson":
+        raise CtxsearchError(
+            f"--forget {args.forget} does not combine with --interval {args.interval}"
+        )
+    evidence = evidence_of(store.examinations())
+    today = evidence.last_day if args.day is None else args.day
+    return ForgetKnowledgeBase(store.catalog, args.alpha if args.alpha is not None else store.alpha,
+                               evidence, today, argtypes.forgetting(args))  # fmt: skip
+
+
+def _count(v: float) -> str:
+    """A count as printed: whole counts as integers, effective (forgetting) counts to 0.1."""
+    return str(int(v)) if float(v).is_integer() else f"{v:.1f}"
+
+
 def _row_dict(r) -> dict:
     return {
         "ref": r.ref,
@@ -263,7 +300,10 @@ def _row_dict(r) -> dict:
 def format_rows(rows) -> str:
     """The interval rows as an aligned text table."""
     head = ("relation", "type", "y/n", "low", "high")
-    body = [(r.relation, r.type, f"{r.y}/{r.n}", f"{r.low:.3f}", f"{r.high:.3f}") for r in rows]
+    body = [
+        (r.relation, r.type, f"{_count(r.y)}/{_count(r.n)}", f"{r.low:.3f}", f"{r.high:.3f}")
+        for r in rows
+    ]
     widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
     right = (False, False, True, True, True)
 
@@ -287,6 +327,11 @@ def run_show(args: argparse.Namespace) -> int:
                 catalog.path, f"unknown type or class '{name}' (types: {known}; classes: {kinds})"
             )
     pooled = args.backoff or args.ref_type in classes or args.related in classes
+    if pooled and args.forget != "none":
+        raise CtxsearchError(
+            f"--forget {args.forget} reads types' own evidence: it does not combine with classes "
+            "or --backoff"
+        )
     if pooled and args.interval != "wilson":
         raise CtxsearchError(
             f"--interval {args.interval} reads types' own evidence: it does not combine with "
@@ -322,6 +367,11 @@ def run_show(args: argparse.Namespace) -> int:
         f"{info['path']}: {info['examinations']} examinations, alpha {kb.alpha:g}, "
         f"catalog {info['catalog_fingerprint']}"
         + ("" if args.interval == "wilson" else f", {args.interval} intervals")
+        + (
+            ""
+            if args.forget == "none"
+            else f", forgetting {argtypes.forgetting(args).label} on day {kb.today}"
+        )
     ]
     if rows:
         out.append(format_rows(rows))

@@ -130,13 +130,40 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         "least C (0..1; the detector's confidence; default: 0, any detection)",
     )
     argtypes.add_interval_argument(p)
+    p.add_argument(
+        "--days",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="D",
+        help="visit the same rooms on D days (furniture stays, small objects are placed anew "
+        "each day by the style's rules and its [[drift]] schedule); a later call with more days "
+        "adds the days not yet done (default: 1, the paper's single visit)",
+    )
+    p.add_argument(
+        "--reexamine",
+        choices=("never", "impact"),
+        default="never",
+        help="on a later day, may an object examined before be examined again? never (the "
+        "paper, default); impact: when its type's impact under the --forget counts, per second "
+        "of examining it, is at least --reexamine-rate",
+    )
+    p.add_argument(
+        "--reexamine-rate",
+        type=argtypes.non_negative_float,
+        default=None,
+        metavar="IMPACT_PER_S",
+        help="impact (eq. 3) per simulated second worth a re-examination (default: 1e-3)",
+    )
+    argtypes.add_forget_arguments(p)
 
 
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
     # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from agent.learning import LearnConfig, learn
+    from agent.run_state import DEFAULT_REEXAMINE_RATE
 
+    rate = DEFAULT_REEXAMINE_RATE if args.reexamine_rate is None else args.reexamine_rate
     s = learn(
         LearnConfig(
             args.style,
@@ -155,12 +182,19 @@ def run_learn(args: argparse.Namespace) -> int:
             detector=args.detector,
             confirm=args.confirm,
             min_score=args.min_score,
+            days=args.days,
+            reexamine=args.reexamine,
+            reexamine_rate=rate,
+            forgetting=argtypes.forgetting(args),
         )
     )
     for line in s.lines():
         print(line)
     if args.interval != "wilson":
         print(f"mean interval width ({args.interval}): {_mean_width(args.kb, args.interval):.4f}")
+    if args.forget != "none":
+        width = _forget_width(args.kb, s.run, argtypes.forgetting(args))
+        print(f"mean interval width ({args.forget}, the run's evidence): {width:.4f}")
     for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
@@ -174,6 +208,18 @@ def _mean_width(kb_path: Path, interval: str) -> float:
 
     with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
         return store.knowledge_base(interval=interval).mean_width()
+
+
+def _forget_width(kb_path: Path, run: str, forgetting) -> float:
+    """The run's mean interval width on its last day, read with ``forgetting``."""
+    from knowledge.catalog import load_catalog
+    from knowledge.drift import ForgetKnowledgeBase, evidence_of
+    from knowledge.store import EvidenceStore
+
+    with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
+        ev = evidence_of(store.examinations(run))
+        kb = ForgetKnowledgeBase(store.catalog, store.alpha, ev, ev.last_day, forgetting)
+        return kb.mean_width()
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
@@ -232,6 +278,100 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
     register_intervals(bench_sub)
+    register_drift(bench_sub)
+
+
+def register_drift(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench drift``."""
+    p = bench_sub.add_parser(
+        "drift",
+        help="a world set that changes over days: how fast none / half-life / detect notice it, "
+        "their false alarms and errors, and the search on the last day with each",
+        description="Learn in --rooms rooms of a style on --days days (the furniture stays, small "
+        "objects are placed anew each day) while the style drifts (its [[drift]] schedule, or "
+        "--drift RULE:P:FROM_DAY, applied in memory), once re-examining every known object daily "
+        "(one store read by each forgetting method) and once per method with --reexamine impact. "
+        "Writes DIR/drift.json, DIR/drift.md, DIR/drift.csv (per day x entry x method) and "
+        "DIR/drift.png (p_true(day) against each method's interval for the changed entries).",
+    )
+    p.add_argument(
+        "--style",
+        default="office",
+        help="room style: name or TOML path (default: office); not a house style (a drift "
+        "schedule belongs to a room style: the rooms of a house drift with theirs in learn --days)",
+    )
+    p.add_argument("--days", type=argtypes.positive_int, default=12, help="days (default: 12)")
+    p.add_argument(
+        "--rooms", type=argtypes.positive_int, default=4, help="rooms visited per day (default: 4)"
+    )
+    p.add_argument("--seed", type=argtypes.seed, default=0, help="run seed (default: 0)")
+    p.add_argument(
+        "--drift",
+        action="append",
+        default=None,
+        metavar="RULE:P:FROM_DAY",
+        help="a change (repeatable): from FROM_DAY on (an integer, or 'half' for days // 2) the "
+        "rule REF/RELATION/TYPE places with probability P (default: the style's own schedule, "
+        "else Desk/ON-TOP-OF-DESK/Laptop:0.9:half and Desk/ON-TOP-OF-DESK/Monitor:0.3:half)",
+    )
+    p.add_argument(
+        "--half-life", type=argtypes.positive_float, default=3.0, metavar="DAYS",
+        help="half-life of the half-life method (default: 3)",
+    )  # fmt: skip
+    p.add_argument(
+        "--false-alarm", type=argtypes.alpha, default=0.05, metavar="RATE",
+        help="detect's false-alarm rate per entry and run (default: 0.05)",
+    )  # fmt: skip
+    p.add_argument(
+        "--truth-samples", type=argtypes.positive_int, default=30,
+        help="day draws of the bench's worlds per phase of the schedule for p_true (default: 30)",
+    )  # fmt: skip
+    p.add_argument(
+        "--episodes", type=argtypes.non_negative_int, default=4,
+        help="search episodes on the last day per method (default: 4; 0: no search)",
+    )  # fmt: skip
+    p.add_argument(
+        "--perception",
+        default="oracle",
+        choices=("camera", "oracle"),
+        help="perception mode (default: oracle: D days of camera learning are slow on 2 cores)",
+    )
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    add_sweep_arguments(p)
+    p.set_defaults(func=run_drift)
+
+
+def run_drift(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench drift``."""
+    # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
+    from knowledge.catalog import load_catalog
+    from scripts.experiments.bench_drift import (
+        DriftBenchConfig,
+        bench_drift,
+        drifting_style,
+        markdown,
+    )
+
+    config = DriftBenchConfig(
+        style=args.style,
+        days=args.days,
+        rooms=args.rooms,
+        seed=args.seed,
+        drift=tuple(args.drift or ()),
+        half_life=args.half_life,
+        false_alarm=args.false_alarm,
+        truth_samples=args.truth_samples,
+        episodes=args.episodes,
+        perception=args.perception,
+    )
+    if args.days < 2:
+        raise CtxsearchError("--days: a world that changes needs at least 2 days")
+    drifting_style(config, load_catalog())  # one-line errors before anything runs
+    doc = bench_drift(config, args.out, sweep=SweepOptions.from_args(args))
+    print(markdown(doc))
+    for name in ("drift.json", "drift.md", "drift.csv", "drift.png"):
+        print(f"wrote {args.out / name}")
+    return 0
 
 
 def register_intervals(bench_sub: argparse._SubParsersAction) -> None:

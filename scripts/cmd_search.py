@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from knowledge.errors import CtxsearchError
 from scripts import argtypes
 from scripts.sweep import add_sweep_arguments
 
@@ -130,6 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--record", type=Path, default=None, metavar="FILE.rrd", help="write a rerun recording"
     )
     _add_common(p)
+    argtypes.add_forget_arguments(p)
     p.set_defaults(func=run_search)
 
 
@@ -161,6 +163,28 @@ def _config_fields(args: argparse.Namespace) -> dict:
     }
 
 
+def _forgetting_knowledge(args: argparse.Namespace):
+    """The store at --kb read with --forget on its last day (knowledge.drift), and the room seeds
+    it learned in (held out of the search)."""
+    from knowledge.catalog import load_catalog
+    from knowledge.drift import ForgetKnowledgeBase, evidence_of
+    from knowledge.store import EvidenceStore
+
+    if args.interval != "wilson":
+        raise CtxsearchError(
+            f"--forget {args.forget} does not combine with --interval {args.interval}"
+        )
+    with EvidenceStore.open(args.kb, load_catalog(), read_only=True) as store:
+        ev = evidence_of(store.examinations())
+        if not store.examinations_count():
+            raise CtxsearchError(f"{args.kb}: the store holds no examinations yet")
+        kb = ForgetKnowledgeBase(
+            store.catalog, store.alpha, ev, ev.last_day, argtypes.forgetting(args)
+        )
+        seeds = {int(seed) for _run, _style, seed, _status in store.rooms()}
+    return kb, seeds
+
+
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
@@ -170,7 +194,13 @@ def run_search(args: argparse.Namespace) -> int:
     fields = _config_fields(args)
     policy = args.policy or DEFAULT_POLICY[fields["map"]]
     config = SearchConfig(policies=(policy,), **fields)
-    one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
+    if args.forget == "none":
+        one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
+    else:
+        kb, seeds = _forgetting_knowledge(args)
+        one = search_once(config, args.target, kb=kb, exclude_seeds=seeds, records=[args.record])
+        print(f"knowledge: {args.kb} read with forgetting {argtypes.forgetting(args).label} "
+              f"on day {kb.today}")  # fmt: skip
     ep, res = one.episode, one.results[0]
     s = ep.start
     print(

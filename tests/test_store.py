@@ -17,6 +17,7 @@ from knowledge import intervals
 from knowledge.base import KnowledgeBase
 from knowledge.errors import CtxsearchError, StoreError
 from knowledge.store import SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
+from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -529,14 +530,7 @@ def _old_version(path: Path, catalog, version: int) -> None:
     with EvidenceStore.open(path, catalog) as s:
         exam(s, 1, "Desk")
         s.mark_room("r1", "office", 1, "done")
-    conn = sqlite3.connect(path)
-    conn.execute("DROP INDEX examinations_key")
-    conn.execute("CREATE INDEX examinations_room ON examinations (run, style, room_seed)")
-    if version == 1:
-        conn.execute("ALTER TABLE rooms DROP COLUMN end_time")
-    conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(version),))
-    conn.commit()
-    conn.close()
+    as_version(path, version)
 
 
 def _version1(path: Path, catalog) -> None:

@@ -16,6 +16,7 @@ import pytest
 from knowledge.errors import CtxsearchError, StoreError
 from knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
 from scripts.cli import main
+from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -60,7 +61,7 @@ def test_the_same_examination_twice_is_refused_and_other_runs_still_append(tmp_p
         assert a.examinations_count() == 5 and a.examinations_count("r1") == 4
         # Nothing of the refused examination was written (no orphan observations either).
         assert a.conn.execute("SELECT COUNT(*) FROM observations").fetchone()[0] == 3
-    assert EXAM_KEY == ("run", "style", "room_seed", "object_id")
+    assert EXAM_KEY == ("run", "style", "room_seed", "day", "object_id")
 
 
 def test_two_learn_processes_of_one_run_leave_the_single_run_counts(tmp_path):
@@ -93,12 +94,7 @@ def _cat():
 
 
 def _as_version_2(path: Path) -> None:
-    conn = sqlite3.connect(path)
-    conn.execute("DROP INDEX examinations_key")
-    conn.execute("CREATE INDEX examinations_room ON examinations (run, style, room_seed)")
-    conn.execute("UPDATE meta SET value = '2' WHERE key = 'schema_version'")
-    conn.commit()
-    conn.close()
+    as_version(path, 2)
 
 
 def test_a_version_2_store_with_duplicates_is_deduplicated_by_its_upgrade(tmp_path, catalog):
