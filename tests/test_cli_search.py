@@ -177,7 +177,7 @@ def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
     assert doc["policies"]["exhaustive"]["ratio_to_exhaustive"] == 1.0
     assert "| location |" in (out_dir / "search.md").read_text()
     assert (out_dir / "search.png").stat().st_size > 1000
-    with (out_dir / "search.csv").open(newline="") as f:
+    with (out_dir / "episodes.csv").open(newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 2 * 3  # episodes x policies
     assert {r["policy"] for r in rows} == {"exhaustive", "location", "oracle"}

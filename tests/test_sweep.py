@@ -126,5 +126,5 @@ def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_s
     b = json.loads((tmp_path / "ray" / "search.json").read_text())
     assert len(a["episode_list"]) == 3
     assert _strip_timing(a) == _strip_timing(b)
-    csv_a = (tmp_path / "serial" / "search.csv").read_text()
-    assert csv_a == (tmp_path / "ray" / "search.csv").read_text()
+    csv_a = (tmp_path / "serial" / "episodes.csv").read_text()
+    assert csv_a == (tmp_path / "ray" / "episodes.csv").read_text()
