@@ -32,7 +32,8 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes (about 40 minutes on 2 cores). The sweeps (truth,
+# Regenerates every result the README quotes (about 40 minutes on 2 cores, plus about 35 for the
+# 200 search episodes: README, Usage). The sweeps (truth,
 # bench learning, bench search) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray);
 # the results are the same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)

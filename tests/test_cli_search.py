@@ -121,7 +121,7 @@ def test_search_prints_the_outcome_and_records(store, tmp_path, capsys):
             "--style",
             "office",
             "--target",
-            "Monitor",
+            "Cup",
             "--policy",
             "location",
             "--budget-seconds",
@@ -132,7 +132,7 @@ def test_search_prints_the_outcome_and_records(store, tmp_path, capsys):
     )
     out = capsys.readouterr().out
     assert code == 0
-    assert "target Monitor" in out and "simulated s" in out and "gazes" in out and "m driven" in out
+    assert "target Cup" in out and "simulated s" in out and "gazes" in out and "m driven" in out
     assert rrd.is_file() and rrd.stat().st_size > 1000
 
 
