@@ -48,7 +48,8 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 	rm -f build/kb_office.sqlite && mkdir -p build
 	$(VENV)/bin/ctxsearch learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
-	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search --workers $(WORKERS)
+# Search: 200 paired episodes per scenario (target not visible from the start, feasible).
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 200 --policies $(POLICIES) --detector perfect --out results/search --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 # A drifting world set: forgetting methods (about 6 minutes on 2 loaded cores, oracle perception).

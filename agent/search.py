@@ -61,8 +61,9 @@ class with a ``name`` and ``run(ctx) -> SearchResult``:
   I, then applies the location constraint around what it detected, then falls back.
 - ``oracle-prior``: ``location`` with the ground-truth probabilities (envs.truth) instead of
   the learned intervals; ``oracle-prior-indirect`` likewise for ``indirect``.
-- ``oracle``: knows where the target's instances are and looks at the cheapest one: the lower
-  bound on time to find.
+- ``oracle``: knows where the target's instances are and what the detector will report, and goes
+  straight to the soonest view that detects one (``oracle_view``): the lower bound on time to
+  find (``bench search`` counts the episodes any policy beat it in: ``oracle_violations``).
 
 Which value of the interval ranks candidates is ``rank`` (``low``, ``p0`` or ``high``; default
 ``low``, the lower bound, chosen by measurement). ``ctxsearch bench search --episodes 80
@@ -99,15 +100,22 @@ from agent.mapping import MAP_MODES, BuiltMap
 from agent.navigation import OccupancyGrid, nearest_free, plan_path
 from agent.recording import Recorder
 from agent.viewplan import Gaze, GazePlanOptions, aim, execute_gaze, plan_gazes
-from envs.camera import Frame, frustum_mask
-from envs.detector import Detection, DetectorModel, SimDetector, load_detector
+from envs.camera import Frame, frustum_mask, half_fov_tangents
+from envs.detector import (
+    Detection,
+    DetectorModel,
+    SimDetector,
+    box_distance,
+    load_detector,
+    ray_scale,
+)
 from envs.houses import WorldStyle
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from envs.truth import ground_truth, load_truth
 from knowledge.catalog import Catalog
 from knowledge.errors import CtxsearchError
-from knowledge.geometry import Box, ObjectInstance, relation_volume
+from knowledge.geometry import ObjectInstance, relation_volume
 from knowledge.pooling import PooledCounts
 from knowledge.store import EvidenceStore
 
@@ -363,6 +371,7 @@ class SearchContext:
         self.episode, self.truth, self.catalog = episode, layout, catalog
         self.spec: RobotSpec = body.spec
         self.time_model: TimeModel = body.time_model
+        self.raw_body = body  # the oracle's views render through it without charging time
         self.body = _PathMeter(body)
         self.maps = maps or RoomMaps.given(layout, catalog, self.spec)
         # The built scenario's own map (the layout gives only the footprint's extent).
@@ -1190,64 +1199,344 @@ class OraclePriorIndirect(Indirect):
 
 
 class Oracle(SearchPolicy):
-    """Knows where the target's instances are and goes to see the one that is cheapest to see:
-    the lower bound. For every instance it considers aiming the head from where the robot stands
-    (if the instance is within the detection range) and the view planner's gazes from nearer;
-    it takes the cheapest option, and the next one if that image did not show the target (an
-    occluded view)."""
+    """Knows where the target's instances are, and what the detector in use will report from any
+    pose at any simulated second, and goes straight to the pose that detects one soonest: the
+    lower bound (``oracle_view``). If that image did not show the target after all (a physical
+    drive that ended a little off, a detector draw at another second), it plans again from where
+    it stands, without the views it tried; exhaustive coverage when no view is left."""
 
     name = "oracle"
 
     def search(self, ctx: SearchContext) -> None:
-        tm, spec = ctx.time_model, ctx.spec
-        tried: set[tuple[int, str]] = set()
-        instances = list(ctx.truth.of_type(ctx.target))  # the oracle reads the truth
+        eye = OracleEye(ctx.raw_body, ctx.truth, ctx.catalog, ctx.maps.detector, ctx.target)
+        grid = OccupancyGrid.from_layout(ctx.truth, ctx.spec)  # the oracle reads the truth
+        tried: set[tuple] = set()
         while True:
             ctx.check()
-            pose = ctx.body.pose()
-            cam = np.array([pose.x, pose.y, spec.camera_height])
-            options = []
-            for o in instances:
-                if (o.id, "here") not in tried and np.linalg.norm(
-                    np.asarray(o.position) - cam
-                ) <= ctx.target_range:
-                    pan, tilt = aim(
-                        pose.xy, pose.yaw, spec.camera_height, np.asarray(o.position), spec
-                    )
-                    g = Gaze(
-                        RobotPose(pose.x, pose.y, pose.yaw, pan, tilt),
-                        np.asarray(o.position, float),
-                    )
-                    options.append(
-                        (
-                            tm.head_time(pose.pan, pose.tilt, pan, tilt) + tm.image_cost,
-                            o.id,
-                            "here",
-                            [g],
-                        )
-                    )
-                if (o.id, "near") not in tried:
-                    box = o.box()
-                    box = Box(box.center, box.yaw, np.maximum(box.half, 0.03))
-                    near = GazePlanOptions(
-                        max_distance=min(ctx.target_range, 2.5), coverage_goal=0.5, max_gazes=2
-                    )
-                    gz = plan_gazes(ctx.grid, box, pose, spec, tm, near)
-                    options.append((sum(x.cost for x in gz) if gz else math.inf, o.id, "near", gz))
-            options = [opt for opt in options if opt[3] and math.isfinite(opt[0])]
-            if not options:
-                break
-            options.sort(key=lambda x: (x[0], x[1], x[2]))
-            cost, oid, how, gazes = options[0]
-            tried.add((oid, how))
-            ctx.note(
-                f"go and see {ctx.target} #{oid} ({'from here' if how == 'here' else 'from nearer'}, "
-                f"~{cost:.1f} s)"
+            view = oracle_view(
+                eye,
+                grid,
+                ctx.body.pose(),
+                float(ctx.body.sim_time),
+                ctx.time_model,
+                deadline_s=ctx.episode.budget_s - ctx.elapsed,
+                exclude=tried,
             )
-            for g in gazes:
-                ctx.look_gaze(g, f"oracle {ctx.target} #{oid}")
-        ctx.note("every instance looked at; falling back to exhaustive coverage")
+            if view is None:
+                break
+            tried.add(view.key)
+            ctx.note(
+                f"go and see {ctx.target} #{view.instance_id} (~{view.seconds:.1f} s, "
+                f"{view.renders} views checked)"
+            )
+            ctx.look_gaze(view.gaze, f"oracle {ctx.target} #{view.instance_id}")
+        ctx.note("no view left that detects the target; falling back to exhaustive coverage")
         ctx.cover()
+
+
+# =========================================================================== the oracle's views
+# The oracle's candidate views (``oracle_view``) and the episode checks (``OracleEye``):
+# - base positions: the pose's own position and every reachable free cell of every
+#   ``ORACLE_CELL_STEP``-th row and column (0.1 m on the 5 cm grid, offset one cell: a superset
+#   of the lattices the other policies stand on, the coverage viewpoints' 0.5 m and the gaze
+#   planner's 0.3 m, both offset by half their step), within the detector's reach of an
+#   instance (camera to bounding box: the perfect detector's ``max_range``; a detector that errs:
+#   where its range fall-off leaves ``MIN_RECALL``);
+# - at each, the views of ``ORACLE_VIEWS``: the head aimed at the instance's centre (turning the
+#   base beyond the pan limit), or moved as little as it can from where it is while the centre
+#   stays within half or 0.9 of the half field of view (a view that shows the target off-centre
+#   can be cheaper: other policies' sweeps take such images), each charged exactly as
+#   ``execute_gaze`` will charge it (the planned path, turns, head slew, image: the one
+#   TimeModel);
+# - in order of a lower bound on those seconds (straight-line drive, tilt slew, image), each
+#   view is charged exactly and, if it would beat the best so far, rendered from that pose
+#   (no time charged, the robot put back) and read by the detector in use at the simulated
+#   second the image would be taken; a position whose aimed image shows the instance too little
+#   to be detected even with ``PERSPECTIVE_GAIN`` times its pixels (perfect: below min_pixels or
+#   beyond max_range; a detector that errs: recall below ``MIN_RECALL``) is not rendered again.
+# The detector's random stream is seeded by the room and the image's second, so that reading is
+# what the robot would get there and then: the oracle knows the draws as it knows the layout, and
+# takes the soonest (view, second) that detects a true instance reported as the target. With the
+# perfect detector (no draws) this is the least time over every pose the other policies can stand
+# at (up to the views above); with a detector that errs, a policy reaching a pose later draws
+# again, so a luckier draw (or one at a recall below ``MIN_RECALL``) could beat the oracle:
+# ``bench search`` counts such episodes (``oracle_violations``) and the tests check there are
+# none. A plan renders at most ``ORACLE_MAX_RENDERS`` images.
+ORACLE_CELL_STEP = 2
+# the views at each base position: the head aimed at the instance (0), or moved as little as it
+# can while the instance stays within this fraction of the half field of view of the centre
+ORACLE_VIEWS = (0.0, 0.5, 0.9)
+MIN_RECALL = 0.02  # a detector that errs: views where the target's recall is below this
+PERSPECTIVE_GAIN = 2.5  # an object at the image corner shows up to ~1/cos^3(43 deg) its pixels
+ORACLE_MAX_RENDERS = 600  # images rendered per plan: bounds the look for an undetectable target
+VISIBLE_MIN_P = MIN_RECALL  # visible at the start: some start view may detect it this likely
+
+
+@dataclass(frozen=True)
+class OracleView:
+    """The oracle's choice: the gaze, the seconds it costs from the pose it was planned from, the
+    instance it detects, and how many views were rendered to find it."""
+
+    seconds: float
+    gaze: Gaze
+    instance_id: int
+    renders: int
+    key: tuple  # (base x, base y, instance id, view): for not trying it twice
+
+
+class OracleEye:
+    """What the head camera would see from a pose, read by the detector in use, without moving
+    the robot or charging time: the oracle's knowledge of the sensor, and the episode checks'
+    (visible from the start, some pose detects the target). ``body`` renders (an envs World);
+    ``detector``: the preset (None: perfect), its stream seeded as the search's."""
+
+    def __init__(
+        self,
+        body: Body,
+        layout: RoomLayout,
+        catalog: Catalog,
+        detector: DetectorModel | None,
+        target: str,
+    ):
+        self.body, self.catalog, self.target = body, catalog, target
+        self.model = detector or load_detector("perfect")
+        self.sim = SimDetector(self.model, layout, catalog, layout.seed)
+        self.instances = layout.of_type(target)
+        self.true_ids = {o.id for o in self.instances}
+        self.renders = 0
+
+    @property
+    def reach(self) -> float:
+        """How far (m, camera to bounding box) the detector can report the target at all."""
+        typ = self.catalog.type(self.target)
+        r = self.model.recall
+        if self.model.perfect or r is None:
+            return float(typ.max_range)
+        return float(
+            (r.range_fraction + r.range_width * math.log(1.0 / MIN_RECALL - 1.0)) * typ.max_range
+        )
+
+    def frame_at(self, pose: RobotPose) -> Frame:
+        """The image (ids and depth) the head camera takes at ``pose``; nothing charged, the robot
+        put back where it was."""
+        b = self.body
+        t, here = b.sim_time, b.pose()
+        b.reset_pose(pose)
+        try:
+            frame = b.capture(rgb=False, depth=True)
+        finally:
+            b.sim_time = t
+            b.reset_pose(here)
+        self.renders += 1
+        if frame is None:
+            raise CtxsearchError("the oracle's views need a body that renders images")
+        return frame
+
+    def detects(self, frame: Frame, sim_time: float) -> bool:
+        """True if the detector, reading ``frame`` at simulated second ``sim_time``, reports a true
+        instance as the target first (what makes a search succeed)."""
+        hit = next((d for d in self.sim(frame, sim_time) if d.type == self.target), None)
+        return hit is not None and hit.instance_id in self.true_ids
+
+    def probability(
+        self, frame: Frame, gain: float = 1.0, instance: ObjectInstance | None = None
+    ) -> float:
+        """The largest probability with which the detector reports a true target instance (or
+        ``instance``) in ``frame``: its recall for the instance's visible pixels, times ``gain``,
+        and distance (perfect: 0 or 1)."""
+        ids = np.asarray(frame.instance_ids)
+        h, w = ids.shape
+        typ = self.catalog.type(self.target)
+        scale = ray_scale(w, h, float(frame.camera.fovy_deg))
+        best = 0.0
+        for o in self.instances if instance is None else [instance]:
+            mask = ids == o.id
+            px = int(mask.sum())
+            if px == 0:
+                continue
+            if frame.depth is not None:
+                dist = float(np.median(np.asarray(frame.depth)[mask] * scale[mask]))
+            else:
+                dist = box_distance(np.asarray(frame.camera.position, float), o)
+            best = max(best, float(self.model.recall_prob(typ, gain * px, dist, w, h)))
+        return best
+
+    def worth(self, p: float) -> bool:
+        """True if a view whose probability (``probability``) is ``p`` may detect the target."""
+        return p >= (1.0 if self.model.perfect else MIN_RECALL)
+
+    def start_visibility(self, start: RobotPose) -> float:
+        """The largest probability that some image from ``start`` (turning in place, pan and
+        tilt, no driving) reports a true target instance: the head aimed at each instance, its
+        pixels times ``PERSPECTIVE_GAIN`` (an image showing it off-centre may show more)."""
+        spec = self.body.spec
+        best = 0.0
+        cam = np.array([start.x, start.y, spec.camera_height])
+        for o in self.instances:
+            if box_distance(cam, o) > self.reach:  # out of the detector's reach: no image needed
+                continue
+            target = np.asarray(o.position, float)
+            yaw = start.yaw
+            pan, tilt = aim(start.xy, yaw, spec.camera_height, target, spec)
+            d = target[:2] - start.xy
+            heading = math.atan2(d[1], d[0])
+            if abs(wrap_angle(yaw + pan - heading)) > 1e-3:  # beyond the pan limit: turn
+                yaw = heading
+                pan, tilt = aim(start.xy, yaw, spec.camera_height, target, spec)
+            frame = self.frame_at(RobotPose(start.x, start.y, yaw, pan, tilt))
+            best = max(best, self.probability(frame, PERSPECTIVE_GAIN, o))
+        return best
+
+
+def _exact_gaze(
+    grid: OccupancyGrid,
+    pose: RobotPose,
+    xy: np.ndarray,
+    target: np.ndarray,
+    spec: RobotSpec,
+    tm: TimeModel,
+    frac: float = 0.0,
+) -> Gaze | None:
+    """The gaze at base position ``xy`` that shows ``target`` as ``execute_gaze`` runs it from
+    ``pose``, its ``cost`` the seconds it charges (None: ``xy`` cannot be reached). ``frac`` 0:
+    the head aimed at ``target``; ``frac`` > 0: the head moved as little as it can from where it
+    is while ``target`` stays within ``frac`` of the half field of view from the image centre."""
+    path = None
+    if float(np.hypot(*(np.asarray(xy) - pose.xy))) > 1e-9:
+        path = plan_path(grid, pose.xy, np.asarray(xy, float))
+        if path is None:
+            return None
+    yaw, end = pose.yaw, pose.xy
+    if path is not None and len(path) >= 2:
+        seg = path[-1] - path[-2]
+        if np.hypot(*seg) > 1e-9:
+            yaw = math.atan2(seg[1], seg[0])
+        end = path[-1]
+    pan, tilt = aim(end, yaw, spec.camera_height, target, spec)
+    d = target[:2] - end
+    heading = math.atan2(d[1], d[0])
+    if abs(wrap_angle(yaw + pan - heading)) > 1e-3:  # beyond the pan limit: turn the base
+        yaw = heading
+        pan, tilt = aim(end, yaw, spec.camera_height, target, spec)
+    aim_xyz = np.asarray(target, float)
+    if frac > 0.0:
+        tx, ty = half_fov_tangents(spec.fovy_deg, 320, 240)
+        a, b = frac * math.atan(tx), frac * math.atan(ty)
+        pan, tilt = spec.clip_head(
+            float(np.clip(pose.pan, pan - a, pan + a)),
+            float(np.clip(pose.tilt, tilt - b, tilt + b)),
+        )
+        h, rng = yaw + pan, max(float(np.hypot(*d)), 0.5)  # a point along the camera's axis
+        aim_xyz = np.array(
+            [
+                end[0] + rng * math.cos(h),
+                end[1] + rng * math.sin(h),
+                spec.camera_height + rng * math.tan(tilt),
+            ]
+        )
+    if path is not None and len(path) >= 2:
+        t = tm.drive_time(path, pose.yaw, yaw)
+    else:
+        t = tm.turn_time(pose.yaw, yaw) if abs(wrap_angle(yaw - pose.yaw)) > 1e-6 else 0.0
+    t += tm.head_time(pose.pan, pose.tilt, pan, tilt) + tm.image_cost
+    out = RobotPose(float(end[0]), float(end[1]), float(yaw), float(pan), float(tilt))
+    return Gaze(out, aim_xyz, cost=float(t), path=path)
+
+
+def _oracle_candidates(
+    eye: OracleEye, grid: OccupancyGrid, pose: RobotPose, tm: TimeModel
+) -> tuple[np.ndarray, list[tuple[float, int, int, int]]]:
+    """The oracle's base positions (M, 2) (``pose``'s own first) and its candidate views as
+    (lower bound on the seconds from ``pose``, position index, instance index, view index),
+    sorted: the straight-line drive, the tilt slew the view needs at least, and the image."""
+    spec = eye.body.spec
+    rows, cols = grid.lattice_cells(ORACLE_CELL_STEP)
+    ok = np.isfinite(grid.distances_from(pose.xy)[rows, cols])
+    xs, ys = grid.cell_centers()
+    pos = np.vstack([pose.xy[None, :], np.column_stack([xs[cols[ok]], ys[rows[ok]]])])
+    cams = np.column_stack([pos, np.full(len(pos), spec.camera_height)])
+    _, ty = half_fov_tangents(spec.fovy_deg, 320, 240)
+    pairs = []
+    for j, o in enumerate(eye.instances):
+        idx = np.flatnonzero(np.array([box_distance(c, o) for c in cams]) <= eye.reach)
+        if not len(idx):
+            continue
+        d = np.asarray(o.position, float) - cams[idx]
+        tilt = np.clip(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])), *spec.tilt_range)
+        drive = np.hypot(*(pos[idx] - pose.xy).T) / tm.drive_speed
+        for v, frac in enumerate(ORACLE_VIEWS):
+            slack = frac * math.atan(ty)
+            lb = drive + np.maximum(np.abs(tilt - pose.tilt) - slack, 0.0) / tm.tilt_rate
+            lb = lb + tm.image_cost
+            pairs.extend(
+                zip(lb.tolist(), idx.tolist(), [j] * len(idx), [v] * len(idx), strict=True)
+            )
+    pairs.sort()
+    return pos, pairs
+
+
+def _aimed_view(
+    eye: OracleEye,
+    grid: OccupancyGrid,
+    pose: RobotPose,
+    xy: np.ndarray,
+    o: ObjectInstance,
+    now: float,
+    tm: TimeModel,
+) -> tuple[Gaze | None, bool, bool]:
+    """The gaze at ``xy`` aimed at ``o`` from ``pose`` (None: unreachable), whether any view
+    from there may detect ``o`` (the aimed image's pixels times ``PERSPECTIVE_GAIN``), and
+    whether the aimed image, taken at its second, does."""
+    g = _exact_gaze(grid, pose, xy, np.asarray(o.position, float), eye.body.spec, tm)
+    if g is None:
+        return None, False, False
+    frame = eye.frame_at(g.pose)
+    if not eye.worth(eye.probability(frame, PERSPECTIVE_GAIN, o)):
+        return g, False, False
+    return g, True, eye.detects(frame, now + g.cost)
+
+
+def oracle_view(
+    eye: OracleEye,
+    grid: OccupancyGrid,
+    pose: RobotPose,
+    now: float,
+    tm: TimeModel,
+    *,
+    deadline_s: float = math.inf,
+    exclude: set[tuple] | frozenset[tuple] = frozenset(),
+) -> OracleView | None:
+    """The soonest view from ``pose`` (at the body's simulated second ``now``) whose image the
+    detector reads as a true target instance, within ``deadline_s`` seconds (see the comment
+    above); None if no candidate view does (or ``ORACLE_MAX_RENDERS`` renders found none)."""
+    spec = eye.body.spec
+    if not eye.instances:
+        return None
+    renders0 = eye.renders
+    pos, pairs = _oracle_candidates(eye, grid, pose, tm)
+    best: OracleView | None = None
+    # (position, instance) -> the aimed gaze (None: unreachable), whether it may detect (if it
+    # shows too little, so do the off-centre views) and whether it does
+    aimed: dict[tuple[int, int], tuple[Gaze | None, bool, bool]] = {}
+    for lb, i, j, v in pairs:
+        if lb > deadline_s + 1e-9 or (best is not None and lb >= best.seconds - 1e-9):
+            break
+        o = eye.instances[j]
+        key = (round(float(pos[i, 0]), 3), round(float(pos[i, 1]), 3), o.id, v)
+        if key in exclude or eye.renders - renders0 >= ORACLE_MAX_RENDERS:
+            continue
+        target = np.asarray(o.position, float)
+        if (i, j) not in aimed:
+            aimed[i, j] = _aimed_view(eye, grid, pose, pos[i], o, now, tm)
+        g0, worth, hit0 = aimed[i, j]
+        if not worth:
+            continue
+        g = g0 if v == 0 else _exact_gaze(grid, pose, pos[i], target, spec, tm, ORACLE_VIEWS[v])
+        if g.cost > deadline_s + 1e-9 or (best is not None and g.cost >= best.seconds - 1e-9):
+            continue
+        if hit0 if v == 0 else eye.detects(eye.frame_at(g.pose), now + g.cost):
+            best = OracleView(g.cost, g, o.id, eye.renders - renders0, key)
+    return best
 
 
 def _probs(ctx: SearchContext) -> ss.ProbabilitySource:

@@ -222,12 +222,16 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     p = bench_sub.add_parser(
         "search",
         help="search policies on the same held-out episodes: time to find, success, ratios",
-        description="Draw --episodes paired episodes once (held-out room, start pose, a small target "
-        "type present in the room) and run every policy on each. Reports per policy the success rate "
-        "within the budget, median and mean simulated seconds to find (failures counted at the "
-        "budget) with bootstrap 95%% intervals, gazes, path length and the ratios of the median to "
-        "exhaustive and to oracle. Writes DIR/search.json, DIR/search.md, DIR/search.png and "
-        "DIR/search.csv (one row per episode and policy). A policy name may carry a rank: "
+        description="Draw --episodes paired episodes once (held-out room, a small target type "
+        "present in the room, a start pose from which the target is not visible, in a world where "
+        "the oracle's planner detects it within the budget; the worlds and starts left out are "
+        "counted) and run every policy on each. Reports per policy the paired per-episode ratio of "
+        "time to each baseline that ran (median, bootstrap 95%% interval, wins, losses), the "
+        "success rate within the budget, spl (mean of S * t_oracle / max(t, t_oracle)), median and "
+        "mean simulated seconds to find (failures counted at the budget) with bootstrap 95%% "
+        "intervals, gazes, path length, oracle violations and a per-target breakdown. Writes "
+        "DIR/search.json, DIR/search.md, DIR/search.png and DIR/episodes.csv (one row per episode "
+        "and policy). A policy name may carry a rank: "
         "location@low,location@p0,location@high. With --workers N the episodes run in batches "
         "as Ray tasks (same files).",
     )

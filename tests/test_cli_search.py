@@ -121,7 +121,7 @@ def test_search_prints_the_outcome_and_records(store, tmp_path, capsys):
             "--style",
             "office",
             "--target",
-            "Monitor",
+            "Cup",
             "--policy",
             "location",
             "--budget-seconds",
@@ -132,7 +132,7 @@ def test_search_prints_the_outcome_and_records(store, tmp_path, capsys):
     )
     out = capsys.readouterr().out
     assert code == 0
-    assert "target Monitor" in out and "simulated s" in out and "gazes" in out and "m driven" in out
+    assert "target Cup" in out and "simulated s" in out and "gazes" in out and "m driven" in out
     assert rrd.is_file() and rrd.stat().st_size > 1000
 
 
@@ -177,7 +177,7 @@ def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
     assert doc["policies"]["exhaustive"]["ratio_to_exhaustive"] == 1.0
     assert "| location |" in (out_dir / "search.md").read_text()
     assert (out_dir / "search.png").stat().st_size > 1000
-    with (out_dir / "search.csv").open(newline="") as f:
+    with (out_dir / "episodes.csv").open(newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 2 * 3  # episodes x policies
     assert {r["policy"] for r in rows} == {"exhaustive", "location", "oracle"}

@@ -1,33 +1,48 @@
 """The search benchmark: every policy on the same episodes, time to find, and the files.
 
-Paired episodes (``episodes.make_episodes``, ``episodes.run_episodes``): the episode list is
-drawn once: held-out rooms (``search.held_out_seed(seed, i)``, skipping any seed the knowledge
-store learned in and rooms without a small object), a start pose (a uniformly drawn free cell,
-random heading) and a target type drawn uniformly among the small (kind=object) types present in
-the room. Every policy then runs every episode: the room is built once per episode and the robot
-is put back at the same start pose for each policy, with a fresh seen map and nothing known.
+Paired episodes (``episodes.draw_episodes``): the episode list is drawn once: held-out rooms
+(``search.held_out_seed(seed, i)``, skipping any seed the knowledge store learned in and rooms
+without a small object), a target type drawn uniformly among the small (kind=object) types present
+in the room, and a start pose (a uniformly drawn free cell, random heading) from which the target
+is **not visible** (redrawn while it is; the world dropped after ``MAX_START_TRIES``), in a world
+where the oracle's planner finds a view that **detects** it within the budget (else dropped as
+infeasible); search.json counts both (``excluded``, ``start_redraws``). Every policy then runs
+every episode: the room is built once per episode and the robot is put back at the same start
+pose for each policy, with a fresh seen map and nothing known.
 
-Statistics per policy: success rate within the budget; median and mean simulated seconds to
-find, **a failure counted at the budget** (so a policy that fails often cannot look fast), each
-with a seeded percentile bootstrap 95% interval over episodes; mean gazes and metres driven;
-the ratio of the median to ``exhaustive``'s and to ``oracle``'s (when they ran), and the paired
-ratio (the median over episodes of this policy's time over exhaustive's) with its interval.
+Statistics per policy (``aggregate``), failures counted at the budget (so a policy that fails
+often cannot look fast):
+
+- ``paired_ratio`` (the headline): for each baseline B of ``BASELINES`` that ran, the median over
+  episodes of this policy's time over B's on the same episode, with a seeded percentile bootstrap
+  95% interval, and the episodes it was faster (``wins``) and slower (``losses``) in;
+- ``success_rate`` within the budget, ``spl`` = mean over episodes of S * t_oracle /
+  max(t, t_oracle) (S: success; with ``oracle`` in the run), ``oracle_violations`` (episodes the
+  policy beat the oracle: a bound that is not one; must be 0);
+- median and mean simulated seconds to find, each with its bootstrap interval; mean gazes and
+  metres driven; as secondary fields, the ratio of the median to ``exhaustive``'s and to
+  ``oracle``'s (not paired).
+
+Per target type and per group (``detect_group``: small / hard to detect vs large, from the
+catalog's detectability) the episodes, success and median time of every policy (``by_target``,
+``by_group``).
 
 Policy names may carry a rank, ``location@low``, ``location@p0``, ``location@high``, to compare
 the parts of the interval on the same episodes.
 
-Writes ``DIR/search.json``, ``DIR/search.md`` (the table), ``DIR/search.png`` (the
-time-to-find CDF of every policy) and ``DIR/search.csv`` (one row per episode and policy); with
-``indirect`` and ``frontier`` also ``DIR/indirect.json`` and ``DIR/indirect.md`` (each
-intermediate type's predicted gain against the measured paired ratio: bench_indirect).
+Writes ``DIR/search.json``, ``DIR/search.md`` (the tables, paired ratios first),
+``DIR/search.png`` (the time-to-find CDF of every policy) and ``DIR/episodes.csv`` (one row per
+episode and policy); with ``indirect`` and ``frontier`` also ``DIR/indirect.json`` and
+``DIR/indirect.md`` (each intermediate type's predicted gain against the measured paired ratio:
+bench_indirect).
 
 The map scenario (``SearchConfig.map``, ``--map``): ``built`` (the robot knows nothing at the
 start: frontier, indirect, oracle-prior-indirect, oracle) or ``given`` (the furniture poses are
 known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``map`` says which.
 
-The episodes run in batches of ``EPISODES_PER_UNIT``, the units of a sweep (``scripts.sweep``:
-serially, or as Ray tasks with ``--workers N`` / ``--ray-address``); the files are the same
-either way, apart from the wall time.
+The episode checks and the episodes run as the units of sweeps (``scripts.sweep``: serially, or as
+Ray tasks with ``--workers N`` / ``--ray-address``; episodes in batches of ``EPISODES_PER_UNIT``);
+the files are the same either way, apart from the wall time.
 """
 
 from __future__ import annotations
@@ -44,17 +59,19 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from agent import search as S
+from agent import search_space as ss
 from envs.detector import DetectorModel
 from envs.houses import resolve_style
 from knowledge.base import KnowledgeBase
-from knowledge.catalog import load_catalog
+from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
 from scripts.experiments.bench_indirect import indirect_analysis, write_indirect
 from scripts.experiments.episodes import (
+    EpisodeDraw,
     Priors,
     SearchConfig,
+    draw_episodes,
     load_priors,
-    make_episodes,
     run_episode,
     split_name,
 )
@@ -83,6 +100,45 @@ def bootstrap_ci(
     return (float(np.quantile(stats, a)), float(np.quantile(stats, 1 - a)))
 
 
+# The baselines every policy's paired ratio is taken to, when they ran: the no-context policies
+# (the nearest-frontier explorer on the built map, the known furniture's volumes without
+# probabilities on the given map, exhaustive coverage) and the policies with the true
+# probabilities.
+BASELINES = ("frontier", "map-only", "exhaustive", "oracle-prior", "oracle-prior-indirect")
+ORACLE = "oracle"
+TIE_S = 1e-6  # seconds: closer than this counts as a tie (no win, no loss, no violation)
+
+
+@dataclass(frozen=True)
+class PairedRatio:
+    """The per-episode ratio of a policy's time to find to a baseline's, over paired episodes:
+    its median with a bootstrap interval, and the episodes it was faster (wins) and slower
+    (losses) in."""
+
+    median: float
+    ci: tuple[float, float]
+    wins: int
+    losses: int
+    n: int
+
+    def to_json(self) -> dict:
+        """The entry of search.json's ``paired_ratio``."""
+        return {
+            "median": _r(self.median),
+            "ci": [_r(self.ci[0]), _r(self.ci[1])],
+            "wins": self.wins,
+            "losses": self.losses,
+            "n": self.n,
+        }
+
+
+def _r(x):
+    """A JSON number rounded to 4 decimals (None for None, nan, inf)."""
+    return (
+        None if x is None or (isinstance(x, float) and not math.isfinite(x)) else round(float(x), 4)
+    )
+
+
 @dataclass
 class PolicyStats:
     """Aggregates of one policy over the episodes."""
@@ -95,36 +151,67 @@ class PolicyStats:
     mean_ci: tuple[float, float]
     gazes: float
     path_m: float
-    ratio_to_exhaustive: float | None = None
-    ratio_to_oracle: float | None = None
+    ratio_to_exhaustive: float | None = None  # ratio of medians (secondary: not paired)
+    ratio_to_oracle: float | None = None  # ratio of medians (secondary: not paired)
     paired_ratio: float | None = None  # median over episodes of t / t_exhaustive
     paired_ratio_ci: tuple[float, float] | None = None
+    spl: float | None = None  # mean over episodes of S * t_oracle / max(t, t_oracle)
+    paired: dict[str, PairedRatio] = field(default_factory=dict)  # baseline -> paired ratio
+    oracle_violations: int = 0  # episodes this policy found the target sooner than the oracle
 
     def to_json(self) -> dict:
         """The JSON entry of search.json."""
-
-        def r(x):
-            return (
-                None
-                if x is None or (isinstance(x, float) and not math.isfinite(x))
-                else round(float(x), 4)
-            )
-
         return {
-            "success_rate": r(self.success_rate),
-            "median_s": r(self.median_s),
-            "median_ci": [r(self.median_ci[0]), r(self.median_ci[1])],
-            "mean_s": r(self.mean_s),
-            "mean_ci": [r(self.mean_ci[0]), r(self.mean_ci[1])],
-            "gazes": r(self.gazes),
-            "path_m": r(self.path_m),
-            "ratio_to_exhaustive": r(self.ratio_to_exhaustive),
-            "ratio_to_oracle": r(self.ratio_to_oracle),
-            "paired_ratio_to_exhaustive": r(self.paired_ratio),
-            "paired_ratio_ci": None
-            if self.paired_ratio_ci is None
-            else [r(v) for v in self.paired_ratio_ci],
+            "success_rate": _r(self.success_rate),
+            "spl": _r(self.spl),
+            "paired_ratio": {b: p.to_json() for b, p in self.paired.items()},
+            "median_s": _r(self.median_s),
+            "median_ci": [_r(self.median_ci[0]), _r(self.median_ci[1])],
+            "mean_s": _r(self.mean_s),
+            "mean_ci": [_r(self.mean_ci[0]), _r(self.mean_ci[1])],
+            "gazes": _r(self.gazes),
+            "path_m": _r(self.path_m),
+            "ratio_to_exhaustive": _r(self.ratio_to_exhaustive),
+            "ratio_to_oracle": _r(self.ratio_to_oracle),
+            "oracle_violations": self.oracle_violations,
         }
+
+
+def paired_ratio(t: np.ndarray, t_base: np.ndarray, seed: int = 0) -> PairedRatio:
+    """The paired ratio of times ``t`` to ``t_base`` (aligned episodes; see ``PairedRatio``)."""
+    t, t_base = np.asarray(t, float), np.asarray(t_base, float)
+    ratio = t / np.maximum(t_base, TIE_S)
+    n = len(ratio)
+    return PairedRatio(
+        float(np.median(ratio)) if n else math.nan,
+        bootstrap_ci(ratio, np.median, seed=seed),
+        int(np.sum(t < t_base - TIE_S)),
+        int(np.sum(t > t_base + TIE_S)),
+        n,
+    )
+
+
+def spl(results: Sequence[S.SearchResult], oracle: Sequence[S.SearchResult]) -> float:
+    """The time-weighted success: the mean over episodes of S * t_oracle / max(t, t_oracle), S
+    success within the budget, t the simulated seconds to find, t_oracle the oracle's time to
+    find on the same episode (the budget where it failed)."""
+    if not results:
+        return math.nan
+    vals = []
+    for r, o in zip(results, oracle, strict=True):
+        t_o = o.time_to_find
+        vals.append(t_o / max(r.sim_time, t_o, TIE_S) if r.success else 0.0)
+    return float(np.mean(vals))
+
+
+def oracle_violations(results: Sequence[S.SearchResult], oracle: Sequence[S.SearchResult]) -> int:
+    """Episodes in which ``results`` found the target sooner than the oracle (or found it when
+    the oracle did not): a bound that is not one. Must be 0."""
+    return sum(
+        1
+        for r, o in zip(results, oracle, strict=True)
+        if r.success and (not o.success or r.sim_time < o.sim_time - TIE_S)
+    )
 
 
 def aggregate(results: dict[str, list[S.SearchResult]], seed: int = 0) -> dict[str, PolicyStats]:
@@ -142,17 +229,56 @@ def aggregate(results: dict[str, list[S.SearchResult]], seed: int = 0) -> dict[s
             gazes=float(np.mean([r.gazes for r in rs])) if rs else math.nan,
             path_m=float(np.mean([r.path_m for r in rs])) if rs else math.nan,
         )
-    for ref, attr in (("exhaustive", "ratio_to_exhaustive"), ("oracle", "ratio_to_oracle")):
+    for ref, attr in (("exhaustive", "ratio_to_exhaustive"), (ORACLE, "ratio_to_oracle")):
         if ref in out and out[ref].median_s > 0:
             for st in out.values():
                 setattr(st, attr, st.median_s / out[ref].median_s)
-    if "exhaustive" in results:
-        te = np.array([r.time_to_find for r in results["exhaustive"]], float)
-        for name, rs in results.items():
-            t = np.array([r.time_to_find for r in rs], float)
-            ratio = t / np.maximum(te, 1e-6)
-            out[name].paired_ratio = float(np.median(ratio))
-            out[name].paired_ratio_ci = bootstrap_ci(ratio, np.median, seed=seed)
+    times = {n: np.array([r.time_to_find for r in rs], float) for n, rs in results.items()}
+    for name in results:
+        for base in BASELINES:
+            if base in results and base != name:
+                out[name].paired[base] = paired_ratio(times[name], times[base], seed=seed)
+        if "exhaustive" in results:
+            pr = paired_ratio(times[name], times["exhaustive"], seed=seed)
+            out[name].paired_ratio, out[name].paired_ratio_ci = pr.median, pr.ci
+        if ORACLE in results:
+            out[name].spl = spl(results[name], results[ORACLE])
+            if name != ORACLE:
+                out[name].oracle_violations = oracle_violations(results[name], results[ORACLE])
+    return out
+
+
+def detect_group(catalog: Catalog, type_name: str) -> str:
+    """``small`` (hard to detect) or ``large``: small if the type's effective detection range
+    (agent.search_space.effective_range, from the catalog's sizes, min_pixels and max_range) is
+    below the median of the catalog's small-object (kind=object) types', so the rule holds for
+    any style and catalog."""
+    ranges = {t.name: ss.effective_range(t) for t in catalog.types if not t.is_furniture}
+    med = float(np.median(list(ranges.values())))
+    r = ranges.get(type_name, ss.effective_range(catalog.type(type_name)))
+    return "small" if r < med else "large"
+
+
+def breakdown(
+    eps: Sequence[S.Episode],
+    results: dict[str, list[S.SearchResult]],
+    key: Callable[[S.Episode], str],
+) -> dict[str, dict]:
+    """Per value of ``key`` (the target type, its group): episodes, and per policy the success
+    rate and the median time to find (failures at the budget)."""
+    out: dict[str, dict] = {}
+    for k in sorted({key(ep) for ep in eps}):
+        idx = [i for i, ep in enumerate(eps) if key(ep) == k]
+        out[k] = {
+            "n": len(idx),
+            "policies": {
+                name: {
+                    "success_rate": _r(float(np.mean([rs[i].success for i in idx]))),
+                    "median_s": _r(float(np.median([rs[i].time_to_find for i in idx]))),
+                }
+                for name, rs in results.items()
+            },
+        }
     return out
 
 
@@ -166,38 +292,44 @@ class BenchResult:
     table: str
     files: list[Path] = field(default_factory=list)
     wall_s: float = 0.0
+    draw: EpisodeDraw | None = None  # what the episode draw left out
 
 
 def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
-    """The Markdown table of search.md."""
-    lines = [
-        "| policy | success | median s [95% CI] | mean s [95% CI] | gazes | path m | median / exhaustive "
-        "| paired ratio [95% CI] | median / oracle |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+    """The Markdown table of search.md: the paired ratios to each baseline first."""
+    bases = [b for b in BASELINES if b in stats]
 
     def f(x, d=1):
         return "-" if x is None or not math.isfinite(x) else f"{x:.{d}f}"
 
+    def pr(p: PairedRatio | None) -> str:
+        if p is None:
+            return "-"
+        return f"{f(p.median, 2)} [{f(p.ci[0], 2)}, {f(p.ci[1], 2)}] {p.wins}/{p.losses}"
+
+    lines = [
+        "| policy | "
+        + "".join(f"t / t_{b} [95% CI] wins/losses | " for b in bases)
+        + "success | spl | median s [95% CI] | mean s [95% CI] | gazes | path m | "
+        "median / median exhaustive |",
+        "|---|" + "---|" * len(bases) + "---|---|---|---|---|---|---|",
+    ]
     for st in stats.values():
-        pr = (
-            "-"
-            if st.paired_ratio is None
-            else (
-                f"{st.paired_ratio:.2f} [{f(st.paired_ratio_ci[0], 2)}, {f(st.paired_ratio_ci[1], 2)}]"
-            )
-        )
         lines.append(
-            f"| {st.name} | {100 * st.success_rate:.0f}% | {f(st.median_s)} [{f(st.median_ci[0])}, "
-            f"{f(st.median_ci[1])}] | {f(st.mean_s)} [{f(st.mean_ci[0])}, {f(st.mean_ci[1])}] | "
-            f"{f(st.gazes)} | {f(st.path_m)} | {f(st.ratio_to_exhaustive, 2)} | {pr} | "
-            f"{f(st.ratio_to_oracle, 2)} |"
+            f"| {st.name} | "
+            + "".join(f"{pr(st.paired.get(b))} | " for b in bases)
+            + f"{100 * st.success_rate:.0f}% | {f(st.spl, 2)} | {f(st.median_s)} "
+            f"[{f(st.median_ci[0])}, {f(st.median_ci[1])}] | {f(st.mean_s)} [{f(st.mean_ci[0])}, "
+            f"{f(st.mean_ci[1])}] | {f(st.gazes)} | {f(st.path_m)} | "
+            f"{f(st.ratio_to_exhaustive, 2)} |"
         )
     lines.append("")
     lines.append(
         f"{n} paired episodes; simulated seconds to find the target, a failure counted at the "
-        f"budget ({budget_s:.0f} s); 95% intervals: percentile bootstrap over episodes "
-        f"({BOOTSTRAP_SAMPLES} resamples, seeded)."
+        f"budget ({budget_s:.0f} s). t / t_B: the median over episodes of the policy's time over "
+        f"baseline B's on the same episode, wins/losses the episodes it was faster/slower in; "
+        f"spl: the mean of S * t_oracle / max(t, t_oracle); 95% intervals: percentile bootstrap "
+        f"over episodes ({BOOTSTRAP_SAMPLES} resamples, seeded)."
     )
     return "\n".join(lines)
 
@@ -256,13 +388,20 @@ def bench_search(
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
     style = resolve_style(config.style, catalog)
     priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb)
-    eps = make_episodes(
-        style, config.episodes, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned
-    )
     detector = config.detector_model(catalog)
-    results = _run_batches(
-        eps, names, style, priors, sweep or SweepOptions(), bar, (detector, config.map)
+    sweep = sweep or SweepOptions()
+    draw = draw_episodes(
+        style,
+        config.episodes,
+        config.seed,
+        catalog,
+        config.budget_s,
+        exclude_seeds=priors.learned,
+        detector=detector,
+        sweep=sweep,
     )
+    eps = draw.episodes
+    results = _run_batches(eps, names, style, priors, sweep, bar, (detector, config.map))
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -270,6 +409,7 @@ def bench_search(
                 progress(f"episode {ep.index} ({ep.target}, room {ep.room_seed}): {r.summary()}")
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
+    res.draw = draw
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
     if (
         "indirect" in results and "frontier" in results
@@ -326,12 +466,13 @@ def _batch_unit(
     ]
 
 
-# search.csv: one row per episode and policy.
+# episodes.csv: one row per episode and policy.
 EPISODE_COLUMNS = (
     "style",
     "episode",
     "room_seed",
     "target",
+    "target_group",  # small (hard to detect) or large: detect_group
     "start_x_m",
     "start_y_m",
     "start_yaw_rad",
@@ -346,9 +487,15 @@ EPISODE_COLUMNS = (
 )
 
 
-def episode_rows(eps: Sequence[S.Episode], results: dict[str, list[S.SearchResult]]):
-    """The rows of search.csv (``EPISODE_COLUMNS``), episode by episode, policy by policy."""
+def episode_rows(
+    eps: Sequence[S.Episode],
+    results: dict[str, list[S.SearchResult]],
+    catalog: Catalog | None = None,
+):
+    """The rows of episodes.csv (``EPISODE_COLUMNS``), episode by episode, policy by policy."""
+    catalog = catalog or load_catalog()
     for i, ep in enumerate(eps):
+        group = detect_group(catalog, ep.target)
         for name, rs in results.items():
             r = rs[i]
             yield {
@@ -356,6 +503,7 @@ def episode_rows(eps: Sequence[S.Episode], results: dict[str, list[S.SearchResul
                 "episode": ep.index,
                 "room_seed": ep.room_seed,
                 "target": ep.target,
+                "target_group": group,
                 "start_x_m": float(ep.start.x),
                 "start_y_m": float(ep.start.y),
                 "start_yaw_rad": float(ep.start.yaw),
@@ -393,9 +541,11 @@ def _write_files(
     kb: KnowledgeBase | None,
     res: BenchResult,
 ) -> list[Path]:
-    """Write search.json, search.md, search.png and search.csv of ``res`` to ``out``; their
+    """Write search.json, search.md, search.png and episodes.csv of ``res`` to ``out``; their
     paths."""
     eps, results, stats, table = res.episodes, res.results, res.stats, res.table
+    catalog = load_catalog()
+    draw = res.draw or EpisodeDraw(list(eps))
     out.mkdir(parents=True, exist_ok=True)
     doc = {
         "style": style,
@@ -403,15 +553,25 @@ def _write_files(
         "budget_s": config.budget_s,
         "seed": config.seed,
         "rank": config.rank,
-        "detector": config.detector_model(load_catalog()).name,
+        "detector": config.detector_model(catalog).name,
         "interval": config.interval,
         "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
+        "excluded": draw.excluded(),
+        "start_redraws": draw.start_redraws,
+        "oracle_violations": sum(st.oracle_violations for st in stats.values())
+        if ORACLE in stats
+        else None,
+        "baselines": [b for b in BASELINES if b in stats],
         "policies": {n: st.to_json() for n, st in stats.items()},
+        "by_target": breakdown(eps, results, lambda ep: ep.target),
+        "by_group": breakdown(eps, results, lambda ep: detect_group(catalog, ep.target)),
         "episode_list": [_episode_json(ep, i, results) for i, ep in enumerate(eps)],
     }
+    for k, entry in doc["by_target"].items():
+        entry["group"] = detect_group(catalog, k)
     if config.estimate != "flat":  # flat (the default) documents stay as they were
         doc["estimate"] = {"name": config.estimate, "min_evidence": config.min_evidence}
     files = [out / "search.json", out / "search.md", out / "search.png"]
@@ -421,6 +581,7 @@ def _write_files(
         if kb is not None
         else ""
     )
+    ex = draw.excluded()
     files[1].write_text(
         f"# Object search: {style}\n\n{kb_line}ranking by the {config.interval} interval's "
         f"`{config.rank}`"
@@ -429,10 +590,36 @@ def _write_files(
             if config.estimate == "backoff"
             else ""
         )
-        + f", detector `{doc['detector']}`, "
-        f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n"
+        + f", detector `{doc['detector']}`, map `{doc['map']}`, "
+        f"budget {config.budget_s:.0f} simulated s, seed {config.seed}.\n\n{table}\n\n"
+        f"Episodes: the target not visible from the start ({draw.start_redraws} starts redrawn; "
+        f"{ex['visible_at_start']} worlds dropped as visible from every start tried) and "
+        f"detectable within the budget ({ex['infeasible']} worlds dropped as infeasible); "
+        f"oracle violations (a policy faster than the oracle): {doc['oracle_violations']}.\n\n"
+        + _breakdown_table(doc["by_group"], "target group")
+        + "\n"
+        + _breakdown_table(doc["by_target"], "target")
     )
     title = f"time to find ({style}, {len(eps)} paired episodes)"
     plot_cdf(results, config.budget_s, files[2], title)
-    files.append(write_csv(out / "search.csv", EPISODE_COLUMNS, episode_rows(eps, results)))
+    files.append(
+        write_csv(out / "episodes.csv", EPISODE_COLUMNS, episode_rows(eps, results, catalog))
+    )
     return files
+
+
+def _breakdown_table(rows: dict[str, dict], what: str) -> str:
+    """search.md's table of a breakdown: per row, episodes and each policy's success and median
+    seconds."""
+    if not rows:
+        return ""
+    names = list(next(iter(rows.values()))["policies"])
+    head = f"| {what} | n | " + " | ".join(f"{n}: success, median s" for n in names) + " |"
+    lines = [head, "|---|---|" + "---|" * len(names)]
+    for k, row in rows.items():
+        cells = []
+        for n in names:
+            p = row["policies"][n]
+            cells.append(f"{100 * p['success_rate']:.0f}%, {p['median_s']:.1f}")
+        lines.append(f"| {k} | {row['n']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,9 +1,11 @@
 """Search episodes, shared by ``ctxsearch search``, ``ctxsearch bench search`` and the demo.
 
-``make_episodes`` draws paired episodes: held-out rooms (``search.held_out_seed(seed, i)``,
-skipping any seed the knowledge store learned in and rooms without a small object), a start pose
-(a uniformly drawn free cell, random heading) and a target type drawn uniformly among the small
-(kind=object) types present in the room, or a given target. ``run_episodes`` runs every policy
+``make_episodes`` draws paired episodes (``draw_episodes``, which also counts what it left out):
+held-out rooms (``search.held_out_seed(seed, i)``, skipping any seed the knowledge store learned
+in and rooms without a small object), a target type drawn uniformly among the small (kind=object)
+types present in the room, or a given target, and a start pose (a uniformly drawn free cell,
+random heading) from which the target is not visible, redrawn while it is, in a world where the
+oracle's planner detects the target within the budget (both checked with the detector in use). ``run_episodes`` runs every policy
 on every episode (the room built once per episode, the robot put back at the same start pose for
 each policy, with a fresh seen map and nothing known); ``search_once`` runs policies on the first
 held-out room that holds a given target, with a recording per policy or all of them side by side
@@ -15,9 +17,10 @@ of the interval ranks the candidate regions.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +41,7 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.pooling import PooledCounts
+from scripts.sweep import SweepOptions, run_units
 
 ProbsFor = Callable[[str, str | None], ss.ProbabilitySource | None]
 
@@ -88,6 +92,25 @@ def split_name(name: str) -> tuple[str, str | None]:
     return base, rank or None
 
 
+MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
+
+
+@dataclass
+class EpisodeDraw:
+    """The episodes drawn and what was left out: worlds dropped because the target was visible
+    from every start tried (``visible_at_start``) or no pose detects it within the budget
+    (``infeasible``), and starts redrawn because the target was visible from them."""
+
+    episodes: list[S.Episode]
+    visible_at_start: int = 0
+    infeasible: int = 0
+    start_redraws: int = 0
+
+    def excluded(self) -> dict[str, int]:
+        """search.json's ``excluded``: worlds dropped, by reason."""
+        return {"visible_at_start": self.visible_at_start, "infeasible": self.infeasible}
+
+
 def make_episodes(
     style: WorldStyle,
     n: int,
@@ -96,34 +119,137 @@ def make_episodes(
     budget_s: float = S.DEFAULT_BUDGET_S,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
     target: str | None = None,
+    detector: DetectorModel | None = None,
 ) -> list[S.Episode]:
-    """``n`` episodes in held-out rooms of ``style``, deterministic in ``seed``.
+    """``n`` episodes in held-out rooms of ``style``, deterministic in ``seed``: the target not
+    visible from the start, and detectable within the budget (``draw_episodes``; ``detector``:
+    the preset the checks read images with, None: perfect).
 
     ``target``: only rooms holding that type, always looking for it (``ctxsearch search``);
     otherwise the target is drawn among the room's small types."""
-    spec = RobotSpec()
-    out: list[S.Episode] = []
-    i = 0
+    return draw_episodes(
+        style, n, seed, catalog, budget_s, exclude_seeds, target, detector
+    ).episodes
+
+
+def draw_episodes(
+    style: WorldStyle,
+    n: int,
+    seed: int,
+    catalog: Catalog,
+    budget_s: float = S.DEFAULT_BUDGET_S,
+    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    target: str | None = None,
+    detector: DetectorModel | None = None,
+    sweep: SweepOptions | None = None,
+) -> EpisodeDraw:
+    """``make_episodes`` with the counts of what was left out; ``sweep``: check the worlds in
+    parallel (the same episodes and counts for any number of workers).
+
+    World i (room seed ``held_out_seed(seed, i)``, skipped if the store learned in it or it has
+    no small object, or no ``target``) gets a target drawn uniformly among its small types and a
+    start drawn uniformly among the free cells (``random_start``), both from the world's own
+    stream. The start is redrawn while the target is visible from it (``S.OracleEye``: the head
+    aimed at each instance from the start, turning in place, and the detector in use would report
+    a true instance with probability >= ``S.VISIBLE_MIN_P``; the perfect detector: it does), at
+    most ``MAX_START_TRIES`` starts, then the world is dropped. A world whose target no view of
+    the oracle's planner detects within the budget (``S.oracle_view`` from the start, the
+    detector's draws as at the world's first second) is dropped as infeasible. Worlds are taken
+    in index order until ``n`` episodes; the counts cover the worlds up to the last one taken."""
+    sweep = sweep or SweepOptions()
+    draw = EpisodeDraw([])
     limit = 50 * n + 100
-    while len(out) < n:
+    check = functools.partial(
+        _draw_world,
+        style,
+        int(seed),
+        catalog,
+        float(budget_s),
+        frozenset(exclude_seeds),
+        target,
+        detector,
+    )
+    i = 0
+    while len(draw.episodes) < n:
         if i >= limit:
             what = f"a {target}" if target else "a small object"
             raise CtxsearchError(
-                f"no held-out room of style '{style.name}' holds {what} (tried {limit} rooms)"
+                f"no held-out room of style '{style.name}' holds {what} that can be searched "
+                f"for (tried {limit} rooms)"
             )
-        room_seed = S.held_out_seed(seed, i)
-        rng = np.random.default_rng([int(seed), i, 0xE915])
-        i += 1
-        if room_seed in exclude_seeds:
-            continue
-        layout = generate_layout(style, room_seed, catalog)
-        tgt = _episode_target(layout, catalog, target, rng)
-        if tgt is None:
-            continue
-        grid = OccupancyGrid.from_layout(layout, spec)
-        start = S.random_start(layout, grid, rng)
-        out.append(S.Episode(len(out), style.name, room_seed, tgt, start, float(budget_s)))
-    return out
+        # A round: as many worlds as episodes still needed (at least two per worker).
+        m = min(limit - i, max(n - len(draw.episodes), 2 * sweep.workers))
+        rounds = run_units(
+            check,
+            list(range(i, i + m)),
+            workers=sweep.workers,
+            ray_address=sweep.ray_address,
+            desc=f"episodes {style.name}",
+            progress=False,
+        )
+        i += m
+        for world in rounds:
+            if len(draw.episodes) >= n:
+                break
+            draw.start_redraws += world.redraws
+            if world.dropped == "visible_at_start":
+                draw.visible_at_start += 1
+            elif world.dropped == "infeasible":
+                draw.infeasible += 1
+            elif world.episode is not None:
+                draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
+    return draw
+
+
+@dataclass(frozen=True)
+class WorldDraw:
+    """One world's draw: its episode (index to be set), or why it was dropped (None: it holds
+    nothing to search for, or the store learned in it), and how many starts were redrawn."""
+
+    episode: S.Episode | None
+    dropped: str | None = None
+    redraws: int = 0
+
+
+def _draw_world(
+    style: WorldStyle,
+    seed: int,
+    catalog: Catalog,
+    budget_s: float,
+    exclude_seeds: frozenset[int],
+    target: str | None,
+    detector: DetectorModel | None,
+    i: int,
+) -> WorldDraw:
+    """World ``i``'s episode (see ``draw_episodes``): a start from which the target is not
+    visible and from which the oracle's planner detects it within ``budget_s``."""
+    room_seed = S.held_out_seed(seed, i)
+    rng = np.random.default_rng([int(seed), i, 0xE915])
+    if room_seed in exclude_seeds:
+        return WorldDraw(None)
+    layout = generate_layout(style, room_seed, catalog)
+    tgt = _episode_target(layout, catalog, target, rng)
+    if tgt is None:
+        return WorldDraw(None)
+    spec = RobotSpec()
+    grid = OccupancyGrid.from_layout(layout, spec)
+    redraws = 0
+    with World(layout, catalog, spec=spec) as world:
+        eye = S.OracleEye(world, layout, catalog, detector, tgt)
+        for _ in range(MAX_START_TRIES):
+            start = S.random_start(layout, grid, rng)
+            if eye.start_visibility(start) < S.VISIBLE_MIN_P:
+                break
+            redraws += 1
+        else:
+            return WorldDraw(None, "visible_at_start", redraws)
+        world.reset_pose(start)
+        view = S.oracle_view(
+            eye, grid, start, world.sim_time, world.time_model, deadline_s=budget_s
+        )
+    if view is None:
+        return WorldDraw(None, "infeasible", redraws)
+    return WorldDraw(S.Episode(-1, style.name, room_seed, tgt, start, budget_s), None, redraws)
 
 
 def _episode_target(
@@ -392,7 +518,14 @@ def search_once(
     style = resolve_style(config.style, catalog)
     priors = load_priors(config, style, catalog, kb, kb_path, exclude_seeds)
     ep = make_episodes(
-        style, 1, config.seed, catalog, config.budget_s, exclude_seeds=priors.learned, target=target
+        style,
+        1,
+        config.seed,
+        catalog,
+        config.budget_s,
+        exclude_seeds=priors.learned,
+        target=target,
+        detector=config.detector_model(catalog),
     )[0]
     records = list(records) if records is not None else [None] * len(names)
     runs = [

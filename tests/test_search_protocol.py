@@ -1,0 +1,171 @@
+"""The search benchmark's protocol: episodes whose target is not visible from the start and can be
+found, an oracle that is a lower bound, and the metrics (spl, paired ratios, episodes.csv)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from agent import search as S
+from envs.detector import SimDetector, load_detector
+from envs.styles import load_style
+from envs.world import World
+from scripts.experiments import episodes as E
+from scripts.experiments.bench_search import (
+    SearchBenchConfig,
+    aggregate,
+    bench_search,
+    detect_group,
+    paired_ratio,
+)
+
+
+def res(policy: str, t: float, found: bool = True, budget: float = 100.0) -> S.SearchResult:
+    return S.SearchResult(policy, 0, "Cup", found, 1 if found else None, t, 3, 1.0, budget)
+
+
+# =========================================================================== metrics (pure)
+def test_paired_ratio_counts_wins_and_losses_per_episode():
+    t = np.array([10.0, 20.0, 30.0, 40.0, 50.0])
+    base = np.array([20.0, 20.0, 15.0, 80.0, 100.0])
+    p = paired_ratio(t, base)
+    assert (p.wins, p.losses, p.n) == (3, 1, 5)  # 10<20, 40<80, 50<100; 30>15; 20=20 a tie
+    assert p.median == pytest.approx(0.5)
+    assert p.ci[0] <= p.median <= p.ci[1]
+
+
+def test_aggregate_gives_paired_ratios_to_every_baseline_spl_and_violations():
+    results = {
+        "exhaustive": [res("exhaustive", 40), res("exhaustive", 80), res("exhaustive", 30)],
+        "location": [res("location", 10), res("location", 150, False), res("location", 15)],
+        "oracle": [res("oracle", 5), res("oracle", 20), res("oracle", 20)],
+    }
+    stats = aggregate(results)
+    loc = stats["location"]
+    assert set(loc.paired) == {"exhaustive"}  # the baselines that ran, never itself
+    pr = loc.paired["exhaustive"]
+    assert (pr.wins, pr.losses) == (2, 1)  # 10 < 40, 15 < 30; the failure (100) > 80
+    assert pr.median == pytest.approx(0.5)  # ratios 0.25, 1.25, 0.5
+    assert stats["oracle"].spl == pytest.approx(1.0)
+    assert loc.spl == pytest.approx((5 / 10 + 0 + 1.0) / 3)  # 15 s beat the oracle's 20 s
+    assert loc.oracle_violations == 1 and stats["exhaustive"].oracle_violations == 0
+    for st in stats.values():
+        assert 0.0 <= st.spl <= 1.0
+    doc = loc.to_json()
+    entry = doc["paired_ratio"]["exhaustive"]
+    assert (entry["median"], entry["wins"], entry["losses"], entry["n"]) == (0.5, 2, 1, 3)
+    assert entry["ci"][0] <= 0.5 <= entry["ci"][1]
+
+
+def test_detect_group_comes_from_the_catalog(catalog):
+    assert detect_group(catalog, "Pen") == "small"
+    assert detect_group(catalog, "Monitor") == "large"
+    groups = {detect_group(catalog, t.name) for t in catalog.types if not t.is_furniture}
+    assert groups == {"small", "large"}
+
+
+# =========================================================================== episodes
+@pytest.fixture(scope="module")
+def office(catalog):
+    return load_style("office", catalog)
+
+
+@pytest.fixture(scope="module")
+def drawn(office, catalog):
+    return E.draw_episodes(office, 2, 5, catalog, 60.0)
+
+
+def test_episodes_are_reproducible_and_count_what_they_leave_out(drawn, office, catalog):
+    again = E.draw_episodes(office, 2, 5, catalog, 60.0)
+    assert again.episodes == drawn.episodes
+    assert again.excluded() == drawn.excluded() and again.start_redraws == drawn.start_redraws
+    assert [e.index for e in drawn.episodes] == [0, 1]
+    assert drawn.start_redraws + drawn.visible_at_start > 0  # most office starts see the target
+    other = E.draw_episodes(office, 1, 6, catalog, 60.0)
+    assert other.episodes[0] not in drawn.episodes
+
+
+@pytest.mark.render
+def test_the_target_is_never_visible_from_the_start(drawn, catalog):
+    """A direct check: images from the start position, the head aimed at every target instance
+    and a ring of headings at three tilts (turning in place), read by the perfect detector."""
+    perfect = load_detector("perfect")
+    for ep in drawn.episodes:
+        layout = E.generate_layout(load_style(ep.style, catalog), ep.room_seed, catalog)
+        with World(layout, catalog) as world:
+            sim = SimDetector(perfect, layout, catalog, layout.seed)
+            spec = world.spec
+            views = [
+                (h, t)
+                for h in np.linspace(-math.pi, math.pi, 12, endpoint=False)
+                for t in (-0.6, -0.25, 0.1)
+            ]
+            for o in layout.of_type(ep.target):
+                d = np.asarray(o.position) - np.array([ep.start.x, ep.start.y, spec.camera_height])
+                views.append((math.atan2(d[1], d[0]), math.atan2(d[2], math.hypot(d[0], d[1]))))
+            for heading, tilt in views:
+                world.reset_pose(S.RobotPose(ep.start.x, ep.start.y, heading, 0.0, tilt))
+                dets = sim(world.capture(depth=True), world.sim_time)
+                assert not [d for d in dets if d.type == ep.target], (ep, heading, tilt)
+
+
+def test_an_infeasible_world_is_dropped_and_counted(office, catalog, monkeypatch):
+    # A budget no view can meet: the target is not visible from the start, and every other
+    # view needs a drive or a head move longer than 0.3 s.
+    w = E._draw_world(office, 5, catalog, 0.3, frozenset(), None, None, 0)
+    assert w.episode is None and w.dropped in ("infeasible", "visible_at_start")
+    # The count: the first world's oracle finds nothing, the others are as they are.
+    real = S.oracle_view
+    calls = {"n": 0}
+
+    def first_fails(*a, **kw):
+        calls["n"] += 1
+        return None if calls["n"] == 1 else real(*a, **kw)
+
+    monkeypatch.setattr(S, "oracle_view", first_fails)
+    d = E.draw_episodes(office, 1, 5, catalog, 60.0)
+    assert d.infeasible == 1 and len(d.episodes) == 1
+
+
+# =========================================================================== the oracle bound
+@pytest.mark.render
+@pytest.mark.parametrize(("detector", "n"), [("perfect", 8), ("realistic", 6)])
+def test_no_policy_beats_the_oracle(tmp_path, detector, n, desk_cup_store):
+    """14 small episodes (30 per detector with five policies: 0 violations, measured by hand)."""
+    config = SearchBenchConfig(
+        style="office",
+        policies=("exhaustive", "location", "oracle"),
+        seed=3,
+        budget_s=15.0,
+        detector=detector,
+        kb=desk_cup_store(tmp_path / "kb.sqlite"),
+        episodes=n,
+    )
+    out = tmp_path / detector
+    r = bench_search(config, out, progress=None, bar=False)
+    doc = json.loads((out / "search.json").read_text())
+    assert doc["oracle_violations"] == 0
+    o = r.results["oracle"]
+    assert all(x.success for x in o)  # every episode is feasible
+    for name, rs in r.results.items():
+        for a, b in zip(rs, o, strict=True):
+            assert not a.success or a.sim_time >= b.sim_time - 1e-6, (name, a.summary(), b.log)
+    assert r.stats["oracle"].spl == pytest.approx(1.0)
+    assert all(0.0 <= st.spl <= 1.0 for st in r.stats.values())
+    # search.json's keys and episodes.csv: one row per episode and policy
+    assert doc["detector"] == detector and doc["map"] == "given"
+    assert set(doc["excluded"]) == {"visible_at_start", "infeasible"}
+    assert doc["start_redraws"] >= 0
+    assert doc["policies"]["location"]["paired_ratio"]["exhaustive"]["wins"] >= 0
+    assert set(doc["by_group"]) <= {"small", "large"}
+    assert sum(v["n"] for v in doc["by_target"].values()) == n
+    with (out / "episodes.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == n * 3
+    assert {(int(x["episode"]), x["policy"]) for x in rows} == {
+        (i, p) for i in range(n) for p in config.policies
+    }
