@@ -122,8 +122,10 @@ def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_stor
     alone = bench_search(
         replace(base, policies=("location",)), tmp_path / "b", progress=None, bar=False
     )
-    t = [(r.sim_time, r.gazes, r.path_m) for r in both.results["location"]]
-    assert t == [(r.sim_time, r.gazes, r.path_m) for r in alone.results["location"]]
+    def key(rs):  # seconds to the last bits of float sums (the world's clock runs on)
+        return [(round(r.sim_time, 9), r.gazes, round(r.path_m, 9)) for r in rs]
+
+    assert key(both.results["location"]) == key(alone.results["location"])
 
 
 def test_transfer_table_is_learned_in_by_searched_in(transfer_dir):

@@ -133,12 +133,19 @@ def test_an_infeasible_world_is_dropped_and_counted(office, catalog, monkeypatch
 
 # =========================================================================== the oracle bound
 @pytest.mark.render
-@pytest.mark.parametrize(("detector", "n"), [("perfect", 8), ("realistic", 6)])
-def test_no_policy_beats_the_oracle(tmp_path, detector, n, desk_cup_store):
-    """14 small episodes (30 per detector with five policies: 0 violations, measured by hand)."""
+@pytest.mark.parametrize(
+    ("detector", "n", "map_mode"),
+    [("perfect", 8, "given"), ("realistic", 6, "given"), ("perfect", 4, "built")],
+)
+def test_no_policy_beats_the_oracle(tmp_path, detector, n, map_mode, desk_cup_store):
+    """18 small episodes in both map scenarios (30 per detector with five policies on the given
+    map: 0 violations, measured by hand)."""
+    policies = {"given": ("exhaustive", "location", "oracle"),
+                "built": ("frontier", "indirect", "oracle")}[map_mode]  # fmt: skip
     config = SearchBenchConfig(
         style="office",
-        policies=("exhaustive", "location", "oracle"),
+        map=map_mode,
+        policies=policies,
         seed=3,
         budget_s=15.0,
         detector=detector,
@@ -157,10 +164,11 @@ def test_no_policy_beats_the_oracle(tmp_path, detector, n, desk_cup_store):
     assert r.stats["oracle"].spl == pytest.approx(1.0)
     assert all(0.0 <= st.spl <= 1.0 for st in r.stats.values())
     # search.json's keys and episodes.csv: one row per episode and policy
-    assert doc["detector"] == detector and doc["map"] == "given"
+    assert doc["detector"] == detector and doc["map"] == map_mode
     assert set(doc["excluded"]) == {"visible_at_start", "infeasible"}
     assert doc["start_redraws"] >= 0
-    assert doc["policies"]["location"]["paired_ratio"]["exhaustive"]["wins"] >= 0
+    ctx_policy, baseline = policies[1], policies[0]
+    assert doc["policies"][ctx_policy]["paired_ratio"][baseline]["wins"] >= 0
     assert set(doc["by_group"]) <= {"small", "large"}
     assert sum(v["n"] for v in doc["by_target"].values()) == n
     with (out / "episodes.csv").open(newline="") as f:
