@@ -54,8 +54,10 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 # A drifting world set: forgetting methods (about 6 minutes on 2 loaded cores, oracle perception).
 	$(VENV)/bin/ctxsearch bench drift --out results/drift --workers $(WORKERS)
-# Detector x interval against the truth, camera mode (about 22 minutes on 2 shared cores).
-	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals
+# Detector x interval against the truth, camera mode: office after 10 and 30 rooms, apartment after
+# 3 and 10 houses (each about 13 minutes with 2 of them sharing 2 cores: 8 runs each).
+	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 100 --out results/intervals_apartment --workers $(WORKERS)
 # Does learning pay? The paired search ratio after k learned houses, built and given map (issue 12),
 # and context learned in one room style used in another (estimated at about 9 + 3 minutes on 2
 # unloaded cores from smaller runs, before the built-map search policies; see README).
