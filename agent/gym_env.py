@@ -8,11 +8,10 @@
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
 An episode is the benchmark's (``ctxsearch bench search``, ``scripts.experiments.episodes``):
-``reset(seed=s)`` draws held-out room ``agent.search.held_out_seed(s, i)`` for the first i whose
-room holds a small object and that the store (``kb``) did not learn in, a start pose (a uniformly
-drawn free cell, random heading: ``agent.search.random_start``) and a target type drawn among the
-room's small types, from the same random stream as the benchmark's episode 0 for seed s
-(``options={"index": k}``: its episode k). ``reset()`` without a seed draws the seed from the
+``reset(seed=s)`` draws the benchmark's episode 0 for seed s (``options={"index": k}``: its
+episode k) with agent.episode_draw, as the benchmark does: held-out rooms the store (``kb``) did
+not learn in, a target drawn among the room's small types, a start from which it is not visible
+and from which the oracle's planner detects it within the budget (with the env's detector). ``reset()`` without a seed draws the seed from the
 environment's own generator, so one seeded reset fixes every later episode.
 
 Actions (``Discrete(8)``, ``ACTIONS``), each charged by the one time model
@@ -51,6 +50,7 @@ occupancy grid (agent.navigation) and the held-out rooms are the search's (agent
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +59,7 @@ import numpy as np
 from gymnasium import spaces
 
 from agent import search as S
+from agent.episode_draw import draw_world
 from agent.navigation import OccupancyGrid
 from agent.perception_modes import DEFAULT_DETECTOR
 from envs.camera import Frame
@@ -96,7 +97,6 @@ ELAPSED_LIMIT = 2.0  # the ``elapsed`` observation saturates at this many budget
 MAX_EPISODE_STEPS = 2000
 DEFAULT_TOP_K = 8
 CONTEXT_FEATURES = ("cx", "cy", "cz", "yaw", "hx", "hy", "hz", "p_low", "p_high", "valid")
-EPISODE_TAG = 0xE915  # the benchmark's episode stream (scripts.experiments.episodes)
 
 
 def draw_episode(
@@ -107,30 +107,27 @@ def draw_episode(
     index: int = 0,
     budget_s: float = S.DEFAULT_BUDGET_S,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
-    spec: RobotSpec | None = None,
+    detector: DetectorModel | None = None,
 ) -> tuple[S.Episode, RoomLayout]:
     """Episode ``index`` of the benchmark's episodes for ``seed`` (``make_episodes(style,
-    index + 1, seed, ...)[index]``) and its room's layout."""
-    spec = spec or RobotSpec()
+    index + 1, seed, ..., detector=detector)[index]``: agent.episode_draw's worlds in order, the
+    target not visible from the start and detectable within the budget) and its room's layout."""
     n, i = 0, 0
     limit = 50 * (index + 1) + 100
     while i < limit:
-        room_seed = S.held_out_seed(seed, i)
-        rng = np.random.default_rng([int(seed), i, EPISODE_TAG])
+        world = draw_world(
+            style, int(seed), catalog, float(budget_s), frozenset(exclude_seeds), None, detector, i
+        )
         i += 1
-        if room_seed in exclude_seeds:
+        if world.episode is None:
             continue
-        layout = generate_layout(style, room_seed, catalog)
-        small = S.small_types_present(layout, catalog)
-        if not small:
-            continue
-        target = small[int(rng.integers(len(small)))]
-        start = S.random_start(layout, OccupancyGrid.from_layout(layout, spec), rng)
         if n == index:
-            return S.Episode(index, style.name, room_seed, target, start, float(budget_s)), layout
+            ep = replace(world.episode, index=index)
+            return ep, generate_layout(style, ep.room_seed, catalog)
         n += 1
     raise CtxsearchError(
-        f"no held-out room of style '{style.name}' holds a small object (tried {limit} rooms)"
+        f"no held-out room of style '{style.name}' holds a small object that can be searched "
+        f"for (tried {limit} rooms)"
     )
 
 
@@ -222,7 +219,7 @@ class ObjectSearchEnv(gymnasium.Env):
             index=int(index),
             budget_s=self.budget_s,
             exclude_seeds=self.learned,
-            spec=self.robot_spec,
+            detector=self.detector_model,
         )
         self.close()
         self.world = World(

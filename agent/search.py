@@ -356,6 +356,9 @@ class SearchContext:
     true instance of the target: a look-alike or a false positive confirmed as the target ends
     the search as a failure; one not confirmed is forgotten and the search goes on."""
 
+    found_id: int | None  # the instance whose confirmed detection ended the search
+    found_at: float | None  # seconds since the start when it was confirmed
+
     def __init__(
         self,
         episode: Episode,
@@ -402,8 +405,7 @@ class SearchContext:
         self.known: dict[int, ObjectInstance] = {}
         self.trace: list[GazeRecord] = []
         self.log: list[str] = []
-        self.found_id: int | None = None
-        self.found_at: float | None = None
+        self.found_id = self.found_at = None
         body.reset_pose(episode.start)
         self.t0 = float(body.sim_time)
         self._range_cache: dict[str, float] = {}
@@ -416,8 +418,7 @@ class SearchContext:
         self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
         self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
         self._vias: dict[str, float] = {}  # intermediate types worth it: predicted gain
-        self._confirming = False  # taking the image that confirms a detection of the target
-        self.unconfirmed = 0  # detections of the target a second image did not confirm
+        self._confirming, self.unconfirmed = False, 0  # confirming a detection; not confirmed
 
     @property
     def grid(self) -> OccupancyGrid:

@@ -21,6 +21,7 @@ POLICY_FLAGS = [
     "map-only,location,oracle-prior",
 ]
 SMALL = ["--perception", "oracle", "--budget-seconds", "20", "--truth-samples", "5", "--quiet"]
+SMALL += ["--detector", "perfect"]  # the realistic detector's episode checks take longer
 CURVE = ["bench", "curve", "--style", "office", "--rooms", "0,1,2", "--episodes", "3"]
 TRANSFER = ["bench", "transfer", "--styles", "office,biology_lab", "--rooms", "1"]
 TRANSFER += ["--episodes", "2", "--scenarios", "given", "--probe-rooms", "1"]
@@ -122,6 +123,7 @@ def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_stor
     alone = bench_search(
         replace(base, policies=("location",)), tmp_path / "b", progress=None, bar=False
     )
+
     def key(rs):  # seconds to the last bits of float sums (the world's clock runs on)
         return [(round(r.sim_time, 9), r.gazes, round(r.path_m, 9)) for r in rs]
 

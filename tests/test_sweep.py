@@ -125,14 +125,14 @@ def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_s
     from scripts.cli import main
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
-    args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "3"]
+    args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "2"]
     args += ["--policies", "exhaustive,location", "--budget-seconds", "20", "--quiet"]
     args += ["--detector", "perfect"]  # the realistic detector's episode checks take longer
     assert main([*args, "--out", str(tmp_path / "serial")]) == 0
     assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
     a = json.loads((tmp_path / "serial" / "search.json").read_text())
     b = json.loads((tmp_path / "ray" / "search.json").read_text())
-    assert len(a["episode_list"]) == 3
+    assert len(a["episode_list"]) == 2
     assert _strip_timing(a) == _strip_timing(b)
     csv_a = (tmp_path / "serial" / "episodes.csv").read_text()
     assert csv_a == (tmp_path / "ray" / "episodes.csv").read_text()

@@ -23,11 +23,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
-
 from agent import search as S
 from agent import search_space as ss
-from agent.navigation import OccupancyGrid
+from agent.episode_draw import draw_world
 from agent.perception_modes import DEFAULT_DETECTOR
 from agent.recording import Recorder, open_stream
 from agent.rr_layout import SEARCH_APP, search_blueprint
@@ -35,7 +33,6 @@ from envs.detector import DetectorModel, default_or_named
 from envs.floorplan import generate_layout
 from envs.houses import HouseStyle, WorldStyle, resolve_style
 from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec
 from envs.world import World
 from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
@@ -90,9 +87,6 @@ def split_name(name: str) -> tuple[str, str | None]:
         )
     S.make_policy(base)
     return base, rank or None
-
-
-MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
 
 
 @dataclass
@@ -160,7 +154,7 @@ def draw_episodes(
     draw = EpisodeDraw([])
     limit = 50 * n + 100
     check = functools.partial(
-        _draw_world,
+        draw_world,
         style,
         int(seed),
         catalog,
@@ -199,68 +193,6 @@ def draw_episodes(
             elif world.episode is not None:
                 draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
     return draw
-
-
-@dataclass(frozen=True)
-class WorldDraw:
-    """One world's draw: its episode (index to be set), or why it was dropped (None: it holds
-    nothing to search for, or the store learned in it), and how many starts were redrawn."""
-
-    episode: S.Episode | None
-    dropped: str | None = None
-    redraws: int = 0
-
-
-def _draw_world(
-    style: WorldStyle,
-    seed: int,
-    catalog: Catalog,
-    budget_s: float,
-    exclude_seeds: frozenset[int],
-    target: str | None,
-    detector: DetectorModel | None,
-    i: int,
-) -> WorldDraw:
-    """World ``i``'s episode (see ``draw_episodes``): a start from which the target is not
-    visible and from which the oracle's planner detects it within ``budget_s``."""
-    room_seed = S.held_out_seed(seed, i)
-    rng = np.random.default_rng([int(seed), i, 0xE915])
-    if room_seed in exclude_seeds:
-        return WorldDraw(None)
-    layout = generate_layout(style, room_seed, catalog)
-    tgt = _episode_target(layout, catalog, target, rng)
-    if tgt is None:
-        return WorldDraw(None)
-    spec = RobotSpec()
-    grid = OccupancyGrid.from_layout(layout, spec)
-    redraws = 0
-    with World(layout, catalog, spec=spec) as world:
-        eye = S.OracleEye(world, layout, catalog, detector, tgt)
-        for _ in range(MAX_START_TRIES):
-            start = S.random_start(layout, grid, rng)
-            if eye.start_visibility(start) < S.VISIBLE_MIN_P:
-                break
-            redraws += 1
-        else:
-            return WorldDraw(None, "visible_at_start", redraws)
-        world.reset_pose(start)
-        view = S.oracle_view(
-            eye, grid, start, world.sim_time, world.time_model, deadline_s=budget_s
-        )
-    if view is None:
-        return WorldDraw(None, "infeasible", redraws)
-    return WorldDraw(S.Episode(-1, style.name, room_seed, tgt, start, budget_s), None, redraws)
-
-
-def _episode_target(
-    layout: RoomLayout, catalog: Catalog, target: str | None, rng: np.random.Generator
-) -> str | None:
-    """The episode's target in ``layout``: ``target`` if the room holds one, else a small type
-    drawn from ``rng``; None: the room does not serve."""
-    if target is not None:
-        return target if target in {o.type for o in layout.objects} else None
-    small = S.small_types_present(layout, catalog)
-    return small[int(rng.integers(len(small)))] if small else None
 
 
 @dataclass(frozen=True)
