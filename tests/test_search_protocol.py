@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from agent import search as S
+from agent.episode_draw import draw_world
 from envs.detector import SimDetector, load_detector
 from envs.styles import load_style
 from envs.world import World
@@ -116,7 +117,7 @@ def test_the_target_is_never_visible_from_the_start(drawn, catalog):
 def test_an_infeasible_world_is_dropped_and_counted(office, catalog, monkeypatch):
     # A budget no view can meet: the target is not visible from the start, and every other
     # view needs a drive or a head move longer than 0.3 s.
-    w = E._draw_world(office, 5, catalog, 0.3, frozenset(), None, None, 0)
+    w = draw_world(office, 5, catalog, 0.3, frozenset(), None, None, 0)
     assert w.episode is None and w.dropped in ("infeasible", "visible_at_start")
     # The count: the first world's oracle finds nothing, the others are as they are.
     real = S.oracle_view
