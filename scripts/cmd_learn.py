@@ -130,6 +130,11 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         "least C (0..1; the detector's confidence; default: 0, any detection)",
     )
     argtypes.add_interval_argument(p)
+    _add_day_args(p)
+
+
+def _add_day_args(p: argparse.ArgumentParser) -> None:
+    """How ``learn`` runs over days: how many, re-examination, forgetting."""
     p.add_argument(
         "--days",
         type=argtypes.positive_int,
