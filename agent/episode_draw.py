@@ -68,11 +68,17 @@ def draw_world(
             return WorldDraw(None, "visible_at_start", redraws)
         world.reset_pose(start)
         view = S.oracle_view(
-            eye, grid, start, world.sim_time, world.time_model, deadline_s=budget_s
+            eye,
+            grid,
+            start,
+            0.0,
+            world.time_model,
+            deadline_s=budget_s,  # the episode's 0th s
         )
     if view is None:
         return WorldDraw(None, "infeasible", redraws)
-    return WorldDraw(S.Episode(-1, style.name, room_seed, tgt, start, budget_s), None, redraws)
+    ep = S.Episode(-1, style.name, room_seed, tgt, start, budget_s, first_view=view)
+    return WorldDraw(ep, None, redraws)
 
 
 def episode_target(

@@ -109,6 +109,7 @@ from envs.detector import (
     load_detector,
     ray_scale,
 )
+from envs.floorplan import visible_rooms
 from envs.houses import WorldStyle
 from envs.layout import RoomLayout
 from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
@@ -161,6 +162,10 @@ class Episode:
     target: str
     start: RobotPose
     budget_s: float = DEFAULT_BUDGET_S
+    # The oracle's first plan (``oracle_view`` from ``start`` at second 0), as the episode draw
+    # computed it to check the episode is feasible: the Oracle policy starts from it instead of
+    # planning the same view again. Not part of the episode's identity.
+    first_view: OracleView | None = field(default=None, compare=False, repr=False)
 
     def to_json(self) -> dict:
         """A JSON-serialisable dict."""
@@ -265,6 +270,20 @@ class ViaOption:
 
 
 _Option = tuple[float, str, Callable[[], None]]  # (probability per second, label, action)
+
+
+def confirming_detection(
+    hit: Detection, dets: Sequence[Detection], target: str
+) -> Detection | None:
+    """The detection of ``target`` in the confirming image's ``dets`` nearest to ``hit``'s
+    estimated position, within ``CONFIRM_RADIUS_M`` of it; None: ``hit`` is not confirmed."""
+    at = np.asarray(hit.pose.position[:2], float)
+
+    def dist(d: Detection) -> float:
+        return float(np.hypot(*(np.asarray(d.pose.position[:2], float) - at)))
+
+    again = [d for d in dets if d.type == target and dist(d) <= CONFIRM_RADIUS_M]
+    return min(again, key=dist) if again else None
 
 
 # =========================================================================== the running episode
@@ -507,20 +526,13 @@ class SearchContext:
             dets = self._after_image(frame, "confirm")
         finally:
             self._confirming = False
-        at = np.asarray(hit.pose.position[:2], float)
-
-        def dist(d: Detection) -> float:
-            return float(np.hypot(*(np.asarray(d.pose.position[:2], float) - at)))
-
-        again = [d for d in dets if d.type == self.target and dist(d) <= CONFIRM_RADIUS_M]
-        if not again:
+        again = confirming_detection(hit, dets, self.target)
+        if again is None:
             self.unconfirmed += 1
             self.known.pop(hit.instance_id, None)
-            self.note(
-                f"{self.target} at ({at[0]:.2f}, {at[1]:.2f}) not confirmed by a second image"
-            )
-            return None
-        return min(again, key=dist)
+            x, y = hit.pose.position[:2]
+            self.note(f"{self.target} at ({x:.2f}, {y:.2f}) not confirmed by a second image")
+        return again
 
     def capture(self, purpose: str) -> list[Detection]:
         """Take an image where the head points now; detections. Stops when found or out of time."""
@@ -1212,17 +1224,19 @@ class Oracle(SearchPolicy):
         eye = OracleEye(ctx.raw_body, ctx.truth, ctx.catalog, ctx.maps.detector, ctx.target)
         grid = OccupancyGrid.from_layout(ctx.truth, ctx.spec)  # the oracle reads the truth
         tried: set[tuple] = set()
+        view = ctx.episode.first_view if ctx.elapsed == 0.0 and not ctx.trace else None
         while True:
             ctx.check()
-            view = oracle_view(
-                eye,
-                grid,
-                ctx.body.pose(),
-                float(ctx.body.sim_time),
-                ctx.time_model,
-                deadline_s=ctx.episode.budget_s - ctx.elapsed,
-                exclude=tried,
-            )
+            if view is None or tried:
+                view = oracle_view(
+                    eye,
+                    grid,
+                    ctx.body.pose(),
+                    ctx.elapsed,  # the detector's stream runs on the episode's seconds
+                    ctx.time_model,
+                    deadline_s=ctx.episode.budget_s - ctx.elapsed,
+                    exclude=tried,
+                )
             if view is None:
                 break
             tried.add(view.key)
@@ -1267,6 +1281,8 @@ ORACLE_CELL_STEP = 2
 # the views at each base position: the head aimed at the instance (0), or moved as little as it
 # can while the instance stays within this fraction of the half field of view of the centre
 ORACLE_VIEWS = (0.0, 0.5, 0.9)
+RAY_SPACING_PX = 2.0  # the ray test's grid: a ray every this many pixels across the target
+RAY_GRID_MAX = 5  # points along each axis of the target's box at most
 MIN_RECALL = 0.02  # a detector that errs: views where the target's recall is below this
 PERSPECTIVE_GAIN = 2.5  # an object at the image corner shows up to ~1/cos^3(43 deg) its pixels
 ORACLE_MAX_RENDERS = 600  # images rendered per plan: bounds the look for an undetectable target
@@ -1305,6 +1321,43 @@ class OracleEye:
         self.instances = layout.of_type(target)
         self.true_ids = {o.id for o in self.instances}
         self.renders = 0
+        self.layout = layout
+        self._rooms_seen: dict[tuple[float, float], frozenset[int] | None] = {}
+
+    def rays_meet(self, camera: np.ndarray, o: ObjectInstance) -> bool:
+        """False if no ray from ``camera`` (3,) through a grid of points filling ``o``'s
+        bounding box meets ``o`` first (``World.ray_instances``): it is hidden from there, or
+        shows in fewer pixels than the grid's spacing (``RAY_SPACING_PX``) covers; True
+        otherwise, or if the body casts no rays. A test before an image is rendered: the
+        oracle's planner renders only the views whose rays meet the target."""
+        cast = getattr(self.body, "ray_instances", None)
+        if cast is None:
+            return True
+        size = np.asarray(o.size, float)
+        dist = max(box_distance(camera, o), 0.05)
+        focal = 0.5 * self.body.height / math.tan(math.radians(self.body.spec.fovy_deg) / 2)
+        n = np.clip(np.ceil(size * focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX).astype(int)
+        axes = [(np.arange(k) + 0.5) / k - 0.5 for k in n]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) * size
+        c, yaw = np.asarray(o.position, float), float(o.yaw)
+        rot = np.array(
+            [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]]
+        )
+        hits = cast(np.asarray(camera, float), c + grid @ rot.T)
+        return bool(np.any(hits == o.id))
+
+    def may_see(self, xy: np.ndarray, o: ObjectInstance) -> bool:
+        """False if a camera at base position ``xy`` cannot see into ``o``'s room through the
+        house's door openings (``visible_rooms``: the culling the head camera's images use, so
+        such an image would show ``o`` in no pixel); True otherwise (and in a single room)."""
+        room = self.layout.room_of.get(o.id)
+        if room is None:
+            return True
+        key = (float(xy[0]), float(xy[1]))
+        if key not in self._rooms_seen:
+            self._rooms_seen[key] = visible_rooms(self.layout, *key)
+        rooms = self._rooms_seen[key]
+        return rooms is None or room in rooms
 
     @property
     def reach(self) -> float:
@@ -1334,10 +1387,17 @@ class OracleEye:
         return frame
 
     def detects(self, frame: Frame, sim_time: float) -> bool:
-        """True if the detector, reading ``frame`` at simulated second ``sim_time``, reports a true
-        instance as the target first (what makes a search succeed)."""
+        """True if the image ``frame``, read by the detector at simulated second ``sim_time``
+        (seconds since the episode started, after the image), ends the search with success:
+        its first detection of the target is confirmed by the second image the robot takes from
+        the same pose (read at ``sim_time`` plus an image's seconds: ``confirming_detection``)
+        as a true instance (``SearchContext._after_image``)."""
         hit = next((d for d in self.sim(frame, sim_time) if d.type == self.target), None)
-        return hit is not None and hit.instance_id in self.true_ids
+        if hit is None:
+            return False
+        again = self.sim(frame, sim_time + self.body.time_model.image_cost)
+        got = confirming_detection(hit, again, self.target)
+        return got is not None and got.instance_id in self.true_ids
 
     def probability(
         self, frame: Frame, gain: float = 1.0, instance: ObjectInstance | None = None
@@ -1374,8 +1434,10 @@ class OracleEye:
         best = 0.0
         cam = np.array([start.x, start.y, spec.camera_height])
         for o in self.instances:
-            if box_distance(cam, o) > self.reach:  # out of the detector's reach: no image needed
-                continue
+            if box_distance(cam, o) > self.reach or not self.may_see(start.xy, o):
+                continue  # out of the detector's reach or behind walls: no image needed
+            if not self.rays_meet(cam, o):
+                continue  # hidden from here
             target = np.asarray(o.position, float)
             yaw = start.yaw
             pan, tilt = aim(start.xy, yaw, spec.camera_height, target, spec)
@@ -1488,6 +1550,9 @@ def _aimed_view(
     """The gaze at ``xy`` aimed at ``o`` from ``pose`` (None: unreachable), whether any view
     from there may detect ``o`` (the aimed image's pixels times ``PERSPECTIVE_GAIN``), and
     whether the aimed image, taken at its second, does."""
+    cam = np.array([xy[0], xy[1], eye.body.spec.camera_height])
+    if not eye.may_see(xy, o) or not eye.rays_meet(cam, o):
+        return None, False, False
     g = _exact_gaze(grid, pose, xy, np.asarray(o.position, float), eye.body.spec, tm)
     if g is None:
         return None, False, False
