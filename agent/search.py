@@ -106,6 +106,7 @@ from envs.detector import (
     DetectorModel,
     SimDetector,
     box_distance,
+    box_distances,
     load_detector,
     ray_scale,
 )
@@ -727,20 +728,26 @@ class SearchContext:
             m &= self.seen.points[:, 2] <= zmax
         return m
 
-    def viewpoints(
-        self, rng: float, images: float, zmax: float | None = None
-    ) -> list[sx.Viewpoint]:
-        """Where to sweep next for range ``rng`` on the built map, best share per second first
-        (agent.search_explore); none on a given map."""
-        if self.built is None:
-            return []
+    def scorer(self) -> sx.ViewpointScorer:
+        """The built map's viewpoint scorer (made on first use)."""
         if self._scorer is None:
             self._scorer = sx.ViewpointScorer(
                 self.built, self.seen.points, self.spec, self.time_model
             )
+        return self._scorer
+
+    def viewpoint(
+        self, rng: float, images: float, zmax: float | None = None
+    ) -> sx.Viewpoint | None:
+        """Where to sweep next for range ``rng`` on the built map: the best share per second
+        (agent.search_explore); None on a given map or if none is worth it."""
+        if self.built is None:
+            return None
         here = self.body.pose().xy
         avoid = np.array(self._swept[rng]) if self._swept.get(rng) else None
-        return self._scorer.rank(self.grid, self.todo(rng, zmax), here, rng, images, avoid)
+        return self.scorer().best(
+            self.grid, self.todo(rng, zmax), here, rng, images, avoid, key=(rng, zmax)
+        )
 
     def explore_step(
         self,
@@ -773,11 +780,8 @@ class SearchContext:
         ``rng`` (agent.search_explore)."""
         if self.built is None:
             return
-        if self._scorer is None:
-            self.viewpoints(rng, 0.0)
-        assert self._scorer is not None
         here = self.body.pose().xy if xy is None else np.asarray(xy, float)
-        ex = self._scorer.exhaust(here, self.seen.unseen(rng), rng)
+        ex = self.scorer().exhaust(here, self.seen.unseen(rng), rng)
         old = self._exhausted.get(rng)
         self._exhausted[rng] = ex if old is None else old | ex
         self._deferred.clear()
@@ -808,10 +812,9 @@ class SearchContext:
             act()
 
     def _direct_option(self) -> _Option | None:
-        vps = self.viewpoints(self.target_range, sx.SWEEP_IMAGES)
-        if not vps:
+        v = self.viewpoint(self.target_range, sx.SWEEP_IMAGES)
+        if v is None:
             return None
-        v = vps[0]
         return (v.rate, f"explore for {self.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
                 f"{v.gain} points, ~{v.seconds:.0f} s",
                 lambda: self.explore_step(v, self.target_range))  # fmt: skip
@@ -822,10 +825,9 @@ class SearchContext:
         if left < 0.05:
             return None
         rng = self.range_of(via.type)
-        vps = self.viewpoints(rng, sx.RING_IMAGES, via.zmax)
-        if not vps:
+        v = self.viewpoint(rng, sx.RING_IMAGES, via.zmax)
+        if v is None:
             return None
-        v = vps[0]
         m = left * min(1.0, v.share * max(1.0, via.instances - found))
         rate = m * via.q / (v.seconds + m * via.look_s)
 
@@ -1392,12 +1394,26 @@ class OracleEye:
         its first detection of the target is confirmed by the second image the robot takes from
         the same pose (read at ``sim_time`` plus an image's seconds: ``confirming_detection``)
         as a true instance (``SearchContext._after_image``)."""
-        hit = next((d for d in self.sim(frame, sim_time) if d.type == self.target), None)
-        if hit is None:
-            return False
-        again = self.sim(frame, sim_time + self.body.time_model.image_cost)
-        got = confirming_detection(hit, again, self.target)
-        return got is not None and got.instance_id in self.true_ids
+        # The false positives, which cost most to draw, are drawn only where they can decide:
+        # they cover no pixel, so they come after every true detection in an image's list.
+        first, first_all = self.sim.split(frame, sim_time)
+        second, second_all = self.sim.split(frame, sim_time + self.body.time_model.image_cost)
+        hit = self._first(first)
+        if hit is None:  # a false positive first: only a true detection in the second may confirm
+            if not any(d.type == self.target and d.instance_id in self.true_ids for d in second):
+                return False
+            hit = self._first(first_all())
+            if hit is None:
+                return False
+        elif not self._true(confirming_detection(hit, second, self.target)):
+            return False  # the second image's false positives cannot confirm a true instance
+        return self._true(confirming_detection(hit, second_all(), self.target))
+
+    def _first(self, dets: Sequence[Detection]) -> Detection | None:
+        return next((d for d in dets if d.type == self.target), None)
+
+    def _true(self, d: Detection | None) -> bool:
+        return d is not None and d.instance_id in self.true_ids
 
     def probability(
         self, frame: Frame, gain: float = 1.0, instance: ObjectInstance | None = None
@@ -1521,7 +1537,7 @@ def _oracle_candidates(
     _, ty = half_fov_tangents(spec.fovy_deg, 320, 240)
     pairs = []
     for j, o in enumerate(eye.instances):
-        idx = np.flatnonzero(np.array([box_distance(c, o) for c in cams]) <= eye.reach)
+        idx = np.flatnonzero(box_distances(cams, o) <= eye.reach)
         if not len(idx):
             continue
         d = np.asarray(o.position, float) - cams[idx]

@@ -30,7 +30,7 @@ robot can expect before it has seen anything.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,6 +111,7 @@ class ViewpointScorer:
         self.built, self.points, self.spec, self.tm = built, points, spec, tm
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
+        self._gains: dict[Hashable, dict[tuple[float, float], int]] = {}  # best(): last gains
 
     def visible_points(self, blocked: np.ndarray, xy: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
@@ -123,7 +124,7 @@ class ViewpointScorer:
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
         return m & (np.linalg.norm(self.points - cam, axis=1) <= min(rng, MAX_VIEW))
 
-    def rank(
+    def best(
         self,
         grid: OccupancyGrid,
         todo: np.ndarray,
@@ -131,35 +132,69 @@ class ViewpointScorer:
         rng: float,
         images: float,
         avoid: np.ndarray | None = None,
-    ) -> list[Viewpoint]:
-        """Candidate viewpoints for the points ``todo`` (N,) bool at range ``rng``, best rate
-        first; a sweep there is expected to take ``images`` images. Candidates within
-        ``VISITED_RADIUS`` of a point of ``avoid`` (K, 2: where sweeps were made) are left out."""
+        key: Hashable | None = None,
+    ) -> Viewpoint | None:
+        """The candidate viewpoint with the best rate (share of the points ``todo`` (N,) bool at
+        range ``rng`` it shows per second, a sweep there taking ``images`` images; ties: fewer
+        seconds, then smaller x, y); None if none shows ``MIN_GAIN`` points. Candidates within
+        ``VISITED_RADIUS`` of a point of ``avoid`` (K, 2: where sweeps were made) are left out.
+
+        Lazy evaluation, exact: a candidate's gain is at most the number of todo points within
+        range of it (the trace only removes points) and, for calls with the same ``key`` whose
+        ``todo`` only shrinks (the seen map and the exhausted points only grow, occupied cells
+        of the built map are never cleared), at most the gain it had at the last call. The
+        candidates are traced in order of that bound on their rate and the search stops when
+        the bound falls below the best rate found: the viewpoint tracing them all would pick."""
         left = int(todo.sum())
         if left < MIN_GAIN:
-            return []
+            return None
         cand = ss.lattice_candidates(grid, here, 0.5)
         if avoid is not None and len(avoid) and len(cand):
             d = np.linalg.norm(cand[:, None, :] - np.asarray(avoid)[None, :, :], axis=-1)
             cand = cand[d.min(axis=1) > VISITED_RADIUS]
         if len(cand) == 0:
-            return []
-        blocked = coarse_blocked(self.built)
+            return None
         dist = grid.distances_from(here)
+        rc = [grid.to_cell(xy) for xy in cand]
+        drive = np.array(
+            [float(dist[r, c]) if grid.in_grid(r, c) else math.inf for r, c in rc], float
+        )
+        reach = np.isfinite(drive)
+        cand, drive = cand[reach], drive[reach]
+        if len(cand) == 0:
+            return None
         sweep_s = self.tm.looks_estimate(images, HEAD_S)
+        seconds = np.array([self.tm.leg_estimate(d) for d in drive], float) + sweep_s
         sub = np.flatnonzero(todo)
         pts = self.points[sub]
-        out = []
-        for xy in cand:
-            g = int(self._gain(blocked, xy, rng, sub, pts))
+        cache = self._gains.setdefault(key, {}) if key is not None else {}
+        ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
+        upper = np.array([cache.get(i, -1) for i in ids], np.int64)
+        new = np.flatnonzero(upper < 0)
+        if len(new):  # the todo points within range of each camera not traced before
+            view2 = min(rng, MAX_VIEW) ** 2
+            cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
+            for k in range(0, len(new), 16):
+                d2 = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1)
+                upper[new[k : k + 16]] = (d2 <= view2).sum(1)
+        bound = upper / left / seconds
+        blocked = None
+        best: Viewpoint | None = None
+        for i in np.argsort(-bound, kind="stable"):
+            if best is not None and bound[i] < best.rate:
+                break
+            if upper[i] < MIN_GAIN:
+                continue
+            if blocked is None:
+                blocked = coarse_blocked(self.built)
+            g = int(self._gain(blocked, cand[i], rng, sub, pts))
+            cache[ids[i]] = g
             if g < MIN_GAIN:
                 continue
-            r, c = grid.to_cell(xy)
-            d = float(dist[r, c]) if grid.in_grid(r, c) else math.inf
-            if not math.isfinite(d):
-                continue
-            out.append(Viewpoint(xy, g, g / left, self.tm.leg_estimate(d) + sweep_s))
-        return sorted(out, key=lambda v: (-v.rate, v.seconds, float(v.xy[0]), float(v.xy[1])))
+            v = Viewpoint(cand[i], g, g / left, float(seconds[i]))
+            if best is None or _order(v) < _order(best):
+                best = v
+        return best
 
     def _gain(self, blocked, xy, rng, sub, pts) -> int:
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
@@ -178,6 +213,10 @@ class ViewpointScorer:
         docstring)."""
         near = self.visible_points(coarse_blocked(self.built), xy, min(rng, EXHAUST_RADIUS))
         return near & unseen
+
+
+def _order(v: Viewpoint) -> tuple[float, float, float, float]:
+    return (-v.rate, v.seconds, float(v.xy[0]), float(v.xy[1]))
 
 
 def floor_headings(

@@ -458,11 +458,16 @@ def ray_scale(width: int, height: int, fovy_deg: float) -> np.ndarray:
 
 def box_distance(point: np.ndarray, obj: ObjectInstance) -> float:
     """Euclidean distance from ``point`` (3,) to the nearest point of ``obj``'s bounding box."""
-    d = np.asarray(point, float) - np.asarray(obj.position, float)
+    return float(box_distances(np.asarray(point, float).reshape(1, 3), obj)[0])
+
+
+def box_distances(points: np.ndarray, obj: ObjectInstance) -> np.ndarray:
+    """(N,) ``box_distance`` of each of ``points`` (N, 3)."""
+    d = np.asarray(points, float).reshape(-1, 3) - np.asarray(obj.position, float)
     c, s = math.cos(obj.yaw), math.sin(obj.yaw)
-    local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]])
+    local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
     out = np.maximum(np.abs(local) - np.asarray(obj.size, float) / 2, 0.0)
-    return float(np.linalg.norm(out))
+    return np.sqrt((out * out).sum(axis=1))
 
 
 @dataclass(frozen=True)
@@ -512,6 +517,7 @@ def detect_ids(
     fovy_deg: float | None = None,
     model: DetectorModel | None = None,
     draws: ImageDraws | None = None,
+    false_positives: bool = True,
 ) -> list[Detection]:
     """Detections in one segmentation image (H, W) of instance ids (-1: nothing of interest).
 
@@ -520,8 +526,26 @@ def detect_ids(
     depth; with ``fovy_deg`` it is converted to ray length, without it used as is), else the
     distance from ``camera_position`` to the object's bounding box. ``model``: the preset (None:
     perfect); a model that errs needs its ``draws`` (and, for false positives, ``depth`` and the
-    draws' camera). Sorted by pixel count, largest first.
+    draws' camera). Sorted by pixel count, largest first (false positives, which cover no
+    pixel, last). ``false_positives`` False: without them (``false_positive_detections`` gives
+    them afterwards from the same draws, which continue where the true detections left them).
     """
+    img = _image(instance_ids, depth, fovy_deg)
+    counts = img.counts
+    candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
+    if model is None or model.perfect:
+        out = _detect_perfect(img, candidates, objects, catalog, camera_position)
+    else:
+        if draws is None:
+            raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
+        out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
+        if false_positives:
+            out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
+    out.sort(key=lambda d: (-d.pixels, d.instance_id))
+    return out
+
+
+def _image(instance_ids: np.ndarray, depth: np.ndarray | None, fovy_deg: float | None) -> _Image:
     ids = np.asarray(instance_ids)
     h, w = ids.shape
     flat = ids.ravel()
@@ -530,17 +554,17 @@ def detect_ids(
     if depth is not None and fovy_deg is not None:
         scale = ray_scale(w, h, float(fovy_deg)).ravel()
     counts = np.bincount((flat.astype(np.int64) + 1).clip(0))
-    img = _Image(flat, w, h, counts, depth_flat, scale)
-    candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
-    if model is None or model.perfect:
-        out = _detect_perfect(img, candidates, objects, catalog, camera_position)
-    else:
-        if draws is None:
-            raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
-        out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
-        out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
-    out.sort(key=lambda d: (-d.pixels, d.instance_id))
-    return out
+    return _Image(flat, w, h, counts, depth_flat, scale)
+
+
+def false_positive_detections(
+    frame: Frame, model: DetectorModel, catalog: Catalog, rng: np.random.Generator
+) -> list[Detection]:
+    """The false positives of ``frame`` that ``detect`` would add to its true detections, drawn
+    from ``rng`` as it stands after ``detect(..., false_positives=False)`` drew those."""
+    cam = frame.camera
+    img = _image(frame.instance_ids, frame.depth, float(cam.fovy_deg))
+    return _false_positives(img, model, rng, catalog, cam, frame.depth)
 
 
 def _detect_perfect(img: _Image, candidates, objects, catalog, camera_position) -> list[Detection]:
@@ -665,9 +689,11 @@ def detect(
     catalog: Catalog,
     model: DetectorModel | None = None,
     rng: np.random.Generator | None = None,
+    false_positives: bool = True,
 ) -> list[Detection]:
     """Detections in a rendered ``Frame`` (its ``instance_ids``, ``depth`` if present, and the
-    camera it came from) by the preset ``model`` (None: perfect; one that errs needs ``rng``)."""
+    camera it came from) by the preset ``model`` (None: perfect; one that errs needs ``rng``);
+    ``false_positives``: as ``detect_ids``."""
     cam = frame.camera
     return detect_ids(
         frame.instance_ids,
@@ -678,6 +704,7 @@ def detect(
         fovy_deg=float(cam.fovy_deg),
         model=model,
         draws=None if rng is None else ImageDraws(rng, cam),
+        false_positives=false_positives,
     )
 
 
@@ -700,3 +727,24 @@ class SimDetector:
         """The detections in ``frame`` (taken at ``sim_time``)."""
         rng = None if self.model.perfect else image_rng(self.seed, self.room_seed, sim_time)
         return detect(frame, self.objects, self.catalog, self.model, rng)
+
+    def split(
+        self, frame: Frame, sim_time: float
+    ) -> tuple[list[Detection], Callable[[], list[Detection]]]:
+        """``self(frame, sim_time)`` in two steps: the detections of true objects now, and a
+        function giving all of them, false positives included, drawn only when it is called
+        (they cost more than the rest: they back-project the whole depth image)."""
+        if self.model.perfect:
+            dets = detect(frame, self.objects, self.catalog, self.model)
+            return dets, lambda: dets
+        rng = image_rng(self.seed, self.room_seed, sim_time)
+        true = detect(frame, self.objects, self.catalog, self.model, rng, false_positives=False)
+        done: list[list[Detection]] = []
+
+        def full() -> list[Detection]:
+            if not done:
+                fps = false_positive_detections(frame, self.model, self.catalog, rng)
+                done.append(sorted(true + fps, key=lambda d: (-d.pixels, d.instance_id)))
+            return done[0]
+
+        return true, full
