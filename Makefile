@@ -32,15 +32,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes (estimated at about an hour on 2 cores from the
-# parts' measured times; the search benchmarks are sized to fit it: 60 house and 40 office
-# episodes, a curve of 12 house episodes per k, a transfer of 20, not the 200 per scenario issue
-# 12 asks for). The sweeps (truth,
-# bench learning, bench search) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray);
-# the results are the same for any WORKERS.
+# Regenerates every result the README quotes, in about an hour on 2 cores (the parts' times are
+# in the README). The sweeps (truth, bench learning, bench search, curve, transfer, intervals,
+# drift) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the
+# same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
 STRATEGIES := hif,random,round-robin,nearest,fewest,expected-hif,cost-hif
-POLICIES := exhaustive,location,indirect,oracle-prior,oracle
 bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench kb --out results
 	$(VENV)/bin/ctxsearch bench sim --out results
@@ -51,13 +48,14 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 	rm -f build/kb_office.sqlite && mkdir -p build
 	$(VENV)/bin/ctxsearch learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
-# Search: 200 paired episodes per scenario (target not visible from the start, feasible).
-	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --policies $(POLICIES) --detector perfect --out results/search --workers $(WORKERS)
-# The headline scenario (issue 12): a house, the realistic detector, the robot's own map (about 15
-# minutes with 2 workers: 60 paired episodes, 4 policies, after 10 learned houses).
+# Search (issue 12): paired episodes, the target not visible from the start, feasible, the
+# realistic detector. The small-world reference: 40 office episodes on the given map.
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_office.sqlite --style office --episodes 40 --quiet --out results/search --workers $(WORKERS)
+# The headline: houses after 30 learned houses, 200 paired episodes per map scenario.
 	rm -f build/kb_apartment.sqlite
-	$(VENV)/bin/ctxsearch learn --style apartment --rooms 10 --kb build/kb_apartment.sqlite --no-progress
-	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 60 --quiet --out results/search_apartment_built --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch learn --style apartment --rooms 30 --kb build/kb_apartment.sqlite --no-progress
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 # A drifting world set: forgetting methods (about 6 minutes on 2 loaded cores, oracle perception).
@@ -66,12 +64,11 @@ bench: $(STAMP)
 # 3 and 10 houses (each about 13 minutes with 2 of them sharing 2 cores: 8 runs each).
 	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 100 --out results/intervals_apartment --workers $(WORKERS)
-# Does learning pay? The paired search ratio after k learned houses, built and given map (issue 12),
-# and context learned in one room style used in another (estimated at about 9 + 3 minutes on 2
-# unloaded cores from smaller runs, before the built-map search policies; see README).
+# Does learning pay? The paired search ratio after k learned houses, built and given map (issue
+# 12), and context learned in one room style used in another.
 	rm -rf results/curve/stores results/transfer/stores
-	$(VENV)/bin/ctxsearch bench curve --style apartment --rooms 0,1,3 --seed 0 --episodes 12 --out results/curve --workers $(WORKERS)
-	$(VENV)/bin/ctxsearch bench transfer --styles office,biology_lab --rooms 5 --episodes 20 --out results/transfer --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench curve --style apartment --rooms 0,1,3,10,30 --seed 0 --episodes 20 --quiet --out results/curve --workers $(WORKERS)
+	$(VENV)/bin/ctxsearch bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

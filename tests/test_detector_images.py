@@ -281,3 +281,26 @@ def test_scores_are_the_recall_for_true_boxes_and_weak_for_clutter(catalog):
     assert abs(np.mean(fps) - 0.25) < 0.05  # uniform on (0, 0.5]
     perfect = detect_ids(ids, OBJECTS, catalog, depth=depth, model=load_detector("perfect"))
     assert perfect and all(d.score == 1.0 for d in perfect)
+
+
+def test_split_detections_are_the_full_detections_in_two_steps(catalog):
+    """``SimDetector.split``: the true detections now and every detection (false positives
+    drawn from the same stream afterwards) when asked: the same list ``SimDetector`` gives."""
+    from envs.camera import Frame
+    from envs.detector import SimDetector
+    from envs.layout import RoomLayout
+
+    layout = RoomLayout("t", 4, 5.0, 4.0, 2.6, None, tuple(OBJECTS.values()))
+    rng = np.random.default_rng(3)
+    for name in ("realistic", "perfect"):
+        sim = SimDetector(load_detector(name, catalog), layout, catalog, 7)
+        fps = 0
+        for i in range(300):
+            ids, depth = _random_image(rng)
+            frame = Frame(None, depth, ids, _camera(), None)
+            true, full = sim.split(frame, 0.25 * i)
+            want = sim(frame, 0.25 * i)
+            assert full() == want and full() is full()  # drawn once
+            assert true == [d for d in want if d.instance_id >= 0]
+            fps += sum(d.instance_id < 0 for d in want)
+        assert fps > 0 or name == "perfect"

@@ -167,3 +167,44 @@ def test_indirect_records_the_intermediate_it_searched_for(catalog):
     assert res.predicted_gain is not None and res.predicted_gain > 1.0, res.log
     assert res.intermediate == "Desk", res.log
     assert res.success, res.log
+
+
+def _brute_best(scorer, grid, todo, here, rng, images):
+    """Every candidate traced: the viewpoint ``ViewpointScorer.best`` must pick."""
+    left = int(todo.sum())
+    blocked = sx.coarse_blocked(scorer.built)
+    dist = grid.distances_from(here)
+    sub = np.flatnonzero(todo)
+    out = []
+    for xy in ss.lattice_candidates(grid, here, 0.5):
+        r, c = grid.to_cell(xy)
+        d = float(dist[r, c]) if grid.in_grid(r, c) else math.inf
+        g = scorer._gain(blocked, xy, rng, sub, scorer.points[sub])
+        if math.isfinite(d) and g >= sx.MIN_GAIN:
+            s = scorer.tm.leg_estimate(d) + scorer.tm.looks_estimate(images, sx.HEAD_S)
+            out.append(sx.Viewpoint(xy, g, g / left, s))
+    return min(out, key=sx._order) if out else None
+
+
+@pytest.mark.render
+def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
+    """``ViewpointScorer.best`` traces few candidates (bounds, gains cached between calls) and
+    picks what tracing every candidate picks, also after the todo points shrank."""
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP, PEN)
+    with World(layout, catalog) as world:
+        ep = S.Episode(0, "test", 0, "Pen", START, 200.0)
+        maps = S.RoomMaps.built(layout, catalog, world.spec)
+        ctx = S.SearchContext(ep, layout, catalog, world, maps=maps)
+        ctx.look_around()
+        scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
+        todo = ctx.todo(rng)
+        for step in range(3):
+            got = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, key="k")
+            want = _brute_best(scorer, ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
+            assert (got is None) == (want is None) and (step > 0 or got is not None)
+            if got is not None:
+                assert (tuple(got.xy), got.gain, got.seconds) == (
+                    tuple(want.xy), want.gain, want.seconds)  # fmt: skip
+                todo = todo & (np.linalg.norm(ctx.seen.points[:, :2] - got.xy, axis=1) > 1.0)

@@ -178,3 +178,21 @@ def test_no_policy_beats_the_oracle(tmp_path, detector, n, map_mode, desk_cup_st
     assert {(int(x["episode"]), x["policy"]) for x in rows} == {
         (i, p) for i in range(n) for p in config.policies
     }
+
+
+@pytest.mark.render
+def test_the_oracle_plans_on_the_episodes_clock(office, catalog):
+    """The detector's draws are indexed by the seconds since the episode started, and the
+    oracle plans with those: planning itself (no plan from the draw), it searches the same
+    after another policy ran in the shared world (whose clock ran on) as alone."""
+    from dataclasses import replace
+
+    real = load_detector("realistic", catalog)
+    eps = E.draw_episodes(office, 3, 5, catalog, 60.0, detector=real).episodes
+    none = lambda b, r: None  # noqa: E731
+    for ep in (replace(e, first_view=None) for e in eps):
+        alone = E.run_episode(ep, ["oracle"], catalog, office, none, None, real)[0]
+        after = E.run_episode(ep, ["exhaustive", "oracle"], catalog, office, none, None, real)
+        assert alone.success and alone.unconfirmed == 0, alone.log
+        assert after[1].gazes == alone.gazes, after[1].log
+        assert after[1].sim_time == pytest.approx(alone.sim_time, abs=1e-6)

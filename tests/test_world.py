@@ -276,3 +276,16 @@ def test_task_exposes_the_head_camera_as_observables(layout, catalog):
     env.close()
     with pytest.raises(CtxsearchError, match="image size"):
         RoomTask(catalog, layout=layout, camera_size=(0, 48))
+
+
+def test_rays_meet_what_the_camera_would_show_first(world, layout):
+    """``ray_instances``: the cup on the desk seen from the room's centre, the desk's top along a
+    ray beside the cup, nothing (a wall) along a ray away from both."""
+    eye = np.array([0.0, 0.0, world.spec.camera_height])
+    cup = np.array(layout.objects[1].position)
+    top = np.array([1.75, 0.55, 0.735])
+    hits = world.ray_instances(eye, np.array([cup, top, [0.0, -3.0, 1.2]]))
+    assert hits.tolist() == [CUP, DESK, -1]
+    t = world.sim_time
+    world.ray_instances(eye, cup[None, :])
+    assert world.sim_time == t  # no time charged
