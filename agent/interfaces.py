@@ -55,6 +55,12 @@ class Body(Protocol):
         """One image from the head camera where it points now (one ``image_cost`` charged)."""
         ...
 
+    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray | None:
+        """The object instance each ray from ``origin`` (3,) through ``points`` (N, 3) meets
+        first among what the head camera shows (-1: none); None where nothing is rendered. No
+        time charged."""
+        ...
+
     def close(self) -> None:
         """Release what the body holds (a renderer)."""
         ...
@@ -93,6 +99,10 @@ class WrappedBody:
     def capture(self, rgb: bool = False, depth: bool = True) -> Frame | None:
         """An image from the wrapped body."""
         return self._b.capture(rgb=rgb, depth=depth)
+
+    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray | None:
+        """The wrapped body's rays."""
+        return self._b.ray_instances(origin, points)
 
     def close(self) -> None:
         """Close the wrapped body."""

@@ -113,6 +113,10 @@ class KinematicBody:
         """Charge one image; the oracle renders nothing."""
         self.sim_time += self.time_model.image_cost
 
+    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> None:
+        """Nothing is rendered: no rays."""
+        return None
+
     def close(self) -> None:
         """Nothing to release."""
 

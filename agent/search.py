@@ -1330,11 +1330,8 @@ class OracleEye:
         """False if no ray from ``camera`` (3,) through a grid of points filling ``o``'s
         bounding box meets ``o`` first (``World.ray_instances``): it is hidden from there, or
         shows in fewer pixels than the grid's spacing (``RAY_SPACING_PX``) covers; True
-        otherwise, or if the body casts no rays. A test before an image is rendered: the
+        otherwise, or if the body renders nothing. A test before an image is rendered: the
         oracle's planner renders only the views whose rays meet the target."""
-        cast = getattr(self.body, "ray_instances", None)
-        if cast is None:
-            return True
         size = np.asarray(o.size, float)
         dist = max(box_distance(camera, o), 0.05)
         focal = 0.5 * self.body.height / math.tan(math.radians(self.body.spec.fovy_deg) / 2)
@@ -1345,8 +1342,8 @@ class OracleEye:
         rot = np.array(
             [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]]
         )
-        hits = cast(np.asarray(camera, float), c + grid @ rot.T)
-        return bool(np.any(hits == o.id))
+        hits = self.body.ray_instances(np.asarray(camera, float), c + grid @ rot.T)
+        return hits is None or bool(np.any(hits == o.id))
 
     def may_see(self, xy: np.ndarray, o: ObjectInstance) -> bool:
         """False if a camera at base position ``xy`` cannot see into ``o``'s room through the

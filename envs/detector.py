@@ -505,6 +505,7 @@ class ImageDraws:
 
     rng: np.random.Generator
     camera: PinholeCamera | None = None
+    false_positives: bool = True  # False: the true detections only (SimDetector.split)
 
 
 def detect_ids(
@@ -517,7 +518,6 @@ def detect_ids(
     fovy_deg: float | None = None,
     model: DetectorModel | None = None,
     draws: ImageDraws | None = None,
-    false_positives: bool = True,
 ) -> list[Detection]:
     """Detections in one segmentation image (H, W) of instance ids (-1: nothing of interest).
 
@@ -527,8 +527,9 @@ def detect_ids(
     distance from ``camera_position`` to the object's bounding box. ``model``: the preset (None:
     perfect); a model that errs needs its ``draws`` (and, for false positives, ``depth`` and the
     draws' camera). Sorted by pixel count, largest first (false positives, which cover no
-    pixel, last). ``false_positives`` False: without them (``false_positive_detections`` gives
-    them afterwards from the same draws, which continue where the true detections left them).
+    pixel, last); without them if ``draws.false_positives`` is False
+    (``false_positive_detections`` gives them afterwards from the same stream, which continues
+    where the true detections left it).
     """
     img = _image(instance_ids, depth, fovy_deg)
     counts = img.counts
@@ -539,7 +540,7 @@ def detect_ids(
         if draws is None:
             raise ValueError(f"detector '{model.name}' draws random numbers: give it its rng")
         out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
-        if false_positives:
+        if draws.false_positives:
             out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
     out.sort(key=lambda d: (-d.pixels, d.instance_id))
     return out
@@ -703,8 +704,7 @@ def detect(
         camera_position=np.asarray(cam.position, float),
         fovy_deg=float(cam.fovy_deg),
         model=model,
-        draws=None if rng is None else ImageDraws(rng, cam),
-        false_positives=false_positives,
+        draws=None if rng is None else ImageDraws(rng, cam, false_positives),
     )
 
 
