@@ -112,6 +112,13 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         help="built map: which frontier to explore next (nearest by driving distance, or most "
         "unknown cells per second; default: info)",
     )
+    _add_camera_args(p)
+    argtypes.add_interval_argument(p)
+    _add_day_args(p)
+
+
+def _add_camera_args(p: argparse.ArgumentParser) -> None:
+    """What camera mode counts as seen: the detector, confirmation, a minimum score."""
     argtypes.add_detector_argument(p)
     p.add_argument(
         "--confirm",
@@ -129,8 +136,6 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         help="camera mode: count a related object only once one of its detections scored at "
         "least C (0..1; the detector's confidence; default: 0, any detection)",
     )
-    argtypes.add_interval_argument(p)
-    _add_day_args(p)
 
 
 def _add_day_args(p: argparse.ArgumentParser) -> None:
