@@ -115,14 +115,16 @@ def test_curve_files_and_ratios(curve_dir):
 def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_store):
     """What lets the curve run the baseline and the asymptote only once."""
     from scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    from scripts.experiments.episodes import remembered_draws
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     base = SearchBenchConfig(style="office", policies=("exhaustive", "location"), kb=kb,
                              episodes=3, budget_s=20.0, map="given")  # fmt: skip
-    both = bench_search(base, tmp_path / "a", progress=None, bar=False)
-    alone = bench_search(
-        replace(base, policies=("location",)), tmp_path / "b", progress=None, bar=False
-    )
+    with remembered_draws():  # the episodes are drawn once (as the curve does)
+        both = bench_search(base, tmp_path / "a", progress=None, bar=False)
+        alone = bench_search(
+            replace(base, policies=("location",)), tmp_path / "b", progress=None, bar=False
+        )
 
     def key(rs):  # seconds to the last bits of float sums (the world's clock runs on)
         return [(round(r.sim_time, 9), r.gazes, round(r.path_m, 9)) for r in rs]

@@ -34,6 +34,7 @@ from knowledge.catalog import load_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.store import EvidenceStore
 from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from scripts.experiments.episodes import remembered_draws
 from scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -156,7 +157,7 @@ def bench_curve(
     check_no_stores(out / "stores")
     snaps = learn_snapshots(config, out / "stores", bar)
     points: list[CurvePoint] = []
-    with session(sweep or SweepOptions()):
+    with session(sweep or SweepOptions()), remembered_draws():
         for i, (k, exams, path) in enumerate(snaps):
             point = CurvePoint(k, exams, path)
             for sc in config.scenarios:

@@ -41,6 +41,7 @@ from knowledge.errors import CtxsearchError
 from knowledge.store import EvidenceStore
 from scripts.experiments.bench_curve import snapshot
 from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from scripts.experiments.episodes import remembered_draws
 from scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -252,7 +253,7 @@ def bench_transfer(
     sweep = sweep or SweepOptions()
     check_config(config)
     check_no_stores(out / "stores")
-    with session(sweep):
+    with session(sweep), remembered_draws():
         stores = learn_stores(config, out / "stores", sweep, bar)
         if progress is not None:
             progress("learned: " + ", ".join(f"{s} {v['examinations']} examinations"

@@ -17,9 +17,10 @@ of the interval ranks the candidate regions.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -149,8 +150,13 @@ def draw_episodes(
     most ``MAX_START_TRIES`` starts, then the world is dropped. A world whose target no view of
     the oracle's planner detects within the budget (``S.oracle_view`` from the start, the
     detector's draws as at the world's first second) is dropped as infeasible. Worlds are taken
-    in index order until ``n`` episodes; the counts cover the worlds up to the last one taken."""
+    in index order until ``n`` episodes; the counts cover the worlds up to the last one taken.
+    Inside ``remembered_draws`` a draw with the same arguments is not made again."""
     sweep = sweep or SweepOptions()
+    key = (style, int(n), int(seed), catalog.fingerprint, float(budget_s),
+           frozenset(exclude_seeds), target, detector)  # fmt: skip
+    if _drawn is not None and key in _drawn:
+        return replace(_drawn[key], episodes=list(_drawn[key].episodes))
     draw = EpisodeDraw([])
     limit = 50 * n + 100
     check = functools.partial(
@@ -192,7 +198,26 @@ def draw_episodes(
                 draw.infeasible += 1
             elif world.episode is not None:
                 draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
+    if _drawn is not None:
+        _drawn[key] = replace(draw, episodes=list(draw.episodes))
     return draw
+
+
+_drawn: dict[tuple, EpisodeDraw] | None = None  # inside remembered_draws: the draws so far
+
+
+@contextlib.contextmanager
+def remembered_draws() -> Iterator[None]:
+    """Within it, ``draw_episodes`` called again with the same arguments returns the draw it
+    made (deterministic in them) instead of drawing anew: the curve searches the same episodes at
+    every k, the transfer benchmark with every store."""
+    global _drawn
+    outer = _drawn
+    _drawn = {} if outer is None else outer
+    try:
+        yield
+    finally:
+        _drawn = outer
 
 
 @dataclass(frozen=True)
