@@ -7,7 +7,7 @@ import argparse
 
 from knowledge.errors import CtxsearchError
 from scripts import argtypes
-from scripts.cmd_search import DEFAULT_BUDGET_S
+from scripts.cmd_search import add_budget_argument
 from scripts.sweep import add_sweep_arguments
 
 # Copies of scripts.experiments.scenarios.DEFAULT_SCENARIOS' policies, so that building the
@@ -69,13 +69,7 @@ def _add_common(p: argparse.ArgumentParser, rooms_help: str) -> None:
         help="how the robot perceives while learning (default: camera; oracle: faster, the true "
         "layout and the given map)",
     )
-    p.add_argument(
-        "--budget-seconds",
-        type=argtypes.seconds,
-        default=DEFAULT_BUDGET_S,
-        metavar="B",
-        help=f"simulated seconds before an episode counts as failed (default: {DEFAULT_BUDGET_S:.0f})",
-    )
+    add_budget_argument(p)
     p.add_argument(
         "--truth-samples",
         type=argtypes.positive_int,

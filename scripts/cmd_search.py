@@ -37,7 +37,8 @@ DEFAULT_ESTIMATE = "flat"
 DEFAULT_MIN_EVIDENCE = 10
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
+def add_budget_argument(p: argparse.ArgumentParser) -> None:
+    """``--budget-seconds``: an episode's simulated-time budget."""
     p.add_argument(
         "--budget-seconds",
         type=argtypes.seconds,
@@ -45,6 +46,10 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         metavar="B",
         help=f"simulated seconds before an episode counts as failed (default: {DEFAULT_BUDGET_S:.0f})",
     )
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    add_budget_argument(p)
     p.add_argument(
         "--rank",
         choices=RANK_MODES,
