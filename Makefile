@@ -32,8 +32,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes, in about an hour on 2 cores (the parts' times are
-# in the README). The sweeps (truth, bench learning, bench search, curve, transfer, intervals,
+# Regenerates every result the README quotes: about 1 3/4 hours on 2 cores by the parts' times
+# (README), over the hour the project aims at since the 400 house search episodes, the curve to
+# 30 houses and the transfer table came in. The sweeps (truth, bench learning, bench search, curve, transfer, intervals,
 # drift) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the
 # same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
