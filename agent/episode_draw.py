@@ -67,14 +67,8 @@ def draw_world(
         else:
             return WorldDraw(None, "visible_at_start", redraws)
         world.reset_pose(start)
-        view = S.oracle_view(
-            eye,
-            grid,
-            start,
-            0.0,
-            world.time_model,
-            deadline_s=budget_s,  # the episode's 0th s
-        )
+        # planned at the episode's second 0, as the Oracle policy would plan it
+        view = S.oracle_view(eye, grid, start, 0.0, world.time_model, deadline_s=budget_s)
     if view is None:
         return WorldDraw(None, "infeasible", redraws)
     ep = S.Episode(-1, style.name, room_seed, tgt, start, budget_s, first_view=view)

@@ -1338,11 +1338,7 @@ class OracleEye:
         n = np.clip(np.ceil(size * focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX).astype(int)
         axes = [(np.arange(k) + 0.5) / k - 0.5 for k in n]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) * size
-        c, yaw = np.asarray(o.position, float), float(o.yaw)
-        rot = np.array(
-            [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]]
-        )
-        hits = self.body.ray_instances(np.asarray(camera, float), c + grid @ rot.T)
+        hits = self.body.ray_instances(np.asarray(camera, float), o.box().world_points(grid))
         return hits is None or bool(np.any(hits == o.id))
 
     def may_see(self, xy: np.ndarray, o: ObjectInstance) -> bool:

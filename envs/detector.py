@@ -542,8 +542,13 @@ def detect_ids(
         out = _detect_model(img, candidates, objects, catalog, camera_position, model, draws.rng)
         if draws.false_positives:
             out += _false_positives(img, model, draws.rng, catalog, draws.camera, depth)
-    out.sort(key=lambda d: (-d.pixels, d.instance_id))
+    out.sort(key=by_pixels)
     return out
+
+
+def by_pixels(d: Detection) -> tuple[int, int]:
+    """The order of an image's detections: most pixels first (false positives, none, last)."""
+    return (-d.pixels, d.instance_id)
 
 
 def _image(instance_ids: np.ndarray, depth: np.ndarray | None, fovy_deg: float | None) -> _Image:
@@ -744,7 +749,7 @@ class SimDetector:
         def full() -> list[Detection]:
             if not done:
                 fps = false_positive_detections(frame, self.model, self.catalog, rng)
-                done.append(sorted(true + fps, key=lambda d: (-d.pixels, d.instance_id)))
+                done.append(sorted(true + fps, key=by_pixels))
             return done[0]
 
         return true, full

@@ -79,6 +79,14 @@ class Box:
             [np.column_stack([xy, np.full(4, zlo)]), np.column_stack([xy, np.full(4, zhi)])]
         )
 
+    def world_points(self, local: np.ndarray) -> np.ndarray:
+        """Points (N, 3) given in the box's frame (x front, y left, z up, origin the centre) in
+        world coordinates."""
+        local = np.atleast_2d(np.asarray(local, float))
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        x, y = c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]
+        return np.column_stack([x, y, local[:, 2]]) + self.center
+
     def contains_points(self, pts: np.ndarray) -> np.ndarray:
         """Boolean mask of which points (N, 3) lie inside the box (boundary included)."""
         pts = np.atleast_2d(np.asarray(pts, float))
