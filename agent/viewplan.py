@@ -369,8 +369,15 @@ def execute_gaze(
     world: Body, grid: OccupancyGrid, gaze: Gaze, *, rgb: bool = False, depth: bool = True
 ) -> Frame | None:
     """Drive to the gaze's base position (a planned path), turn, point the head at its target and
-    capture a frame; returns the world's ``Frame``. If the position cannot be reached from where
-    the robot stands, the robot looks at the target from where it is.
+    capture a frame (``face_gaze``, then ``capture``); returns the world's ``Frame``."""
+    face_gaze(world, grid, gaze)
+    return world.capture(rgb=rgb, depth=depth)
+
+
+def face_gaze(world: Body, grid: OccupancyGrid, gaze: Gaze) -> None:
+    """Drive to the gaze's base position (a planned path), turn and point the head at its
+    target; no image. If the position cannot be reached from where the robot stands, the robot
+    turns towards the target from where it is.
 
     The path is ``gaze.path`` (planned by ``plan_gazes`` on the same ``grid``) when the robot
     stands exactly where it starts and it ends at the gaze's position: ``plan_path`` would return
@@ -399,4 +406,3 @@ def execute_gaze(
     elif abs(wrap_angle(yaw - pose.yaw)) > 1e-6:
         world.drive(np.asarray(pose.xy, float)[None, :], yaw)
     world.move_head(pan, tilt)
-    return world.capture(rgb=rgb, depth=depth)

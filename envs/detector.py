@@ -599,6 +599,22 @@ def _detect_model(
     """A detector that errs: every visible instance kept with its recall (one uniform each, in
     id order), then per kept instance in order: its reported type (one uniform if it has
     look-alikes) and its pose noise (three normals)."""
+    return _draw_model(
+        _visible(img, candidates, objects, catalog, camera_position, model), model, rng
+    )
+
+
+@dataclass(frozen=True)
+class _Visible:
+    """What a detector that errs draws on in one image: each visible instance (id, pose, pixel
+    indices, distance) in id order and its recall; no random numbers yet."""
+
+    found: list[tuple[int, ObjectInstance, np.ndarray, float]]
+    probs: np.ndarray
+    bboxes: list[tuple[int, int, int, int]]
+
+
+def _visible(img: _Image, candidates, objects, catalog, camera_position, model) -> _Visible:
     found = []
     for oid in candidates:
         oid = int(oid)
@@ -609,21 +625,29 @@ def _detect_model(
         dist = img.distance(oid, idx, obj, camera_position)
         found.append((oid, obj, idx, dist))
     if not found:
-        return []
+        return _Visible([], np.zeros(0), [])
     types = [catalog.type(o.type) for _, o, _, _ in found]
     pixels = np.array([len(idx) for _, _, idx, _ in found])
     dists = np.array([d for _, _, _, d in found])
     probs = recall_probs(model, types, pixels, dists, (img.width, img.height))
-    mask = rng.random(len(probs)) < probs
+    return _Visible(found, probs, [img.bbox(idx) for _, _, idx, _ in found])
+
+
+def _draw_model(vis: _Visible, model: DetectorModel, rng) -> list[Detection]:
+    if not vis.found:
+        return []
+    mask = rng.random(len(vis.probs)) < vis.probs
     out: list[Detection] = []
-    for (oid, obj, idx, dist), kept, p in zip(found, mask, probs, strict=True):
+    for (oid, obj, idx, dist), kept, p, box in zip(
+        vis.found, mask, vis.probs, vis.bboxes, strict=True
+    ):
         if not kept:
             continue
         reported = model.reported_type(obj.type, rng)
         pose = model.noisy_pose(obj, dist, rng)
         if reported != obj.type:
             pose = replace(pose, type=reported)
-        out.append(Detection(oid, reported, pose, len(idx), dist, img.bbox(idx), float(p)))
+        out.append(Detection(oid, reported, pose, len(idx), dist, box, float(p)))
     return out
 
 
@@ -727,6 +751,7 @@ class SimDetector:
         self.model, self.catalog, self.seed = model, catalog, int(seed)
         self.room_seed = int(layout.seed)
         self.objects = objects_by_id(layout)
+        self._last: tuple[Frame, _Image, _Visible] | None = None
 
     def __call__(self, frame: Frame, sim_time: float) -> list[Detection]:
         """The detections in ``frame`` (taken at ``sim_time``)."""
@@ -743,13 +768,28 @@ class SimDetector:
             dets = detect(frame, self.objects, self.catalog, self.model)
             return dets, lambda: dets
         rng = image_rng(self.seed, self.room_seed, sim_time)
-        true = detect(frame, self.objects, self.catalog, self.model, rng, false_positives=False)
+        img, vis = self._prepared(frame)
+        true = sorted(_draw_model(vis, self.model, rng), key=by_pixels)
         done: list[list[Detection]] = []
 
         def full() -> list[Detection]:
             if not done:
-                fps = false_positive_detections(frame, self.model, self.catalog, rng)
+                cam = frame.camera
+                fps = _false_positives(img, self.model, rng, self.catalog, cam, frame.depth)
                 done.append(sorted(true + fps, key=by_pixels))
             return done[0]
 
         return true, full
+
+    def _prepared(self, frame: Frame) -> tuple[_Image, _Visible]:
+        """The frame's image and visible instances, kept for the last frame read: the oracle
+        reads one frame at many seconds (``split``'s draws are then all that is new)."""
+        if self._last is None or self._last[0] is not frame:
+            cam = frame.camera
+            img = _image(frame.instance_ids, frame.depth, float(cam.fovy_deg))
+            counts = img.counts
+            candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
+            pos = np.asarray(cam.position, float)
+            vis = _visible(img, candidates, self.objects, self.catalog, pos, self.model)
+            self._last = (frame, img, vis)
+        return self._last[1], self._last[2]

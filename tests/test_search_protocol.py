@@ -12,6 +12,7 @@ import pytest
 
 from agent import search as S
 from agent.episode_draw import draw_world
+from agent.navigation import OccupancyGrid
 from envs.detector import SimDetector, load_detector
 from envs.styles import load_style
 from envs.world import World
@@ -196,3 +197,53 @@ def test_the_oracle_plans_on_the_episodes_clock(office, catalog):
         assert alone.success and alone.unconfirmed == 0, alone.log
         assert after[1].gazes == alone.gazes, after[1].log
         assert after[1].sim_time == pytest.approx(alone.sim_time, abs=1e-6)
+
+
+@pytest.mark.render
+def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catalog):
+    """``first_success`` walks the images the robot takes one after the other at one pose: an
+    image that shows the target is followed by its confirming image (two images' seconds to the
+    next), the first pair that confirms a true instance ends it; none after ``until`` and at
+    most ``images`` of them. And the Oracle policy, executing its first view, finds the target
+    at that second plus the confirming image when its drive ends where it planned."""
+    from envs.floorplan import generate_layout
+
+    real = load_detector("realistic", catalog)
+    ep = E.draw_episodes(office, 1, 5, catalog, 60.0, detector=real).episodes[0]
+    layout = generate_layout(office, ep.room_seed, catalog)
+    with World(layout, catalog) as w:
+        eye = S.OracleEye(w, layout, catalog, real, ep.target)
+        ic = w.time_model.image_cost
+        # a view that shows the target well: the aimed view of the grid's cell that does best
+        o = eye.instances[0]
+        grid = OccupancyGrid.from_layout(layout, w.spec)
+        xs, ys = grid.cell_centers()
+        rows, cols = grid.lattice_cells(10)
+        views = []
+        for xy in np.column_stack([xs[cols], ys[rows]]):
+            g = S._exact_gaze(grid, ep.start, xy, np.asarray(o.position), w.spec, w.time_model)
+            if g is not None:
+                views.append((eye.probability(eye.frame_at(g.pose)), g.pose))
+        p, pose = max(views, key=lambda v: v[0])
+        assert 0.2 < p < 0.95, p
+        frame = eye.frame_at(pose)
+        found = []
+        for t0 in np.arange(1.0, 30.0, 1.37):
+            t, steps = t0, []
+            while len(steps) < 40:
+                ok, seen = eye.ends_search(frame, t)
+                steps.append(t)
+                if ok:
+                    break
+                t += 2 * ic if seen else ic
+            if not ok:
+                assert eye.first_success(frame, t0, 1e9, 40) is None
+                continue
+            found.append(len(steps))
+            assert eye.first_success(frame, t0, 1e9, 40) == pytest.approx(t)
+            assert eye.first_success(frame, t0, t - 1e-3, 40) is None
+            assert eye.first_success(frame, t0, 1e9, len(steps) - 1) is None
+        assert len(found) >= 5 and min(found) == 1 and max(found) > 1, found
+    res = E.run_episode(ep, ["oracle"], catalog, office, lambda b, r: None, None, real)[0]
+    assert res.success
+    assert res.sim_time <= ep.first_view.seconds + ic + 1e-6
