@@ -38,7 +38,7 @@ import functools
 import math
 import tomllib
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -480,6 +480,7 @@ class _Image:
     counts: np.ndarray  # pixels per id + 1
     depth_flat: np.ndarray | None
     scale: np.ndarray | None  # ray scale, raveled (None: depth used as is)
+    surface: list = field(default_factory=list)  # ``_surface``, once made
 
     def distance(self, oid: int, idx: np.ndarray, obj: ObjectInstance, camera_position) -> float:
         """The instance's distance (module comment above)."""
@@ -664,14 +665,10 @@ def _false_positives(
     images."""
     if model.fp_per_image <= 0 or camera is None or depth is None:
         return []
-    d = np.asarray(depth, float)
-    flat_d = d.ravel()
-    ok = np.isfinite(flat_d) & (flat_d > 0) & (flat_d < FP_MAX_DEPTH)
-    points = np.asarray(camera.backproject(np.where(ok.reshape(d.shape), d, 0.0))).reshape(-1, 3)
-    valid = np.flatnonzero(ok & ((img.flat >= 0) | (points[:, 2] < FLOOR_Z)))
     base = -(1 + 64 * int(rng.integers(1 << 40)))
 
     def sample(r: np.random.Generator):
+        points, valid, flat_d = _surface(img, camera, depth)
         if not len(valid):
             return None
         k = int(valid[int(r.integers(len(valid)))])
@@ -683,6 +680,21 @@ def _false_positives(
         Detection(o.id, o.type, o, 0, dist, (0, 0, 0, 0), false_positive_score(model, o.id))
         for o, dist in fps
     ]
+
+
+def _surface(img: _Image, camera, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The image's points (H*W, 3) back-projected with ``camera``, the pixels a false positive
+    may stand on (an object or the floor, nearer than ``FP_MAX_DEPTH``) and the raveled depth:
+    made when the first false positive is drawn, kept with the image (no random numbers)."""
+    if img.surface:
+        return img.surface[0]
+    d = np.asarray(depth, float)
+    flat_d = d.ravel()
+    ok = np.isfinite(flat_d) & (flat_d > 0) & (flat_d < FP_MAX_DEPTH)
+    points = np.asarray(camera.backproject(np.where(ok.reshape(d.shape), d, 0.0))).reshape(-1, 3)
+    valid = np.flatnonzero(ok & ((img.flat >= 0) | (points[:, 2] < FLOOR_Z)))
+    img.surface.append((points, valid, flat_d))
+    return img.surface[0]
 
 
 def false_positive_score(model: DetectorModel, fp_id: int) -> float:
