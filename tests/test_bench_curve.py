@@ -68,6 +68,23 @@ def test_snapshots_grow_and_k0_is_empty(curve_dir):
     assert k0["kb_examinations"] == 0
 
 
+def test_a_snapshot_is_the_store_learn_makes_after_as_many_rooms(curve_dir, tmp_path, capsys):
+    """make bench searches the houses with the curve's last snapshot instead of learning the same
+    30 houses again: a snapshot after k rooms holds the intervals ``ctxsearch learn --rooms k``
+    (same style, seed and perception) gives."""
+    kb = tmp_path / "kb.sqlite"
+    argv = ["learn", "--style", "office", "--rooms", "2", "--perception", "oracle"]
+    assert main([*argv, "--kb", str(kb), "--no-progress"]) == 0
+    capsys.readouterr()
+
+    def intervals(path: Path) -> list[str]:
+        assert main(["kb", "show", str(path)]) == 0
+        return capsys.readouterr().out.splitlines()[1:]  # the first line names the file
+
+    snapshot = intervals(curve_dir / "stores" / "k=0002.sqlite")
+    assert len(snapshot) > 5 and snapshot == intervals(kb)
+
+
 def test_episodes_are_identical_across_k_and_held_out(curve_dir):
     _, learned = _examinations(curve_dir / "stores" / "k=0002.sqlite")
     for scenario in ("built", "given"):
