@@ -1304,7 +1304,7 @@ ORACLE_CELL_STEP = 2
 ORACLE_VIEWS = (0.0, 0.5, 0.9)
 RAY_SPACING_PX = 2.0  # the ray test's grid: a ray every this many pixels across the target
 RAY_GRID_MAX = 5  # points along each axis of the target's box at most
-OCTILE_RATIO = math.sqrt(2.0)  # the grid distance over the shortest free path, at most
+GRID_PATH_RATIO = math.sqrt(2.0)  # the grid distance over the shortest free path, at most
 ORACLE_IMAGES = 8  # images taken one after the other at a view (the detector draws anew each)
 MIN_RECALL = 0.02  # a detector that errs: views where the target's recall is below this
 PERSPECTIVE_GAIN = 2.5  # an object at the image corner shows up to ~1/cos^3(43 deg) its pixels
@@ -1569,7 +1569,7 @@ def _oracle_candidates(
     # of edge-sharing free cells, whose grid path is at most sqrt 2 as long. Around walls and
     # through doors the second is the tighter: with the straight line alone a house's plan
     # rendered hundreds of views in the rooms behind the wall and hit ORACLE_MAX_RENDERS
-    geo = np.concatenate([[0.0], geo[ok] / OCTILE_RATIO - 2.0 * grid.resolution])
+    geo = np.concatenate([[0.0], geo[ok] / GRID_PATH_RATIO - 2.0 * grid.resolution])
     reach_m = np.maximum(np.hypot(*(pos - pose.xy).T), geo)
     cams = np.column_stack([pos, np.full(len(pos), spec.camera_height)])
     _, ty = half_fov_tangents(spec.fovy_deg, 320, 240)
