@@ -325,7 +325,7 @@ def test_learn_days_cli_and_kb_show_forget(tmp_path, capsys):
 def test_bench_drift_writes_its_files(tmp_path, capsys):
     out = tmp_path / "drift"
     argv = ["bench", "drift", "--days", "2", "--rooms", "1", "--truth-samples", "2",
-            "--episodes", "0", "--drift", f"{LAPTOP}:1.0:1", "--out", str(out)]  # fmt: skip
+            "--episodes", "1", "--drift", f"{LAPTOP}:1.0:1", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     for name in ("drift.json", "drift.md", "drift.csv", "drift.png"):
         assert (out / name).stat().st_size > 0
@@ -334,6 +334,9 @@ def test_bench_drift_writes_its_files(tmp_path, capsys):
     assert set(doc["results"]) == {f"{e}/{m}" for e in ("every-day", "impact")
                                    for m in ("none", "half-life", "detect")}  # fmt: skip
     assert "alarm_rate" in doc["results"]["every-day/detect"]
+    # each method's location search on the last day (the given map: location needs it)
+    assert set(doc["search"]) == {"none", "half-life", "detect"}
+    assert all(s["episodes"] == 1 and s["mean_time_s"] > 0 for s in doc["search"].values())
     n_entries = doc["entries"]["changed"] + doc["entries"]["unchanged"]
     lines = (out / "drift.csv").read_text().splitlines()
     assert len(lines) == 1 + 2 * 3 * 2 * n_entries and lines[0].startswith("evidence,method,day")

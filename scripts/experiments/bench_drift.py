@@ -277,7 +277,7 @@ def measure(tr: Trace, truth: Truth, status: dict, days: int, f: Forgetting) -> 
 def _search(st_last: Style, config: DriftBenchConfig, kbs: dict, learned: set, catalog) -> dict:
     """Each method's ``location`` search on the last day's style (one room per episode, shared)."""
     sc = E.SearchConfig(style=st_last.name, policies=("location",), seed=config.seed,
-                        detector="perfect")  # fmt: skip
+                        detector="perfect", map="given")  # fmt: skip
     eps = E.make_episodes(st_last, config.episodes, config.seed, catalog, sc.budget_s,
                           exclude_seeds=learned)  # fmt: skip
     probs = {m: E.load_priors(sc, st_last, catalog, kb=kb).for_policy("location", None)
