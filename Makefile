@@ -32,9 +32,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-# Regenerates every result the README quotes: about 1 3/4 hours on 2 cores by the parts' times
-# (README), over the hour the project aims at since the 400 house search episodes, the curve to
-# 30 houses and the transfer table came in. The sweeps (truth, bench learning, bench search, curve, transfer, intervals,
+# Regenerates every result the README quotes: 74 minutes on 2 cores (the steps' times, README),
+# over the hour the project aims at since the 400 house search episodes, the curve to 30 houses
+# and the transfer table came in. The sweeps (truth, bench learning, bench search, curve, transfer, intervals,
 # drift) run their units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the
 # same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
@@ -65,10 +65,10 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench hierarchy --style office --quiet --out results/hierarchy
 	$(VENV)/bin/ctxsearch bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
-# A drifting world set: forgetting methods (about 6 minutes on 2 loaded cores, oracle perception).
+# A drifting world set: forgetting methods (about a minute on 2 cores, oracle perception).
 	$(VENV)/bin/ctxsearch bench drift --out results/drift --workers $(WORKERS)
 # Detector x interval against the truth, camera mode: office after 10 and 30 rooms, apartment after
-# 3 and 10 houses (each about 13 minutes with 2 of them sharing 2 cores: 8 runs each).
+# 3 and 10 houses (about 5 minutes each on 2 cores: 8 runs each).
 	$(VENV)/bin/ctxsearch bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 100 --out results/intervals_apartment --workers $(WORKERS)
 
