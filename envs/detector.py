@@ -482,6 +482,11 @@ class _Image:
     scale: np.ndarray | None  # ray scale, raveled (None: depth used as is)
     surface: list = field(default_factory=list)  # ``_surface``, once made
 
+    def candidates(self) -> np.ndarray:
+        """The instance ids (>= 0) with at least one pixel, ascending."""
+        c = self.counts
+        return np.flatnonzero(c[1:]) if len(c) > 1 else np.zeros(0, int)
+
     def distance(self, oid: int, idx: np.ndarray, obj: ObjectInstance, camera_position) -> float:
         """The instance's distance (module comment above)."""
         if self.depth_flat is not None:
@@ -528,13 +533,12 @@ def detect_ids(
     distance from ``camera_position`` to the object's bounding box. ``model``: the preset (None:
     perfect); a model that errs needs its ``draws`` (and, for false positives, ``depth`` and the
     draws' camera). Sorted by pixel count, largest first (false positives, which cover no
-    pixel, last); without them if ``draws.false_positives`` is False
-    (``false_positive_detections`` gives them afterwards from the same stream, which continues
-    where the true detections left it).
+    pixel, last); without them if ``draws.false_positives`` is False (``SimDetector.split``
+    draws them afterwards from the same stream, which continues where the true detections left
+    it).
     """
     img = _image(instance_ids, depth, fovy_deg)
-    counts = img.counts
-    candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
+    candidates = img.candidates()
     if model is None or model.perfect:
         out = _detect_perfect(img, candidates, objects, catalog, camera_position)
     else:
@@ -562,16 +566,6 @@ def _image(instance_ids: np.ndarray, depth: np.ndarray | None, fovy_deg: float |
         scale = ray_scale(w, h, float(fovy_deg)).ravel()
     counts = np.bincount((flat.astype(np.int64) + 1).clip(0))
     return _Image(flat, w, h, counts, depth_flat, scale)
-
-
-def false_positive_detections(
-    frame: Frame, model: DetectorModel, catalog: Catalog, rng: np.random.Generator
-) -> list[Detection]:
-    """The false positives of ``frame`` that ``detect`` would add to its true detections, drawn
-    from ``rng`` as it stands after ``detect(..., false_positives=False)`` drew those."""
-    cam = frame.camera
-    img = _image(frame.instance_ids, frame.depth, float(cam.fovy_deg))
-    return _false_positives(img, model, rng, catalog, cam, frame.depth)
 
 
 def _detect_perfect(img: _Image, candidates, objects, catalog, camera_position) -> list[Detection]:
@@ -799,9 +793,7 @@ class SimDetector:
         if self._last is None or self._last[0] is not frame:
             cam = frame.camera
             img = _image(frame.instance_ids, frame.depth, float(cam.fovy_deg))
-            counts = img.counts
-            candidates = np.flatnonzero(counts[1:]) if len(counts) > 1 else np.zeros(0, int)
             pos = np.asarray(cam.position, float)
-            vis = _visible(img, candidates, self.objects, self.catalog, pos, self.model)
+            vis = _visible(img, img.candidates(), self.objects, self.catalog, pos, self.model)
             self._last = (frame, img, vis)
         return self._last[1], self._last[2]
