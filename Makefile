@@ -59,7 +59,9 @@ bench: $(STAMP)
 	$(VENV)/bin/ctxsearch bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
 # The headline: houses after 30 learned houses, 200 paired episodes per map scenario. The store is
 # the curve's after 30 houses: the same run as `ctxsearch learn --style apartment --rooms 30 --kb
-# build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice.
+# build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice; the old
+# store's WAL files go too (SQLite would replay a stale log into the copy).
+	rm -f build/kb_apartment.sqlite build/kb_apartment.sqlite-wal build/kb_apartment.sqlite-shm
 	cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
 	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS)
 	$(VENV)/bin/ctxsearch bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS)
