@@ -260,7 +260,10 @@ def small_types_present(layout: RoomLayout, catalog: Catalog) -> list[str]:
 class ViaOption:
     """An intermediate type worth searching for (Wixson & Ballard's model says it pays): its
     q = P(T related to one found), expected instances per world, the height it is found up to,
-    the seconds to look into its best relation volume, and the model's predicted gain."""
+    the seconds to look into its best relation volume, and the model's predicted gain; and the
+    model's expected seconds to find one (half a coverage at its range): the online search stops
+    looking for it once it has spent that long on it (the model's expectation) without
+    finding one: a world that held the expected instances would most likely have shown one."""
 
     type: str
     q: float
@@ -268,6 +271,7 @@ class ViaOption:
     zmax: float
     look_s: float
     gain: float
+    find_s: float = math.inf
 
 
 _Option = tuple[float, str, Callable[[], None]]  # (probability per second, label, action)
@@ -438,6 +442,7 @@ class SearchContext:
         self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
         self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
         self._vias: dict[str, float] = {}  # intermediate types worth it: predicted gain
+        self._via_spent: dict[str, float] = {}  # seconds spent looking for each of them
         self._confirming, self.unconfirmed = False, 0  # confirming a detection; not confirmed
 
     @property
@@ -740,17 +745,23 @@ class SearchContext:
         return self._scorer
 
     def viewpoint(
-        self, rng: float, images: float, zmax: float | None = None
+        self,
+        rng: float,
+        images: float,
+        zmax: float | None = None,
+        weights: np.ndarray | None = None,
     ) -> sx.Viewpoint | None:
         """Where to sweep next for range ``rng`` on the built map: the best share per second
-        (agent.search_explore); None on a given map or if none is worth it."""
+        (agent.search_explore; ``weights``: of the target's probability over the points, else of
+        the points); None on a given map or if none is worth it."""
         if self.built is None:
             return None
         here = self.body.pose().xy
         avoid = np.array(self._swept[rng]) if self._swept.get(rng) else None
         return self.scorer().best(
-            self.grid, self.todo(rng, zmax), here, rng, images, avoid, key=(rng, zmax)
-        )
+            self.grid, self.todo(rng, zmax), here, rng, images, avoid, key=(rng, zmax),
+            weights=weights,
+        )  # fmt: skip
 
     def explore_step(
         self,
@@ -806,50 +817,86 @@ class SearchContext:
         self.look_around()
         while True:
             self.check()
-            options = [o for o in (self._region_option(builder), self._direct_option()) if o]
-            options += [o for o in (self._via_option(v) for v in vias) if o]
+            regions, weights, mass = self._belief(builder)
+            options = [
+                o
+                for o in (self._region_option(regions, weights), self._direct_option(weights))
+                if o
+            ]
+            options += [o for o in (self._via_option(v, mass) for v in vias) if o]
             if not options:
                 return
             rate, label, act = max(options, key=lambda o: o[0])
             self.note(f"{label} ({rate:.4f}/s; {len(options)} options)")
             act()
 
-    def _direct_option(self) -> _Option | None:
-        v = self.viewpoint(self.target_range, sx.SWEEP_IMAGES)
+    def _belief(
+        self, builder: ss.RegionBuilder | None
+    ) -> tuple[list[ss.Region], np.ndarray | None, float]:
+        """Where the target may be (online search): the candidate regions of what is known and
+        not looked into yet; the probability that the target is at each seen-map point given
+        that it was not seen yet (``search_space.target_density`` normalised over the points
+        left to see; None without context or before a known object has a relation volume worth
+        anything: every point alike, as ``frontier`` assumes); and the density's total over
+        those points (P(rel(T)) units; when None, ``search_space.expected_mass``, the total a
+        whole world is expected to hold, or 1), which turns an intermediate type's P(rel(T))
+        into the same share."""
+        if builder is None:
+            return [], None, 1.0
+        skip = self._visited | self._deferred
+        regions = [r for r in builder.regions(list(self.known.values())) if r.key not in skip]
+        dens = ss.target_density(
+            builder.regions(list(self.known.values())), ~self.seen.unseen(sx.MAX_VIEW)
+        )
+        prior = ss.expected_mass(self.catalog, builder.probs, self.target) or 1.0
+        if dens is None:
+            return regions, None, prior
+        mass = float(dens[self.todo(self.target_range)].sum())
+        if mass <= 0.0:
+            return regions, None, prior
+        return regions, dens / mass, mass
+
+    def _direct_option(self, weights: np.ndarray | None = None) -> _Option | None:
+        v = self.viewpoint(self.target_range, sx.SWEEP_IMAGES, weights=weights)
         if v is None:
             return None
         return (v.rate, f"explore for {self.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
                 f"{v.gain} points, ~{v.seconds:.0f} s",
                 lambda: self.explore_step(v, self.target_range))  # fmt: skip
 
-    def _via_option(self, via: ViaOption) -> _Option | None:
+    def _via_option(self, via: ViaOption, mass: float = 1.0) -> _Option | None:
         found = sum(1 for o in self.known.values() if o.type == via.type)
         left = 1.0 - math.exp(-max(0.0, via.instances - found))
-        if left < 0.05:
+        if left < 0.05 or self._via_spent.get(via.type, 0.0) >= via.find_s:
             return None
         rng = self.range_of(via.type)
         v = self.viewpoint(rng, sx.RING_IMAGES, via.zmax)
         if v is None:
             return None
         m = left * min(1.0, v.share * max(1.0, via.instances - found))
-        rate = m * via.q / (v.seconds + m * via.look_s)
+        rate = m * via.q / mass / (v.seconds + m * via.look_s)
 
         def act() -> None:
             if self.intermediate is None:
                 self.intermediate, self.predicted_gain = via.type, via.gain
-            n0 = found
-            self.explore_step(v, rng, FURNITURE_TILTS, f"find {via.type}", until=lambda: sum(
-                1 for o in self.known.values() if o.type == via.type) > n0)  # fmt: skip
+            n0, t0 = found, self.elapsed
+            try:
+                self.explore_step(v, rng, FURNITURE_TILTS, f"find {via.type}", until=lambda: sum(
+                    1 for o in self.known.values() if o.type == via.type) > n0)  # fmt: skip
+            finally:
+                self._via_spent[via.type] = self._via_spent.get(via.type, 0.0) + (self.elapsed - t0)
 
         return rate, f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})", act
 
-    def _region_option(self, builder: ss.RegionBuilder | None) -> _Option | None:
-        if builder is None:
+    def _region_option(
+        self, regions: Sequence[ss.Region], weights: np.ndarray | None = None
+    ) -> _Option | None:
+        if not regions:
             return None
-        skip = self._visited | self._deferred
-        regions = [r for r in builder.regions(list(self.known.values())) if r.key not in skip]
         costs = ss.CostModel(self.grid, self.time_model, view_distance=min(self.target_range, 2.5))
-        ranked = ss.score_regions(regions, self.seen, self.target_range, costs, self.body.pose().xy)
+        ranked = ss.score_regions(
+            regions, self.seen, self.target_range, costs, self.body.pose().xy, weights
+        )
         ranked = [r for r in ranked if r.score >= MIN_REGION_SCORE]
         if not ranked:
             return None
@@ -1097,7 +1144,7 @@ class Indirect(SearchPolicy):
             k = probs.instances(o.via)
             zmax = max(typ.size_max[2], 0.3) if typ.is_furniture else None
             out.append(ViaOption(o.via, o.q, 1.0 if k is None else k, zmax or 9.0, o.look_s,
-                                 gains[o.via]))  # fmt: skip
+                                 gains[o.via], o.find_s))  # fmt: skip
         return out[: self.max_vias]
 
     def search_given(self, ctx: SearchContext) -> None:

@@ -133,6 +133,7 @@ class ViewpointScorer:
         images: float,
         avoid: np.ndarray | None = None,
         key: Hashable | None = None,
+        weights: np.ndarray | None = None,
     ) -> Viewpoint | None:
         """The candidate viewpoint with the best rate (share of the points ``todo`` (N,) bool at
         range ``rng`` it shows per second, a sweep there taking ``images`` images; ties: fewer
@@ -144,10 +145,21 @@ class ViewpointScorer:
         ``todo`` only shrinks (the seen map and the exhausted points only grow, occupied cells
         of the built map are never cleared), at most the gain it had at the last call. The
         candidates are traced in order of that bound on their rate and the search stops when
-        the bound falls below the best rate found: the viewpoint tracing them all would pick."""
-        left = int(todo.sum())
-        if left < MIN_GAIN:
+        the bound falls below the best rate found: the viewpoint tracing them all would pick.
+
+        ``weights`` (N,) non-negative: a point's share of what is left is its weight over the
+        todo points' total instead of one over their count (where the target is likely, from
+        ``search_space.target_density``); the bound is then the weight within range, and gains
+        are not cached (the weights change as objects are detected)."""
+        count = int(todo.sum())
+        if count < MIN_GAIN:
             return None
+        w = None if weights is None else np.asarray(weights, float)[todo]
+        left = float(count) if w is None else float(w.sum())
+        if left <= 0.0:
+            return None
+        if w is not None:
+            key = None
         cand = ss.lattice_candidates(grid, here, 0.5)
         if avoid is not None and len(avoid) and len(cand):
             d = np.linalg.norm(cand[:, None, :] - np.asarray(avoid)[None, :, :], axis=-1)
@@ -170,14 +182,16 @@ class ViewpointScorer:
         cache = self._gains.setdefault(key, {}) if key is not None else {}
         ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
         upper = np.array([cache.get(i, -1) for i in ids], np.int64)
+        mass = upper.astype(float)
         new = np.flatnonzero(upper < 0)
         if len(new):  # the todo points within range of each camera not traced before
             view2 = min(rng, MAX_VIEW) ** 2
             cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
             for k in range(0, len(new), 16):
-                d2 = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1)
-                upper[new[k : k + 16]] = (d2 <= view2).sum(1)
-        bound = upper / left / seconds
+                near = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1) <= view2
+                upper[new[k : k + 16]] = near.sum(1)
+                mass[new[k : k + 16]] = near.sum(1) if w is None else near @ w
+        bound = mass / left / seconds
         blocked = None
         best: Viewpoint | None = None
         for i in np.argsort(-bound, kind="stable"):
@@ -187,26 +201,30 @@ class ViewpointScorer:
                 continue
             if blocked is None:
                 blocked = coarse_blocked(self.built)
-            g = int(self._gain(blocked, cand[i], rng, sub, pts))
+            g, m = self._gain(blocked, cand[i], rng, sub, pts, w)
             cache[ids[i]] = g
             if g < MIN_GAIN:
                 continue
-            v = Viewpoint(cand[i], g, g / left, float(seconds[i]))
+            v = Viewpoint(cand[i], g, m / left, float(seconds[i]))
             if best is None or _order(v) < _order(best):
                 best = v
         return best
 
-    def _gain(self, blocked, xy, rng, sub, pts) -> int:
+    def _gain(self, blocked, xy, rng, sub, pts, weights=None) -> tuple[int, float]:
+        """The todo points (``sub``, at ``pts``) a sweep at ``xy`` shows: their count and their
+        weight (``weights`` over ``sub``; None: the count)."""
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
-        near = np.linalg.norm(pts - cam, axis=1) <= min(rng, MAX_VIEW)
-        if near.sum() < MIN_GAIN:
-            return 0
+        near = np.flatnonzero(np.linalg.norm(pts - cam, axis=1) <= min(rng, MAX_VIEW))
+        if len(near) < MIN_GAIN:
+            return 0, 0.0
         vis = visible_cells(blocked, self.origin, xy, min(rng, MAX_VIEW))
         h, w = vis.shape
         cells = self.cells[sub[near]]
         r, c = cells[:, 1], cells[:, 0]
         ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        return int(vis[r[ok], c[ok]].sum())
+        shown = near[ok][vis[r[ok], c[ok]]]
+        g = len(shown)
+        return g, float(g) if weights is None else float(weights[shown].sum())
 
     def exhaust(self, xy: np.ndarray, unseen: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: the points a sweep at ``xy`` should have shown but did not (module

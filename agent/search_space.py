@@ -405,15 +405,74 @@ class CostModel:
         return tm.leg_estimate(d) + tm.looks_estimate(self.images(box), self.head_s)
 
 
+def expected_mass(catalog: Catalog, probs: ProbabilitySource, target: str) -> float | None:
+    """The relation volumes' P(rel(T)) summed over a world's expected objects: sum over types t
+    of instances(t) * sum over rel in RELATIONS(t) of P(rel(T)) (None if ``probs`` knows no
+    instance counts, or it is 0). What ``target_density`` totals over a whole world, before
+    anything in it is seen."""
+    total = 0.0
+    for t in catalog.types:
+        k = probs.instances(t.name)
+        if k is None:
+            return None
+        if k > 0 and t.name != target:
+            total += k * sum(float(probs.p(r.name, target)) for r in t.relations)
+    return total if total > 0 else None
+
+
+def target_density(regions: Sequence[Region], surveyed: np.ndarray) -> np.ndarray | None:
+    """(N,) where the target may be, in P(rel(T)) per seen-map point, from the known objects'
+    relation volumes (``regions``; ``surveyed`` (N,) bool: the points seen from within the
+    built map's depth range, where furniture would have been detected); None when no volume has
+    a probability (nothing known yet: every point alike).
+
+    A point inside relation volumes gets the largest of their densities p_r / |r| (a volume's
+    probability spread over its points; overlapping volumes, NEAR-DESK and NEAR-CHAIR around
+    one desk, are not evidence twice). Every other point gets the mean density of the surveyed
+    part, sum p_r / |surveyed|: the part not explored yet is expected to hold furniture, and
+    with it the target, as the part explored so far did, and the floor between the known
+    volumes (where clutter may lie) is not assumed empty. The search policies normalise it over
+    what is left to see, so the share of it an image or a volume shows is the probability that
+    the target is there given that it was not found yet (``SearchContext.online_search``). The
+    choice of the surveyed part's mean is this module's, not the paper's (which gives no
+    prior for space no known object explains)."""
+    regions = [r for r in regions if r.p > 0 and len(r.points)]
+    if not regions:
+        return None
+    n = len(surveyed)
+    w = np.zeros(n)
+    for r in regions:
+        d = r.p / len(r.points)
+        w[r.points] = np.maximum(w[r.points], d)
+    covered = np.zeros(n, bool)
+    for r in regions:
+        covered[r.points] = True
+    mass = float(sum(r.p for r in regions))
+    base = mass / max(int(np.count_nonzero(surveyed | covered)), 1)
+    w[~covered] = base
+    return w
+
+
 def score_regions(
-    regions: Sequence[Region], seen: SeenMap, target_range: float, costs: CostModel, xy: np.ndarray
+    regions: Sequence[Region],
+    seen: SeenMap,
+    target_range: float,
+    costs: CostModel,
+    xy: np.ndarray,
+    weights: np.ndarray | None = None,
 ) -> list[Region]:
-    """Set every region's score (P(T in its unseen part)) and cost (expected seconds from ``xy``)
-    and return them best first (score per second; ties: cheaper, then key)."""
+    """Set every region's score and cost (expected seconds from ``xy``) and return them best
+    first (score per second; ties: cheaper, then key). The score is P(T in its unseen part)
+    (``region_probabilities``), or with ``weights`` ((N,): the probability that the target is
+    at each point, ``target_density`` normalised over what is left to see) their sum over the
+    region's unseen points."""
     if not regions:
         return []
     unseen = seen.unseen(target_range)
-    probs = region_probabilities(regions, unseen)
+    if weights is None:
+        probs = region_probabilities(regions, unseen)
+    else:
+        probs = [float(weights[r.points][unseen[r.points]].sum()) for r in regions]
     field_ = costs.grid.distances_from(xy).ravel()
     for r, p in zip(regions, probs, strict=True):
         r.score = float(p)
