@@ -274,7 +274,13 @@ class ViaOption:
     find_s: float = math.inf
 
 
-_Option = tuple[float, str, Callable[[], None]]  # (probability per second, label, action)
+# An online search option: (probability per expected second, label, action, kind, expected
+# seconds); the kinds ("region", "explore", "via") are calibrated apart (SearchContext.online_search).
+_Option = tuple[float, str, Callable[[], None], str, float]
+# The online search's calibration of each option kind's expected seconds starts at 1 (estimates
+# taken as they are) and holds this many expected seconds of weight: after that much of a kind
+# was done, its measured ratio weighs as much as the prior.
+CALIBRATION_PRIOR_S = 30.0
 
 
 def confirming_detection(
@@ -811,10 +817,17 @@ class SearchContext:
         """Search on the built map: at each decision the best expected probability of finding
         the target per second among looking into a known object's relation volume (``probs``),
         sweeping for an intermediate type of ``vias``, and sweeping the best frontier viewpoint
-        for the target; returns when none is left."""
+        for the target; returns when none is left.
+
+        The options' seconds come from different estimates (a sweep's drive and images, a
+        volume's planned gazes, the efficiency model's look), which err differently: each kind's
+        expected seconds are scaled by the ratio of the seconds its actions took so far in this
+        episode to the seconds they were expected to take (``CALIBRATION_PRIOR_S`` of prior
+        weight at ratio 1). The robot corrects its own estimates; nothing is fitted offline."""
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
         self._vias = {v.type: v.gain for v in vias}
         self.look_around()
+        took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
         while True:
             self.check()
             regions, weights, mass = self._belief(builder)
@@ -826,9 +839,19 @@ class SearchContext:
             options += [o for o in (self._via_option(v, mass) for v in vias) if o]
             if not options:
                 return
-            rate, label, act = max(options, key=lambda o: o[0])
-            self.note(f"{label} ({rate:.4f}/s; {len(options)} options)")
+
+            def scale(kind: str) -> float:
+                exp_s, got_s = took.get(kind, (0.0, 0.0))
+                return (got_s + CALIBRATION_PRIOR_S) / (exp_s + CALIBRATION_PRIOR_S)
+
+            rate, label, act, kind, seconds = max(options, key=lambda o: o[0] / scale(o[3]))
+            f = scale(kind)
+            self.note(f"{label} ({rate / f:.4f}/s, time x{f:.2f}; {len(options)} options)")
+            t0 = self.elapsed
             act()
+            sums = took.setdefault(kind, [0.0, 0.0])
+            sums[0] += seconds
+            sums[1] += self.elapsed - t0
 
     def _belief(
         self, builder: ss.RegionBuilder | None
@@ -862,7 +885,7 @@ class SearchContext:
             return None
         return (v.rate, f"explore for {self.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
                 f"{v.gain} points, ~{v.seconds:.0f} s",
-                lambda: self.explore_step(v, self.target_range))  # fmt: skip
+                lambda: self.explore_step(v, self.target_range), "explore", v.seconds)  # fmt: skip
 
     def _via_option(self, via: ViaOption, mass: float = 1.0) -> _Option | None:
         found = sum(1 for o in self.known.values() if o.type == via.type)
@@ -874,7 +897,8 @@ class SearchContext:
         if v is None:
             return None
         m = left * min(1.0, v.share * max(1.0, via.instances - found))
-        rate = m * via.q / mass / (v.seconds + m * via.look_s)
+        seconds = v.seconds + m * via.look_s
+        rate = m * via.q / mass / seconds
 
         def act() -> None:
             if self.intermediate is None:
@@ -886,7 +910,7 @@ class SearchContext:
             finally:
                 self._via_spent[via.type] = self._via_spent.get(via.type, 0.0) + (self.elapsed - t0)
 
-        return rate, f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})", act
+        return rate, f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})", act, "via", v.seconds
 
     def _region_option(
         self, regions: Sequence[ss.Region], weights: np.ndarray | None = None
@@ -915,7 +939,7 @@ class SearchContext:
             return None
         rate, cost, best, gazes = max(planned, key=lambda x: (x[0], -x[1]))
         return rate, f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s", (
-            lambda: self.look_region(best, gazes))  # fmt: skip
+            lambda: self.look_region(best, gazes)), "region", cost  # fmt: skip
 
     def _region_gazes(self, region: ss.Region) -> list[Gaze]:
         return plan_gazes(
