@@ -260,6 +260,14 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     p.add_argument("--seed", type=argtypes.seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
+    p.add_argument(
+        "--draw-cache",
+        type=argtypes.out_dir,
+        default=None,
+        metavar="DIR",
+        help="keep the episode draw in DIR and reuse it when the same draw (same arguments, "
+        "same code) is asked for again, e.g. by the other --map scenario (default: not kept)",
+    )
     _add_common(p)
     add_sweep_arguments(p)
     p.set_defaults(func=run_bench)
@@ -274,7 +282,13 @@ def run_bench(args: argparse.Namespace) -> int:
 
     fields = _config_fields(args)
     names = parse_policies(args.policies or DEFAULT_POLICIES[fields["map"]])
-    config = SearchBenchConfig(policies=tuple(names), kb=args.kb, episodes=args.episodes, **fields)
+    config = SearchBenchConfig(
+        policies=tuple(names),
+        kb=args.kb,
+        episodes=args.episodes,
+        draw_cache=args.draw_cache,
+        **fields,
+    )
     res = bench_search(
         config,
         args.out,

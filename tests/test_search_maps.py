@@ -169,20 +169,21 @@ def test_indirect_records_the_intermediate_it_searched_for(catalog):
     assert res.success, res.log
 
 
-def _brute_best(scorer, grid, todo, here, rng, images):
+def _brute_best(scorer, grid, todo, here, rng, images, weights=None):
     """Every candidate traced: the viewpoint ``ViewpointScorer.best`` must pick."""
-    left = int(todo.sum())
     blocked = sx.coarse_blocked(scorer.built)
     dist = grid.distances_from(here)
     sub = np.flatnonzero(todo)
+    w = None if weights is None else weights[sub]
+    left = len(sub) if w is None else float(w.sum())
     out = []
     for xy in ss.lattice_candidates(grid, here, 0.5):
         r, c = grid.to_cell(xy)
         d = float(dist[r, c]) if grid.in_grid(r, c) else math.inf
-        g = scorer._gain(blocked, xy, rng, sub, scorer.points[sub])
+        g, m = scorer._gain(blocked, xy, rng, sub, scorer.points[sub], w)
         if math.isfinite(d) and g >= sx.MIN_GAIN:
             s = scorer.tm.leg_estimate(d) + scorer.tm.looks_estimate(images, sx.HEAD_S)
-            out.append(sx.Viewpoint(xy, g, g / left, s))
+            out.append(sx.Viewpoint(xy, g, m / left, s))
     return min(out, key=sx._order) if out else None
 
 
@@ -208,3 +209,63 @@ def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
                 assert (tuple(got.xy), got.gain, got.seconds) == (
                     tuple(want.xy), want.gain, want.seconds)  # fmt: skip
                 todo = todo & (np.linalg.norm(ctx.seen.points[:, :2] - got.xy, axis=1) > 1.0)
+
+
+@pytest.mark.render
+def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(catalog):
+    """With weights (where the target is likely) the lazy choice is still the exhaustive one, and
+    weight put around one place draws the viewpoint there (uniform weights choose as no weights)."""
+    from envs.world import World
+
+    layout = room(DESK, SHELF, CUP, PEN)
+    with World(layout, catalog) as world:
+        ep = S.Episode(0, "test", 0, "Pen", START, 200.0)
+        maps = S.RoomMaps.built(layout, catalog, world.spec)
+        ctx = S.SearchContext(ep, layout, catalog, world, maps=maps)
+        ctx.look_around()
+        scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
+        todo = ctx.todo(rng)
+        plain = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
+        flat = scorer.best(
+            ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=np.ones(len(todo))
+        )
+        assert plain is not None and flat is not None
+        assert (tuple(flat.xy), flat.gain) == (tuple(plain.xy), plain.gain)
+        # All the weight on the todo points far from the unweighted choice.
+        pts = ctx.seen.points
+        far = todo & (np.linalg.norm(pts[:, :2] - plain.xy, axis=1) > 2.5)
+        assert far.sum() >= sx.MIN_GAIN
+        w = np.where(far, 1.0, 1e-6)
+        got = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=w)
+        want = _brute_best(scorer, ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, w)
+        assert got is not None and want is not None
+        assert (tuple(got.xy), got.gain, got.seconds) == (tuple(want.xy), want.gain, want.seconds)
+        assert abs(got.share - want.share) < 1e-12
+        assert tuple(got.xy) != tuple(plain.xy)
+        assert np.linalg.norm(pts[far, :2] - got.xy, axis=1).min() < rng
+
+
+def test_target_density_spreads_each_volume_and_does_not_count_overlaps_twice():
+    """A volume's P(rel(T)) spread over its points, the larger density where volumes overlap,
+    the surveyed part's mean elsewhere; nothing known: None (every point alike)."""
+    n = 10
+    a = ss.Region(None, 0.6, [("ON-TOP-OF-DESK", 1)], np.array([0, 1, 2]))
+    b = ss.Region(None, 0.2, [("NEAR-DESK", 1)], np.array([2, 3]))
+    surveyed = np.zeros(n, bool)
+    surveyed[:8] = True
+    w = ss.target_density([a, b], surveyed)
+    assert np.allclose(w[:3], 0.2)  # 0.6 / 3 beats 0.2 / 2 at the shared point 2
+    assert np.isclose(w[3], 0.1)
+    assert np.allclose(w[4:], 0.8 / 8)  # (0.6 + 0.2) over the 8 surveyed points
+    assert ss.target_density([], surveyed) is None
+    assert ss.target_density([ss.Region(None, 0.0, [("NEAR-DESK", 1)], np.array([1]))],
+                             surveyed) is None  # fmt: skip
+
+
+def test_expected_mass_sums_the_volumes_over_a_worlds_objects(catalog):
+    probs = ss.TableProbabilities(
+        {("ON-TOP-OF-DESK", "Pen"): 0.5, ("NEAR-SHELF", "Pen"): 0.25},
+        per_room={"Desk": 2.0, "Shelf": 1.0},
+    )
+    assert ss.expected_mass(catalog, probs, "Pen") == pytest.approx(2.0 * 0.5 + 1.0 * 0.25)
+    assert ss.expected_mass(catalog, ss.TableProbabilities({}), "Pen") is None

@@ -247,3 +247,47 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
     res = E.run_episode(ep, ["oracle"], catalog, office, lambda b, r: None, None, real)[0]
     assert res.success
     assert res.sim_time <= ep.first_view.seconds + ic + 1e-6
+
+
+def _view_state(v):
+    if v is None:
+        return None
+    g = v.gaze
+    path = None if g.path is None else g.path.tolist()
+    return (v.seconds, g.pose, g.target.tolist(), g.coverage, g.cost, path, v.instance_id,
+            v.renders, v.key)  # fmt: skip
+
+
+def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
+    drawn, office, catalog, tmp_path, monkeypatch
+):
+    """``--draw-cache``: the second command reads the first's draw (episodes, counts and the
+    oracle's first plans, to the last bit) instead of drawing; a file of any other bytes is a
+    miss, drawn again and replaced."""
+    from scripts.experiments import draw_store
+
+    first = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+    files = list(tmp_path.glob("*.json"))
+    assert len(files) == 1
+    assert first.episodes == drawn.episodes
+    assert any(e.first_view is not None for e in first.episodes)
+
+    def no_draw(*a, **k):
+        raise AssertionError("drew again")
+
+    with monkeypatch.context() as m:
+        m.setattr(E, "run_units", no_draw)
+        kept = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+    assert kept.episodes == first.episodes
+    assert [e.start for e in kept.episodes] == [e.start for e in first.episodes]
+    assert [_view_state(e.first_view) for e in kept.episodes] == [
+        _view_state(e.first_view) for e in first.episodes
+    ]
+    assert (kept.excluded(), kept.start_redraws) == (first.excluded(), first.start_redraws)
+    # Other arguments are another key.
+    assert draw_store.draw_key((1,)) != draw_store.draw_key((2,))
+    for junk in (b"\xff\xfe[", b'{"format": 1, "episodes": [{"index": "x"}]}'):
+        files[0].write_bytes(junk)
+        again = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+        assert again.episodes == first.episodes
+        assert draw_store.load(tmp_path, files[0].stem, E.EpisodeDraw) is not None

@@ -364,6 +364,9 @@ class SearchBenchConfig(SearchConfig):
 
     kb: Path | None = None  # knowledge store made by `ctxsearch learn`
     episodes: int = 40
+    # Where the episode draw is kept for later commands (scripts.experiments.draw_store): make
+    # bench's two map scenarios search the same episodes, drawn once. None: not kept.
+    draw_cache: Path | None = None
 
 
 def bench_search(
@@ -399,6 +402,7 @@ def bench_search(
         exclude_seeds=priors.learned,
         detector=detector,
         sweep=sweep,
+        cache=config.draw_cache,
     )
     eps = draw.episodes
     results = _run_batches(eps, names, style, priors, sweep, bar, (detector, config.map))

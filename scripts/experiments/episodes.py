@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import re
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -39,6 +40,7 @@ from knowledge.base import KnowledgeBase
 from knowledge.catalog import Catalog, load_catalog
 from knowledge.errors import CtxsearchError
 from knowledge.pooling import PooledCounts
+from scripts.experiments import draw_store
 from scripts.sweep import SweepOptions, run_units
 
 ProbsFor = Callable[[str, str | None], ss.ProbabilitySource | None]
@@ -137,9 +139,12 @@ def draw_episodes(
     target: str | None = None,
     detector: DetectorModel | None = None,
     sweep: SweepOptions | None = None,
+    cache: Path | None = None,
 ) -> EpisodeDraw:
     """``make_episodes`` with the counts of what was left out; ``sweep``: check the worlds in
-    parallel (the same episodes and counts for any number of workers).
+    parallel (the same episodes and counts for any number of workers); ``cache``: a directory
+    where the draw is kept and read back by later commands with the same arguments and code
+    (scripts.experiments.draw_store).
 
     World i (room seed ``held_out_seed(seed, i)``, skipped if the store learned in it or it has
     no small object, or no ``target``) gets a target drawn uniformly among its small types and a
@@ -157,6 +162,25 @@ def draw_episodes(
            frozenset(exclude_seeds), target, detector)  # fmt: skip
     if _drawn is not None and key in _drawn:
         return replace(_drawn[key], episodes=list(_drawn[key].episodes))
+    stored = None
+    if cache is not None:
+        stored = draw_store.draw_key(
+            (
+                style,
+                int(n),
+                int(seed),
+                catalog.fingerprint,
+                float(budget_s),
+                tuple(sorted(exclude_seeds)),
+                target,
+                detector,
+            )  # fmt: skip
+        )
+        kept = draw_store.load(cache, stored, EpisodeDraw)
+        if kept is not None:
+            if _drawn is not None:
+                _drawn[key] = replace(kept, episodes=list(kept.episodes))
+            return kept
     draw = EpisodeDraw([])
     limit = 50 * n + 100
     check = functools.partial(
@@ -200,6 +224,12 @@ def draw_episodes(
                 draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
     if _drawn is not None:
         _drawn[key] = replace(draw, episodes=list(draw.episodes))
+    if cache is not None and stored is not None:
+        try:
+            draw_store.save(cache, stored, draw)
+        except OSError as e:  # the draw is made: a cache that cannot keep it costs only time
+            print(f"ctxsearch: warning: {cache}: episode draw not kept: {e.strerror or e}",
+                  file=sys.stderr)  # fmt: skip
     return draw
 
 

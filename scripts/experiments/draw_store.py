@@ -1,0 +1,166 @@
+"""Episode draws kept on disk between commands (``bench search --draw-cache DIR``).
+
+An episode draw (``episodes.draw_episodes``) is deterministic in its arguments and costs about
+2.5 s per world checked, mostly the oracle's feasibility plan: 200 house episodes take about 5
+minutes to draw. ``make bench`` searches the same 200 episodes in both map scenarios, in two
+commands; with ``--draw-cache DIR`` the second reads the first's draw instead of drawing it
+again (the same episodes, counts and oracle first plans, so the same results).
+
+A file ``DIR/<key>.json`` holds one draw. Its key is a SHA-256 over the draw's arguments (the
+style as loaded, the number of episodes, the seed, the catalog's fingerprint, the budget, the
+excluded room seeds, the target, the detector preset) and over the source of the packages the
+draw runs (``agent``, ``envs``, ``knowledge``): a changed argument or a changed line of code is
+another key, never a stale draw. A file that cannot be read back as a draw (any bytes: a
+truncated write, an edit by hand) is a miss: the draw is made again and the file replaced
+(written to a temporary file first, then renamed, so a reader never sees half a file).
+Floats are written with ``repr``: they read back to the same bits.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from agent import search as S
+from agent.viewplan import Gaze
+from envs.robot_spec import RobotPose
+
+FORMAT = 1
+_PACKAGES = ("agent", "envs", "knowledge")
+
+
+@functools.cache
+def code_digest() -> str:
+    """SHA-256 over the source files of the packages an episode draw runs (sorted by path)."""
+    root = Path(__file__).resolve().parents[2]
+    h = hashlib.sha256()
+    for pkg in _PACKAGES:
+        for p in sorted((root / pkg).rglob("*.py")):
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def draw_key(args: tuple) -> str:
+    """The file name stem of the draw made with ``args`` (``draw_episodes``' memo key)."""
+    h = hashlib.sha256()
+    h.update(f"format {FORMAT}\n{code_digest()}\n".encode())
+    h.update(repr(args).encode())
+    return h.hexdigest()[:32]
+
+
+def _pose(p: RobotPose) -> list[float]:
+    return [p.x, p.y, p.yaw, p.pan, p.tilt]
+
+
+def _view_json(v: S.OracleView | None) -> dict | None:
+    if v is None:
+        return None
+    g = v.gaze
+    return {
+        "seconds": v.seconds,
+        "gaze": {
+            "pose": _pose(g.pose),
+            "target": [float(x) for x in np.asarray(g.target, float)],
+            "coverage": g.coverage,
+            "cost": g.cost,
+            "path": None if g.path is None else np.asarray(g.path, float).tolist(),
+        },
+        "instance_id": v.instance_id,
+        "renders": v.renders,
+        "key": list(v.key),
+    }
+
+
+def _finite(x) -> float:
+    v = float(x)
+    if not math.isfinite(v):
+        raise ValueError("not finite")
+    return v
+
+
+def _view(d: dict | None) -> S.OracleView | None:
+    if d is None:
+        return None
+    g = d["gaze"]
+    path = None if g["path"] is None else np.array(g["path"], float).reshape(-1, 2)
+    gaze = Gaze(
+        RobotPose(*(_finite(x) for x in g["pose"])),
+        np.array([_finite(x) for x in g["target"]], float),
+        _finite(g["coverage"]),
+        _finite(g["cost"]),
+        path,
+    )
+    k = d["key"]
+    key = (float(k[0]), float(k[1]), int(k[2]), int(k[3]))
+    return S.OracleView(_finite(d["seconds"]), gaze, int(d["instance_id"]), int(d["renders"]), key)
+
+
+def to_json(draw) -> dict:
+    """A JSON-serialisable dict of an ``episodes.EpisodeDraw``."""
+    return {
+        "format": FORMAT,
+        "visible_at_start": draw.visible_at_start,
+        "infeasible": draw.infeasible,
+        "start_redraws": draw.start_redraws,
+        "episodes": [
+            {
+                **ep.to_json(),
+                "start": _pose(ep.start),
+                "first_view": _view_json(ep.first_view),
+            }
+            for ep in draw.episodes
+        ],
+    }
+
+
+def from_json(doc: dict, draw_type):
+    """The ``draw_type`` (``episodes.EpisodeDraw``) ``to_json`` wrote; ValueError, KeyError or
+    TypeError on anything else."""
+    if doc.get("format") != FORMAT:
+        raise ValueError("another format")
+    eps = [
+        S.Episode(
+            int(e["index"]),
+            str(e["style"]),
+            int(e["room_seed"]),
+            str(e["target"]),
+            RobotPose(*(_finite(x) for x in e["start"])),
+            _finite(e["budget_s"]),
+            first_view=_view(e["first_view"]),
+        )
+        for e in doc["episodes"]
+    ]
+    return draw_type(
+        eps, int(doc["visible_at_start"]), int(doc["infeasible"]), int(doc["start_redraws"])
+    )
+
+
+def load(directory: Path, key: str, draw_type):
+    """The draw stored under ``key`` in ``directory``, or None (no file, or not a draw)."""
+    path = Path(directory) / f"{key}.json"
+    try:
+        return from_json(json.loads(path.read_bytes()), draw_type)
+    except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError):
+        return None
+
+
+def save(directory: Path, key: str, draw) -> None:
+    """Store ``draw`` under ``key`` in ``directory`` (created if needed), atomically."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(to_json(draw), f)
+        os.replace(tmp, directory / f"{key}.json")
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
