@@ -49,11 +49,19 @@ class with a ``name`` and ``run(ctx) -> SearchResult``:
   has probability left.
 - ``indirect``: detectability-driven. On the built map it decides online: at each step it takes
   the best expected probability of finding T per second among (a) looking into a relation volume
-  of an object detected so far (P(T in its unseen part) over the seconds of its planned gazes),
-  (b) sweeping for an intermediate type I that Wixson & Ballard's efficiency model says pays
-  (agent.search_explore.predicted_plan: gain C_direct / C_via > 1 from I's detectability, the
-  intervals' q_I and the instances per world), valued as P(a new I is seen there) q_I over the
-  seconds, and (c) the frontier step above; frontier exploration when nothing is worth more.
+  of an object detected so far, (b) sweeping for an intermediate type I that Wixson & Ballard's
+  efficiency model says pays (agent.search_explore.predicted_plan: gain C_direct / C_via > 1
+  from I's detectability, the intervals' q_I and the instances per world), valued as P(a new I
+  is seen there) q_I, given up after the model's expected seconds to find one, and (c) the
+  frontier step above. All three are valued in one currency: the probability that T is at each
+  point of the seen map given that it was not seen yet (``search_space.target_density``: the
+  known objects' relation volumes spread their P(rel(T)) over their points, the unexplored rest
+  of the house gets the surveyed part's mean density; ``SearchContext._belief``), so the
+  frontier step of (c) is drawn towards likely places and no option counts an overlap twice.
+  Each option kind's expected seconds are corrected by what its actions took so far in the
+  episode. Measured on 48 apartment episodes (10-house store, ``bench search``'s draw): the
+  weighting took the geometric-mean time ratio to ``frontier`` from 0.90 to 0.75 and the mean
+  from 117 s to 100 s; the calibration raised success from 90% to 94% at the same mean.
   Its result records the intermediate type it used (searched for, or whose relation volume it
   looked into first) and the model's predicted gain. On the given map it knows the furniture
   map but plans once: it compares the expected cost of looking for T directly with looking first

@@ -226,9 +226,7 @@ def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(
         scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
         todo = ctx.todo(rng)
         plain = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
-        flat = scorer.best(
-            ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=np.ones(len(todo))
-        )
+        flat = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=np.ones(len(todo)))
         assert plain is not None and flat is not None
         assert (tuple(flat.xy), flat.gain) == (tuple(plain.xy), plain.gain)
         # All the weight on the todo points far from the unweighted choice.
