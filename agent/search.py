@@ -456,7 +456,6 @@ class SearchContext:
         self._deferred: set[tuple] = set()  # regions no gaze reached yet (built map)
         self._swept: dict[float, list[np.ndarray]] = {}  # where sweeps for each range were made
         self._vias: dict[str, float] = {}  # intermediate types worth it: predicted gain
-        self._via_spent: dict[str, float] = {}  # seconds spent looking for each of them
         self._confirming, self.unconfirmed = False, 0  # confirming a detection; not confirmed
 
     @property
@@ -834,6 +833,7 @@ class SearchContext:
         weight at ratio 1). The robot corrects its own estimates; nothing is fitted offline."""
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
         self._vias = {v.type: v.gain for v in vias}
+        self._via_spent: dict[str, float] = {}  # seconds spent looking for each of them
         self.look_around()
         took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
         while True:
