@@ -36,7 +36,8 @@ test: $(STAMP)
 # by side (make -j2, their lines interleaved): lane A starts with the steps that
 # run on one core (the hierarchy, the oracle learning runs), lane B with the curve (whose
 # learning run is one core's too), so no core idles while a one-core step runs. The steps write disjoint files and every result is
-# deterministic, so the lanes' order does not change a number. Time on 2 cores: README (Speed).
+# deterministic, so the lanes' order does not change a number. Time on 2 cores: 63 minutes
+# (README, Usage).
 # The sweeps (truth, bench learning, bench search, curve, transfer, intervals, drift) run their
 # units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
