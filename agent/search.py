@@ -836,11 +836,12 @@ class SearchContext:
         builder = ss.RegionBuilder(self.catalog, probs, self.seen, self.target) if probs else None
         self._vias = {v.type: v.gain for v in vias}
         self._via_spent: dict[str, float] = {}  # seconds spent looking for each of them
+        prior = (ss.expected_mass(self.catalog, probs, self.target) if probs else None) or 1.0
         self.look_around()
         took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
         while True:
             self.check()
-            regions, weights, mass = self._belief(builder)
+            regions, weights, mass = self._belief(builder, prior)
             options = [
                 o
                 for o in (self._region_option(regions, weights), self._direct_option(weights))
@@ -864,24 +865,22 @@ class SearchContext:
             sums[1] += self.elapsed - t0
 
     def _belief(
-        self, builder: ss.RegionBuilder | None
+        self, builder: ss.RegionBuilder | None, prior: float = 1.0
     ) -> tuple[list[ss.Region], np.ndarray | None, float]:
         """Where the target may be (online search): the candidate regions of what is known and
         not looked into yet; the probability that the target is at each seen-map point given
         that it was not seen yet (``search_space.target_density`` normalised over the points
         left to see; None without context or before a known object has a relation volume worth
         anything: every point alike, as ``frontier`` assumes); and the density's total over
-        those points (P(rel(T)) units; when None, ``search_space.expected_mass``, the total a
-        whole world is expected to hold, or 1), which turns an intermediate type's P(rel(T))
-        into the same share."""
+        those points (P(rel(T)) units; when None, ``prior``: ``search_space.expected_mass``, the
+        total a whole world is expected to hold, or 1), which turns an intermediate type's
+        P(rel(T)) into the same share."""
         if builder is None:
             return [], None, 1.0
+        every = builder.regions(list(self.known.values()))
         skip = self._visited | self._deferred
-        regions = [r for r in builder.regions(list(self.known.values())) if r.key not in skip]
-        dens = ss.target_density(
-            builder.regions(list(self.known.values())), ~self.seen.unseen(sx.MAX_VIEW)
-        )
-        prior = ss.expected_mass(self.catalog, builder.probs, self.target) or 1.0
+        regions = [r for r in every if r.key not in skip]
+        dens = ss.target_density(every, ~self.seen.unseen(sx.MAX_VIEW))
         if dens is None:
             return regions, None, prior
         mass = float(dens[self.todo(self.target_range)].sum())

@@ -158,39 +158,14 @@ class ViewpointScorer:
         left = float(count) if w is None else float(w.sum())
         if left <= 0.0:
             return None
-        if w is not None:
-            key = None
-        cand = ss.lattice_candidates(grid, here, 0.5)
-        if avoid is not None and len(avoid) and len(cand):
-            d = np.linalg.norm(cand[:, None, :] - np.asarray(avoid)[None, :, :], axis=-1)
-            cand = cand[d.min(axis=1) > VISITED_RADIUS]
+        cand, seconds = self._reachable(grid, here, images, avoid)
         if len(cand) == 0:
             return None
-        dist = grid.distances_from(here)
-        rc = [grid.to_cell(xy) for xy in cand]
-        drive = np.array(
-            [float(dist[r, c]) if grid.in_grid(r, c) else math.inf for r, c in rc], float
-        )
-        reach = np.isfinite(drive)
-        cand, drive = cand[reach], drive[reach]
-        if len(cand) == 0:
-            return None
-        sweep_s = self.tm.looks_estimate(images, HEAD_S)
-        seconds = np.array([self.tm.leg_estimate(d) for d in drive], float) + sweep_s
         sub = np.flatnonzero(todo)
         pts = self.points[sub]
-        cache = self._gains.setdefault(key, {}) if key is not None else {}
+        cache = self._gains.setdefault(key, {}) if key is not None and w is None else {}
         ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
-        upper = np.array([cache.get(i, -1) for i in ids], np.int64)
-        mass = upper.astype(float)
-        new = np.flatnonzero(upper < 0)
-        if len(new):  # the todo points within range of each camera not traced before
-            view2 = min(rng, MAX_VIEW) ** 2
-            cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
-            for k in range(0, len(new), 16):
-                near = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1) <= view2
-                upper[new[k : k + 16]] = near.sum(1)
-                mass[new[k : k + 16]] = near.sum(1) if w is None else near @ w
+        upper, mass = self._bounds(cand, pts, rng, w, [cache.get(i, -1) for i in ids])
         bound = mass / left / seconds
         blocked = None
         best: Viewpoint | None = None
@@ -209,6 +184,44 @@ class ViewpointScorer:
             if best is None or _order(v) < _order(best):
                 best = v
         return best
+
+    def _reachable(
+        self, grid: OccupancyGrid, here: np.ndarray, images: float, avoid: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The candidate viewpoints (M, 2) reachable from ``here`` and not within
+        ``VISITED_RADIUS`` of ``avoid``, and the expected seconds to drive to each and sweep."""
+        cand = ss.lattice_candidates(grid, here, 0.5)
+        if avoid is not None and len(avoid) and len(cand):
+            d = np.linalg.norm(cand[:, None, :] - np.asarray(avoid)[None, :, :], axis=-1)
+            cand = cand[d.min(axis=1) > VISITED_RADIUS]
+        if len(cand) == 0:
+            return cand, np.zeros(0)
+        dist = grid.distances_from(here)
+        rc = [grid.to_cell(xy) for xy in cand]
+        drive = np.array(
+            [float(dist[r, c]) if grid.in_grid(r, c) else math.inf for r, c in rc], float
+        )
+        reach = np.isfinite(drive)
+        sweep_s = self.tm.looks_estimate(images, HEAD_S)
+        seconds = np.array([self.tm.leg_estimate(d) for d in drive[reach]], float) + sweep_s
+        return cand[reach], seconds
+
+    def _bounds(
+        self, cand: np.ndarray, pts: np.ndarray, rng: float, w: np.ndarray | None, cached: list
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Upper bounds on each candidate's gain: the count (``cached``, the last call's gain,
+        where it is not -1, else the todo points ``pts`` within range) and the weight (``w``
+        over ``pts``; None: the count) of the todo points it may show."""
+        upper = np.array(cached, np.int64)
+        mass = upper.astype(float)
+        new = np.flatnonzero(upper < 0)
+        view2 = min(rng, MAX_VIEW) ** 2
+        cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
+        for k in range(0, len(new), 16):  # the todo points within range of each camera
+            near = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1) <= view2
+            upper[new[k : k + 16]] = near.sum(1)
+            mass[new[k : k + 16]] = near.sum(1) if w is None else near @ w
+        return upper, mass
 
     def _gain(self, blocked, xy, rng, sub, pts, weights=None) -> tuple[int, float]:
         """The todo points (``sub``, at ``pts``) a sweep at ``xy`` shows: their count and their

@@ -439,13 +439,10 @@ def target_density(regions: Sequence[Region], surveyed: np.ndarray) -> np.ndarra
     regions = [r for r in regions if r.p > 0 and len(r.points)]
     if not regions:
         return None
-    n = len(surveyed)
-    w = np.zeros(n)
+    w = np.zeros(len(surveyed))
+    covered = np.zeros(len(surveyed), bool)
     for r in regions:
-        d = r.p / len(r.points)
-        w[r.points] = np.maximum(w[r.points], d)
-    covered = np.zeros(n, bool)
-    for r in regions:
+        w[r.points] = np.maximum(w[r.points], r.p / len(r.points))
         covered[r.points] = True
     mass = float(sum(r.p for r in regions))
     base = mass / max(int(np.count_nonzero(surveyed | covered)), 1)

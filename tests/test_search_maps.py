@@ -4,6 +4,7 @@ checks, the recorded intermediate, determinism."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import subprocess
 import sys
@@ -187,10 +188,10 @@ def _brute_best(scorer, grid, todo, here, rng, images, weights=None):
     return min(out, key=sx._order) if out else None
 
 
-@pytest.mark.render
-def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
-    """``ViewpointScorer.best`` traces few candidates (bounds, gains cached between calls) and
-    picks what tracing every candidate picks, also after the todo points shrank."""
+@contextlib.contextmanager
+def _looked_around(catalog):
+    """A built-map search for the Pen in a room with a desk, a shelf and a cup, after the first
+    look around (the World closed on exit)."""
     from envs.world import World
 
     layout = room(DESK, SHELF, CUP, PEN)
@@ -199,6 +200,14 @@ def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
         maps = S.RoomMaps.built(layout, catalog, world.spec)
         ctx = S.SearchContext(ep, layout, catalog, world, maps=maps)
         ctx.look_around()
+        yield ctx
+
+
+@pytest.mark.render
+def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
+    """``ViewpointScorer.best`` traces few candidates (bounds, gains cached between calls) and
+    picks what tracing every candidate picks, also after the todo points shrank."""
+    with _looked_around(catalog) as ctx:
         scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
         todo = ctx.todo(rng)
         for step in range(3):
@@ -215,14 +224,7 @@ def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
 def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(catalog):
     """With weights (where the target is likely) the lazy choice is still the exhaustive one, and
     weight put around one place draws the viewpoint there (uniform weights choose as no weights)."""
-    from envs.world import World
-
-    layout = room(DESK, SHELF, CUP, PEN)
-    with World(layout, catalog) as world:
-        ep = S.Episode(0, "test", 0, "Pen", START, 200.0)
-        maps = S.RoomMaps.built(layout, catalog, world.spec)
-        ctx = S.SearchContext(ep, layout, catalog, world, maps=maps)
-        ctx.look_around()
+    with _looked_around(catalog) as ctx:
         scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
         todo = ctx.todo(rng)
         plain = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)

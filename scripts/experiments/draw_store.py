@@ -23,6 +23,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -153,14 +154,20 @@ def load(directory: Path, key: str, draw_type):
 
 
 def save(directory: Path, key: str, draw) -> None:
-    """Store ``draw`` under ``key`` in ``directory`` (created if needed), atomically."""
+    """Store ``draw`` under ``key`` in ``directory`` (created if needed), atomically; a
+    directory that cannot keep it (read-only, full) is a warning on stderr: the draw is made,
+    the cache costs only time."""
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=directory)
+    tmp = None
     try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=directory)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             json.dump(to_json(draw), f)
         os.replace(tmp, directory / f"{key}.json")
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    except OSError as e:
+        print(f"ctxsearch: warning: {directory}: episode draw not kept: {e.strerror or e}",
+              file=sys.stderr)  # fmt: skip
+    finally:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)

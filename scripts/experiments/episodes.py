@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import re
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -157,41 +156,28 @@ def draw_episodes(
     detector's draws as at the world's first second) is dropped as infeasible. Worlds are taken
     in index order until ``n`` episodes; the counts cover the worlds up to the last one taken.
     Inside ``remembered_draws`` a draw with the same arguments is not made again."""
-    sweep = sweep or SweepOptions()
     key = (style, int(n), int(seed), catalog.fingerprint, float(budget_s),
-           frozenset(exclude_seeds), target, detector)  # fmt: skip
+           tuple(sorted(exclude_seeds)), target, detector)  # fmt: skip
     if _drawn is not None and key in _drawn:
         return replace(_drawn[key], episodes=list(_drawn[key].episodes))
-    stored = None
-    if cache is not None:
-        stored = draw_store.draw_key(
-            (
-                style,
-                int(n),
-                int(seed),
-                catalog.fingerprint,
-                float(budget_s),
-                tuple(sorted(exclude_seeds)),
-                target,
-                detector,
-            )  # fmt: skip
-        )
-        kept = draw_store.load(cache, stored, EpisodeDraw)
-        if kept is not None:
-            if _drawn is not None:
-                _drawn[key] = replace(kept, episodes=list(kept.episodes))
-            return kept
+    stored = draw_store.draw_key(key) if cache is not None else None
+    draw = draw_store.load(cache, stored, EpisodeDraw) if stored is not None else None
+    if draw is None:
+        draw = _draw_worlds(key, catalog, sweep or SweepOptions())
+        if stored is not None:
+            draw_store.save(cache, stored, draw)
+    if _drawn is not None:
+        _drawn[key] = replace(draw, episodes=list(draw.episodes))
+    return draw
+
+
+def _draw_worlds(key: tuple, catalog: Catalog, sweep: SweepOptions) -> EpisodeDraw:
+    """``draw_episodes``' worlds checked in rounds (``key``: its arguments, in its order)."""
+    style, n, seed, _fingerprint, budget_s, exclude_seeds, target, detector = key
     draw = EpisodeDraw([])
     limit = 50 * n + 100
     check = functools.partial(
-        draw_world,
-        style,
-        int(seed),
-        catalog,
-        float(budget_s),
-        frozenset(exclude_seeds),
-        target,
-        detector,
+        draw_world, style, seed, catalog, budget_s, frozenset(exclude_seeds), target, detector
     )
     i = 0
     while len(draw.episodes) < n:
@@ -222,14 +208,6 @@ def draw_episodes(
                 draw.infeasible += 1
             elif world.episode is not None:
                 draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
-    if _drawn is not None:
-        _drawn[key] = replace(draw, episodes=list(draw.episodes))
-    if cache is not None and stored is not None:
-        try:
-            draw_store.save(cache, stored, draw)
-        except OSError as e:  # the draw is made: a cache that cannot keep it costs only time
-            print(f"ctxsearch: warning: {cache}: episode draw not kept: {e.strerror or e}",
-                  file=sys.stderr)  # fmt: skip
     return draw
 
 
