@@ -59,27 +59,27 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from agent import strategies as strat
-from agent.exam_volumes import group_volume_members, relation_boxes
-from agent.exploration import Explorer
-from agent.frontiers import FrontierExplorer
-from agent.grid_costs import GridCosts
-from agent.learn_log import RunLog
-from agent.mapping import BuiltMap
-from agent.navigation import OccupancyGrid, drive_along, nearest_free
-from agent.resume import ReplayBody, replayed_related, resume_error
-from agent.run_state import ExamResult, Run, StoredExam, room_rng
-from agent.strategies import Choice, EuclideanCosts
-from agent.viewplan import Gaze, execute_gaze, plan_gazes
-from envs.camera import Frame
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose
-from envs.rooms import door_entry
-from knowledge import geometry
-from knowledge.drift import ForgetKnowledgeBase
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
-from knowledge.store import NewExamination
+from ctxsearch.agent import strategies as strat
+from ctxsearch.agent.exam_volumes import group_volume_members, relation_boxes
+from ctxsearch.agent.exploration import Explorer
+from ctxsearch.agent.frontiers import FrontierExplorer
+from ctxsearch.agent.grid_costs import GridCosts
+from ctxsearch.agent.learn_log import RunLog
+from ctxsearch.agent.mapping import BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid, drive_along, nearest_free
+from ctxsearch.agent.resume import ReplayBody, replayed_related, resume_error
+from ctxsearch.agent.run_state import ExamResult, Run, StoredExam, room_rng
+from ctxsearch.agent.strategies import Choice, EuclideanCosts
+from ctxsearch.agent.viewplan import Gaze, execute_gaze, plan_gazes
+from ctxsearch.envs.camera import Frame
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.envs.rooms import door_entry
+from ctxsearch.knowledge import geometry
+from ctxsearch.knowledge.drift import ForgetKnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
 

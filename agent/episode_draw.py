@@ -10,15 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent import search as S
-from agent.navigation import OccupancyGrid
-from envs.detector import DetectorModel
-from envs.floorplan import generate_layout
-from envs.houses import WorldStyle
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec
-from envs.world import World
-from knowledge.catalog import Catalog
+from ctxsearch.agent import search as S
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import WorldStyle
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.catalog import Catalog
 
 MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
 EPISODE_TAG = 0xE915  # the episode stream of world i: (seed, i, EPISODE_TAG)

@@ -8,10 +8,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from envs.robot_spec import wrap_angle
-from knowledge import geometry
-from knowledge.catalog import Catalog
-from knowledge.geometry import Box, ObjectInstance
+from ctxsearch.envs.robot_spec import wrap_angle
+from ctxsearch.knowledge import geometry
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 
 def relation_boxes(catalog: Catalog, obj: ObjectInstance) -> list[Box]:

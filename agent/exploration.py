@@ -9,11 +9,11 @@ from typing import Protocol
 
 import numpy as np
 
-from agent import strategies as strat
-from agent.grid_costs import GridCosts
-from agent.interfaces import Body
-from agent.navigation import OccupancyGrid, nearest_free
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent import strategies as strat
+from ctxsearch.agent.grid_costs import GridCosts
+from ctxsearch.agent.interfaces import Body
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 LOOK_TILT = -0.35  # rad: the look-around tilt (sees the floor from about 1 m out and desk tops)
 LOOK_PANS_DEG = (-150.0, -90.0, -30.0, 30.0, 90.0, 150.0)  # a 360 degree sweep in six images

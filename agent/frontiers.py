@@ -36,14 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from agent import strategies as strat
-from agent.exploration import LOOK_PANS_DEG, LOOK_TILT, ExploringRoom
-from agent.grid_costs import GridCosts
-from agent.interfaces import Body
-from agent.mapping import BuiltMap
-from agent.navigation import OccupancyGrid, plan_path
-from envs.robot_spec import TimeModel
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent import strategies as strat
+from ctxsearch.agent.exploration import LOOK_PANS_DEG, LOOK_TILT, ExploringRoom
+from ctxsearch.agent.grid_costs import GridCosts
+from ctxsearch.agent.interfaces import Body
+from ctxsearch.agent.mapping import BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid, plan_path
+from ctxsearch.envs.robot_spec import TimeModel
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 NEAR_TILT = -1.0  # rad: the second look-around tilt (the floor near the robot)
 FRONTIER_RULES = ("nearest", "info")

@@ -8,9 +8,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agent.navigation import OccupancyGrid
-from envs.robot_spec import RobotPose, TimeModel
-from knowledge.geometry import Box, ObjectInstance
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.robot_spec import RobotPose, TimeModel
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 
 class GridCosts:

@@ -1,6 +1,6 @@
 """The search task as a Gymnasium environment: ``ctxsearch/ObjectSearch-v0``.
 
-``import agent.gym_env`` registers it; then ::
+``import ctxsearch.agent.gym_env`` registers it; then ::
 
     env = gymnasium.make("ctxsearch/ObjectSearch-v0", style="office", detector="perfect",
                          kb="build/kb_office.sqlite", width=64, height=48)
@@ -58,23 +58,23 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from agent import search as S
-from agent.episode_draw import draw_world
-from agent.navigation import OccupancyGrid
-from agent.perception_modes import DEFAULT_DETECTOR
-from envs.camera import Frame
-from envs.detector import Detection, DetectorModel, SimDetector, default_or_named
-from envs.floorplan import generate_layout
-from envs.houses import WorldStyle, resolve_style
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
-from envs.task import CAMERA_SIZE, check_camera_size
-from envs.world import World
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
-from knowledge.ranking import KBProbabilities, candidate_volumes
+from ctxsearch.agent import search as S
+from ctxsearch.agent.episode_draw import draw_world
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
+from ctxsearch.envs.camera import Frame
+from ctxsearch.envs.detector import Detection, DetectorModel, SimDetector, default_or_named
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import WorldStyle, resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel, wrap_angle
+from ctxsearch.envs.task import CAMERA_SIZE, check_camera_size
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.ranking import KBProbabilities, candidate_volumes
 
 ENV_ID = "ctxsearch/ObjectSearch-v0"
 ACTIONS = (
@@ -370,7 +370,7 @@ def register() -> None:
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(
             id=ENV_ID,
-            entry_point="agent.gym_env:ObjectSearchEnv",
+            entry_point="ctxsearch.agent.gym_env:ObjectSearchEnv",
             max_episode_steps=MAX_EPISODE_STEPS,
         )
 

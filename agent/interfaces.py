@@ -15,10 +15,10 @@ from typing import Protocol
 
 import numpy as np
 
-from envs.camera import Frame
-from envs.detector import Detection
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.geometry import ObjectInstance
+from ctxsearch.envs.camera import Frame
+from ctxsearch.envs.detector import Detection
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 
 class Body(Protocol):

@@ -6,19 +6,19 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Protocol
 
-from agent.exam_volumes import relation_boxes
-from agent.interfaces import Body, Perception
-from agent.recording import Recorder, Shot
-from agent.rr_layout import LEARN_APP, learn_blueprint
-from agent.run_state import ExamResult, Run
-from agent.strategies import Choice
-from agent.viewplan import Gaze
-from envs.camera import Frame, camera_at
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent.exam_volumes import relation_boxes
+from ctxsearch.agent.interfaces import Body, Perception
+from ctxsearch.agent.recording import Recorder, Shot
+from ctxsearch.agent.rr_layout import LEARN_APP, learn_blueprint
+from ctxsearch.agent.run_state import ExamResult, Run
+from ctxsearch.agent.strategies import Choice
+from ctxsearch.agent.viewplan import Gaze
+from ctxsearch.envs.camera import Frame, camera_at
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 
 class LoggedRoom(Protocol):

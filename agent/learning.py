@@ -31,14 +31,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from agent import strategies as strat
-from agent.acquisition import RoomLearner
-from agent.frontiers import FRONTIER_RULES
-from agent.learn_log import RunLog
-from agent.mapping import MAP_MODES, default_map_mode
-from agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
-from agent.resume import RunHistory
-from agent.run_state import (
+from ctxsearch.agent import strategies as strat
+from ctxsearch.agent.acquisition import RoomLearner
+from ctxsearch.agent.frontiers import FRONTIER_RULES
+from ctxsearch.agent.learn_log import RunLog
+from ctxsearch.agent.mapping import MAP_MODES, default_map_mode
+from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
+from ctxsearch.agent.resume import RunHistory
+from ctxsearch.agent.run_state import (
     DEFAULT_REEXAMINE_RATE,
     REEXAMINE_POLICIES,
     ROOM_DONE,
@@ -48,16 +48,16 @@ from agent.run_state import (
     PerceptionFactory,
     Run,
 )
-from envs.detector import DetectorModel, default_or_named
-from envs.floorplan import generate_layout
-from envs.houses import resolve_style
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.drift import Forgetting
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
+from ctxsearch.envs.detector import DetectorModel, default_or_named
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.drift import Forgetting
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
 
 ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
 # (room index, room seed[, day]) -> layout; the day (>= 1) only in runs over several days

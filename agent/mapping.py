@@ -38,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from agent.navigation import OccupancyGrid
-from envs.camera import NEAR_CLIP, Frame, PinholeCamera
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.camera import NEAR_CLIP, Frame, PinholeCamera
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 
 MAP_MODES = ("given", "built")
 FLOOR_EPS = 0.005  # m: depth points below this height are floor (a pen lying there is not)

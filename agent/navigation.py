@@ -50,11 +50,11 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from agent.interfaces import Body
-from envs.floorplan import wall_obstacles
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec
-from knowledge.geometry import Box
+from ctxsearch.agent.interfaces import Body
+from ctxsearch.envs.floorplan import wall_obstacles
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.knowledge.geometry import Box
 
 _SQRT2 = math.sqrt(2.0)
 SEARCH_CACHE_SIZE = 16  # Dijkstra results kept per grid (least recently used dropped first)

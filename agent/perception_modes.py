@@ -19,15 +19,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from agent.interfaces import Perception
-from envs.camera import Frame, camera_axes, half_fov_tangents, in_frustum
-from envs.detector import Detection, DetectorModel, SimDetector, load_detector
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
-from knowledge import geometry
-from knowledge.catalog import Catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent.interfaces import Perception
+from ctxsearch.envs.camera import Frame, camera_axes, half_fov_tangents, in_frustum
+from ctxsearch.envs.detector import Detection, DetectorModel, SimDetector, load_detector
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from ctxsearch.knowledge import geometry
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 PERCEPTION_MODES = ("camera", "oracle")
 DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors)
@@ -281,7 +281,7 @@ class CameraPerception:
     ):
         # Imported here: MuJoCo and dm_control add about 0.3 s to the start of every run (measured:
         # `import envs.world` 1.1 s against 0.8 s for numpy and scipy), which oracle runs never use.
-        from envs.world import World
+        from ctxsearch.envs.world import World
 
         self.layout, self.catalog, self.spec, self.rgb = layout, catalog, spec, rgb
         self.body = World(

@@ -46,13 +46,13 @@ from typing import Any
 
 import numpy as np
 
-from envs.camera import Frame, PinholeCamera, intrinsics
-from envs.floorplan import wall_boxes as house_wall_boxes
-from envs.layout import RoomLayout
-from envs.parts import world_parts
-from envs.robot_spec import RobotPose, RobotSpec
-from knowledge.catalog import Catalog
-from knowledge.geometry import Box
+from ctxsearch.envs.camera import Frame, PinholeCamera, intrinsics
+from ctxsearch.envs.floorplan import wall_boxes as house_wall_boxes
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.parts import world_parts
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.geometry import Box
 
 WALL_THICKNESS = 0.1  # m, drawn outside the room's boundary
 RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])

@@ -15,15 +15,15 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from agent.interfaces import WrappedBody
-from agent.run_state import ROOM_DONE, StoredExam
-from agent.strategies import Strategy
-from envs.layout import RoomLayout
-from knowledge.base import KnowledgeBase
-from knowledge.drift import DayEvidence
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
-from knowledge.store import EvidenceStore, Examination
+from ctxsearch.agent.interfaces import WrappedBody
+from ctxsearch.agent.run_state import ROOM_DONE, StoredExam
+from ctxsearch.agent.strategies import Strategy
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.drift import DayEvidence
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.store import EvidenceStore, Examination
 
 
 @dataclass

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from envs.layout import RoomLayout
+from ctxsearch.envs.layout import RoomLayout
 
 # Application ids: the viewer remembers a layout per application, so each kind has its own.
 LEARN_APP = "ctxsearch-learn"

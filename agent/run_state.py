@@ -11,17 +11,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.interfaces import Perception
-from agent.perception_modes import Sensing, make_perception
-from agent.strategies import Choice, Strategy
-from envs.detector import DetectorModel
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog
-from knowledge.drift import DayEvidence, Forgetting
-from knowledge.geometry import ObjectInstance
-from knowledge.store import EvidenceStore
+from ctxsearch.agent.interfaces import Perception
+from ctxsearch.agent.perception_modes import Sensing, make_perception
+from ctxsearch.agent.strategies import Choice, Strategy
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.drift import DayEvidence, Forgetting
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.store import EvidenceStore
 
 ROOM_DONE = "done"
 ROOM_STARTED = "started"

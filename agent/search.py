@@ -102,16 +102,16 @@ from typing import ClassVar
 
 import numpy as np
 
-from agent import search_explore as sx
-from agent import search_space as ss
-from agent.frontiers import NEAR_TILT
-from agent.interfaces import Body, WrappedBody
-from agent.mapping import MAP_MODES, BuiltMap
-from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from agent.recording import Recorder
-from agent.viewplan import Gaze, GazePlanOptions, aim, face_gaze, plan_gazes
-from envs.camera import Frame, frustum_mask, half_fov_tangents
-from envs.detector import (
+from ctxsearch.agent import search_explore as sx
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.frontiers import NEAR_TILT
+from ctxsearch.agent.interfaces import Body, WrappedBody
+from ctxsearch.agent.mapping import MAP_MODES, BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free, plan_path
+from ctxsearch.agent.recording import Recorder
+from ctxsearch.agent.viewplan import Gaze, GazePlanOptions, aim, face_gaze, plan_gazes
+from ctxsearch.envs.camera import Frame, frustum_mask, half_fov_tangents
+from ctxsearch.envs.detector import (
     Detection,
     DetectorModel,
     SimDetector,
@@ -120,16 +120,16 @@ from envs.detector import (
     load_detector,
     ray_scale,
 )
-from envs.floorplan import visible_rooms
-from envs.houses import WorldStyle
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
-from envs.truth import ground_truth, load_truth
-from knowledge.catalog import Catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance, relation_volume
-from knowledge.pooling import PooledCounts
-from knowledge.store import EvidenceStore
+from ctxsearch.envs.floorplan import visible_rooms
+from ctxsearch.envs.houses import WorldStyle
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from ctxsearch.envs.truth import ground_truth, load_truth
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
+from ctxsearch.knowledge.pooling import PooledCounts
+from ctxsearch.knowledge.store import EvidenceStore
 
 DEFAULT_BUDGET_S = 300.0
 HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash

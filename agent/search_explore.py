@@ -35,12 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent import search_space as ss
-from agent.mapping import BuiltMap
-from agent.navigation import OccupancyGrid
-from envs.robot_spec import RobotSpec, TimeModel
-from knowledge.catalog import Catalog
-from knowledge.geometry import ObjectInstance, relation_volume
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.mapping import BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
 
 RAY_COUNT = 120
 COARSE = ss.LATTICE_XY  # m: the visibility cells (the seen map's lattice spacing)

@@ -65,18 +65,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
-from agent.navigation import OccupancyGrid, nearest_free
-from agent.viewplan import facing_for
-from envs.camera import PinholeCamera, focal_length, frustum_mask
-from envs.detector import min_pixels_at
-from envs.layout import RoomLayout
-from envs.parts import world_parts_array
-from envs.robot_spec import RobotSpec, TimeModel, wrap_angle
-from knowledge.catalog import Catalog, ObjectType
-from knowledge.geometry import Box, ObjectInstance, relation_volume
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
+from ctxsearch.agent.viewplan import facing_for
+from ctxsearch.envs.camera import PinholeCamera, focal_length, frustum_mask
+from ctxsearch.envs.detector import min_pixels_at
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.parts import world_parts_array
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel, wrap_angle
+from ctxsearch.knowledge.catalog import Catalog, ObjectType
+from ctxsearch.knowledge.geometry import Box, ObjectInstance, relation_volume
 
 # The probability sources live in knowledge.ranking (one place); re-exported for the policies.
-from knowledge.ranking import (  # noqa: F401
+from ctxsearch.knowledge.ranking import (  # noqa: F401
     DEFAULT_ESTIMATE,
     DEFAULT_MIN_EVIDENCE,
     DEFAULT_RANK,

@@ -33,12 +33,12 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from envs.robot_spec import RobotPose, TimeModel
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
-from knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.envs.robot_spec import RobotPose, TimeModel
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 
 Candidates = Mapping[str, Sequence[ObjectInstance]]
 

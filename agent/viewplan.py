@@ -33,12 +33,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from agent.interfaces import Body
-from agent.navigation import OccupancyGrid, nearest_free, plan_path
-from envs.camera import Frame, PinholeCamera, frustum_masks, half_fov_tangents
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle, wrap_angles
-from knowledge.catalog import RelationSpec
-from knowledge.geometry import Box, ObjectInstance
+from ctxsearch.agent.interfaces import Body
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free, plan_path
+from ctxsearch.envs.camera import Frame, PinholeCamera, frustum_masks, half_fov_tangents
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle, wrap_angles
+from ctxsearch.knowledge.catalog import RelationSpec
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 
 # --------------------------------------------------------------------------- sampling

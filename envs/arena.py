@@ -27,8 +27,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first 
 
 from dm_control import composer, mjcf
 
-from envs.floorplan import wall_boxes as house_wall_boxes
-from envs.layout import RoomLayout
+from ctxsearch.envs.floorplan import wall_boxes as house_wall_boxes
+from ctxsearch.envs.layout import RoomLayout
 
 ROOM_GEOM_GROUP = 0
 OVERHEAD_GEOM_GROUP = 3

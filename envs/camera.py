@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 
 NEAR_CLIP = 0.05  # m: points closer to the camera than this (along the optical axis) are unseen
 

@@ -43,11 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
-from envs.camera import Frame, PinholeCamera, focal_length
-from envs.layout import RoomLayout
-from knowledge.catalog import ASSETS_DIR, Catalog, ObjectType, asset_file
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
+from ctxsearch.envs.camera import Frame, PinholeCamera, focal_length
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, ObjectType, asset_file
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 DETECTORS_DIR = ASSETS_DIR / "detectors"
 REFERENCE_PIXELS = 320 * 240  # the resolution the catalog's min_pixels refers to

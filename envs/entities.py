@@ -18,10 +18,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first 
 import numpy as np
 from dm_control import composer, mjcf
 
-from envs.layout import RoomLayout
-from envs.parts import solid_parts
-from knowledge.catalog import Catalog, ObjectType
-from knowledge.geometry import ObjectInstance
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.parts import solid_parts
+from ctxsearch.knowledge.catalog import Catalog, ObjectType
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 OBJECT_GEOM_GROUP = 1
 

@@ -34,13 +34,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from envs.houses import CORRIDOR, HouseError, HouseStyle, WorldStyle
-from envs.layout import Door, Passage, Room, RoomLayout
-from envs.robot_spec import RobotSpec, wrap_angle
-from envs.rooms import RoomShell, generate_room
-from envs.styles import Style
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.geometry import Box, ObjectInstance
+from ctxsearch.envs.houses import CORRIDOR, HouseError, HouseStyle, WorldStyle
+from ctxsearch.envs.layout import Door, Passage, Room, RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec, wrap_angle
+from ctxsearch.envs.rooms import RoomShell, generate_room
+from ctxsearch.envs.styles import Style
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 WALL = 0.1  # m, wall thickness (the arena's WALL_THICKNESS)
 DOOR_MARGIN = 0.35  # m kept between a door's edge and the corner of either room it joins

@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from envs.camera import half_fov_tangents, in_frustum
-from envs.floorplan import visible_rooms
-from envs.layout import RoomLayout
+from ctxsearch.envs.camera import half_fov_tangents, in_frustum
+from ctxsearch.envs.floorplan import visible_rooms
+from ctxsearch.envs.layout import RoomLayout
 
 MARGIN = 0.05  # m added to every bounding sphere
 

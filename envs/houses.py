@@ -13,7 +13,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from envs.styles import (
+from ctxsearch.envs.styles import (
     STYLES_DIR,
     Style,
     StyleError,
@@ -21,7 +21,7 @@ from envs.styles import (
     load_style,
     range_field,
 )
-from knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
+from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
 
 HOUSES_DIR = ASSETS_DIR / "houses"
 TOP_FIELDS = {"name", "description", "house", "rooms"}

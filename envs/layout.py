@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 
 @dataclass(frozen=True)

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from knowledge.catalog import SHAPES, Catalog, load_catalog
-from knowledge.geometry import Box, BoxArray, ObjectInstance
+from ctxsearch.knowledge.catalog import SHAPES, Catalog, load_catalog
+from ctxsearch.knowledge.geometry import Box, BoxArray, ObjectInstance
 
 Vec3 = tuple[float, float, float]
 

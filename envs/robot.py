@@ -29,7 +29,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first 
 import numpy as np
 from dm_control import composer, mjcf
 
-from envs.robot_spec import RobotPose, RobotSpec, wrap_angle
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, wrap_angle
 
 ROBOT_GEOM_GROUP = 2  # hidden from the head camera
 JOINTS = ("x", "y", "yaw", "pan", "tilt")  # qpos order of the robot (and of its actuators)

@@ -37,12 +37,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from envs.layout import Door, RoomLayout
-from envs.parts import WorldSurface, world_parts_array, world_surfaces
-from envs.robot_spec import RobotSpec, wrap_angle
-from envs.styles import Rule, Style
-from knowledge.catalog import Catalog, ObjectType, load_catalog
-from knowledge.geometry import (
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.parts import WorldSurface, world_parts_array, world_surfaces
+from ctxsearch.envs.robot_spec import RobotSpec, wrap_angle
+from ctxsearch.envs.styles import Rule, Style
+from ctxsearch.knowledge.catalog import Catalog, ObjectType, load_catalog
+from ctxsearch.knowledge.geometry import (
     EPS,
     Box,
     BoxArray,

@@ -14,9 +14,9 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from envs.robot_spec import RobotSpec
-from knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
-from knowledge.errors import CtxsearchError
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 
 STYLES_DIR = ASSETS_DIR / "styles"
 TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter", "drift"}

@@ -25,16 +25,16 @@ from dm_control import composer, mjcf
 from dm_control.composer.observation import observable
 from dm_control.mujoco.wrapper import core
 
-from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, PHYSICS_TIMESTEP, RoomArena
-from envs.entities import RoomObjects
-from envs.floorplan import generate_layout
-from envs.houses import resolve_style
-from envs.layout import RoomLayout
-from envs.robot import ROBOT_GEOM_GROUP, Robot
-from envs.robot_spec import RobotPose, RobotSpec
-from envs.rooms import door_entry
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
+from ctxsearch.envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, PHYSICS_TIMESTEP, RoomArena
+from ctxsearch.envs.entities import RoomObjects
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot import ROBOT_GEOM_GROUP, Robot
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.envs.rooms import door_entry
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 
 CONTROL_TIMESTEP = 0.05  # s, composer.Environment's agent step (5 physics steps)
 CAMERA_SIZE = (320, 240)  # the head camera observables' default (width, height), as World's

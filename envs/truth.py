@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from envs.floorplan import generate_layout
-from envs.houses import HouseStyle, resolve_style
-from envs.layout import RoomLayout
-from envs.styles import Style
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance, related
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import HouseStyle, resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.styles import Style
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance, related
 
 
 def room_counts(

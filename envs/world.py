@@ -34,15 +34,15 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
-from envs.camera import Frame, PinholeCamera
-from envs.house_view import RoomCulling
-from envs.layout import RoomLayout
-from envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
-from envs.task import RoomTask
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
+from ctxsearch.envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICKNESS
+from ctxsearch.envs.camera import Frame, PinholeCamera
+from ctxsearch.envs.house_view import RoomCulling
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
+from ctxsearch.envs.task import RoomTask
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 
 log = logging.getLogger(__name__)
 

@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from knowledge import intervals
-from knowledge.catalog import Catalog
-from knowledge.clustered import ClusteredIntervals
-from knowledge.errors import CtxsearchError
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.clustered import ClusteredIntervals
+from ctxsearch.knowledge.errors import CtxsearchError
 
 # (y, n, alpha) -> per-pair score, vectorised like intervals.impact.
 ScoreFn = Callable[..., np.ndarray]

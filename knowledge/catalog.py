@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from knowledge.errors import CatalogError
-from knowledge.hierarchy import Hierarchy, parse_hierarchy
+from ctxsearch.knowledge.errors import CatalogError
+from ctxsearch.knowledge.hierarchy import Hierarchy, parse_hierarchy
 
 ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_CATALOG = ASSETS_DIR / "types.toml"

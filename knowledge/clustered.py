@@ -49,7 +49,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from knowledge import intervals
+from ctxsearch.knowledge import intervals
 
 INTERVAL_METHODS = ("wilson", "clustered")
 

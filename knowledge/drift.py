@@ -35,8 +35,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from knowledge import intervals
-from knowledge.base import IntervalRow, KnowledgeBase
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import IntervalRow, KnowledgeBase
 
 FORGET_METHODS = ("none", "half-life", "detect")
 DEFAULT_HALF_LIFE = 7.0  # days

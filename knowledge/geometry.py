@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from knowledge.catalog import Catalog, RelationSpec
+from ctxsearch.knowledge.catalog import Catalog, RelationSpec
 
 EPS = 1e-3  # metres: overlaps thinner than this count as touching, not overlapping
 

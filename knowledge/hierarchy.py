@@ -27,7 +27,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from knowledge.errors import CatalogError
+from ctxsearch.knowledge.errors import CatalogError
 
 CLASS_FIELDS = {"name", "parent", "types", "relations", "maps"}
 _NAME_RE = re.compile(r"^[A-Z][A-Za-z0-9]*$")

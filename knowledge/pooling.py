@@ -32,11 +32,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from knowledge import intervals
-from knowledge.base import IntervalRow, KnowledgeBase
-from knowledge.catalog import Catalog
-from knowledge.hierarchy import Hierarchy
-from knowledge.store import EvidenceStore
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import IntervalRow, KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.hierarchy import Hierarchy
+from ctxsearch.knowledge.store import EvidenceStore
 
 KAPPA_MAX = 50.0  # at most this many pseudo-examinations are borrowed from a class
 # rho where no class has two members with evidence: kappa = 1, a single pseudo-examination.

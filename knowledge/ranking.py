@@ -19,12 +19,12 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import Box, ObjectInstance, relation_volume
-from knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import Box, ObjectInstance, relation_volume
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 
 RANK_MODES = ("low", "p0", "high")
 # The lower bound was best or tied on three stores of different sizes (measured; README, Search).

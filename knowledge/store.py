@@ -71,16 +71,16 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog
-from knowledge.clustered import (
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.clustered import (
     INTERVAL_METHODS,
     ClusteredIntervals,
     RoomCounts,
     room_counts_from_rows,
 )
-from knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 
 SCHEMA_VERSION = 4
 APP = "ctxsearch"

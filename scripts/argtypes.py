@@ -179,7 +179,7 @@ def add_forget_arguments(p: argparse.ArgumentParser) -> None:
 
 def forgetting(args: argparse.Namespace):
     """The knowledge.drift.Forgetting of ``add_forget_arguments``'s options."""
-    from knowledge.drift import Forgetting
+    from ctxsearch.knowledge.drift import Forgetting
 
     return Forgetting(args.forget, args.half_life, args.false_alarm)
 

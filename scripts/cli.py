@@ -16,25 +16,25 @@ import importlib
 import os
 import sys
 
-from knowledge.errors import CtxsearchError, printable
+from ctxsearch.knowledge.errors import CtxsearchError, printable
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
-    "scripts.cmd_kb",
-    "scripts.cmd_room",
-    "scripts.cmd_truth",
-    "scripts.cmd_learn",
-    "scripts.cmd_search",
-    "scripts.cmd_demo",
+    "ctxsearch.scripts.cmd_kb",
+    "ctxsearch.scripts.cmd_room",
+    "ctxsearch.scripts.cmd_truth",
+    "ctxsearch.scripts.cmd_learn",
+    "ctxsearch.scripts.cmd_search",
+    "ctxsearch.scripts.cmd_demo",
 ]
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
 BENCH_MODULES = [
-    "scripts.cmd_kb",
-    "scripts.cmd_sim",
-    "scripts.cmd_learn",
-    "scripts.cmd_search",
-    "scripts.cmd_hierarchy",
-    "scripts.cmd_context",
+    "ctxsearch.scripts.cmd_kb",
+    "ctxsearch.scripts.cmd_sim",
+    "ctxsearch.scripts.cmd_learn",
+    "ctxsearch.scripts.cmd_search",
+    "ctxsearch.scripts.cmd_hierarchy",
+    "ctxsearch.scripts.cmd_context",
 ]
 
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-from knowledge.errors import CtxsearchError
-from scripts import argtypes
-from scripts.cmd_search import add_budget_argument
-from scripts.sweep import add_sweep_arguments
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.cmd_search import add_budget_argument
+from ctxsearch.scripts.sweep import add_sweep_arguments
 
 # Copies of scripts.experiments.scenarios.DEFAULT_SCENARIOS' policies, so that building the
 # parser does not import the search stack; tests/test_bench_curve.py checks they agree.
@@ -20,7 +20,7 @@ SCENARIO_POLICIES = {
 
 def parse_room_marks(text: str) -> tuple[int, ...]:
     """``--rooms 0,1,3,10``: strictly increasing counts >= 0 (one-line errors)."""
-    from scripts.experiments.bench_curve import check_rooms
+    from ctxsearch.scripts.experiments.bench_curve import check_rooms
 
     parts = [x.strip() for x in text.split(",")]
     try:
@@ -138,14 +138,14 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 
 def _scenarios(args: argparse.Namespace):
-    from scripts.experiments.scenarios import parse_scenarios
+    from ctxsearch.scripts.experiments.scenarios import parse_scenarios
 
     overrides = {"built": args.built_policies, "given": args.given_policies}
     return parse_scenarios(args.scenarios, overrides)
 
 
 def _search_base(args: argparse.Namespace, style: str, **extra):
-    from scripts.experiments.bench_search import SearchBenchConfig
+    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig
 
     return SearchBenchConfig(
         style=style,
@@ -172,8 +172,8 @@ def run_curve(args: argparse.Namespace) -> int:
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from pathlib import Path
 
-    from scripts.experiments.bench_curve import CurveConfig, bench_curve
-    from scripts.sweep import SweepOptions
+    from ctxsearch.scripts.experiments.bench_curve import CurveConfig, bench_curve
+    from ctxsearch.scripts.sweep import SweepOptions
 
     marks = parse_room_marks(args.rooms)
     truth = Path(args.truth) if args.truth else None
@@ -192,8 +192,8 @@ def run_curve(args: argparse.Namespace) -> int:
 def run_transfer(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench transfer``."""
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from scripts.experiments.bench_transfer import TransferConfig, bench_transfer
-    from scripts.sweep import SweepOptions
+    from ctxsearch.scripts.experiments.bench_transfer import TransferConfig, bench_transfer
+    from ctxsearch.scripts.sweep import SweepOptions
 
     try:
         rooms = argtypes.positive_int(args.rooms)

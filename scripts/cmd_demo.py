@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scripts import argtypes
+from ctxsearch.scripts import argtypes
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch demo``."""
     # Imported here: the demo pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from scripts.experiments.demo import DemoConfig, run_demo
+    from ctxsearch.scripts.experiments.demo import DemoConfig, run_demo
 
     config = DemoConfig(
         out=args.out,

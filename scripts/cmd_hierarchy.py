@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from scripts import argtypes
+from ctxsearch.scripts import argtypes
 
 DEFAULT_KS = "0,1,3,5,10"
 
@@ -72,7 +72,7 @@ def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench hierarchy``."""
     # Imported here: the benchmark pulls in MuJoCo and the search stack, which `--help` must not
     # wait for.
-    from scripts.experiments.bench_hierarchy import HierarchyBenchConfig, bench_hierarchy
+    from ctxsearch.scripts.experiments.bench_hierarchy import HierarchyBenchConfig, bench_hierarchy
 
     config = HierarchyBenchConfig(
         style=args.style,

@@ -10,12 +10,12 @@ import sys
 import textwrap
 from pathlib import Path
 
-from knowledge.catalog import load_catalog
-from knowledge.drift import ForgetKnowledgeBase, evidence_of
-from knowledge.errors import CatalogError, CtxsearchError, StoreError
-from knowledge.pooling import PooledCounts, interval_rows
-from knowledge.store import EvidenceStore, merge_stores
-from scripts import argtypes
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
+from ctxsearch.knowledge.errors import CatalogError, CtxsearchError, StoreError
+from ctxsearch.knowledge.pooling import PooledCounts, interval_rows
+from ctxsearch.knowledge.store import EvidenceStore, merge_stores
+from ctxsearch.scripts import argtypes
 
 SHOW_EXAMPLES = """\
 examples:
@@ -445,7 +445,7 @@ def run_merge(args: argparse.Namespace) -> int:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench kb``."""
     # Imported here: the benchmark pulls in matplotlib, which `kb show` must not wait for.
-    from scripts.experiments import bench_kb as bench
+    from ctxsearch.scripts.experiments import bench_kb as bench
 
     sizes = args.sizes or bench.DEFAULT_SIZES
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.strategies import STRATEGIES, make_strategy
-from knowledge.errors import CtxsearchError
-from scripts import argtypes
-from scripts.sweep import SweepOptions, add_sweep_arguments
+from ctxsearch.agent.strategies import STRATEGIES, make_strategy
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
 ROOM_BUDGET_HELP = (
     "simulated seconds the robot may spend in each room: when they are spent it leaves the room "
@@ -170,8 +170,8 @@ def _add_day_args(p: argparse.ArgumentParser) -> None:
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
     # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from agent.learning import LearnConfig, learn
-    from agent.run_state import DEFAULT_REEXAMINE_RATE
+    from ctxsearch.agent.learning import LearnConfig, learn
+    from ctxsearch.agent.run_state import DEFAULT_REEXAMINE_RATE
 
     rate = DEFAULT_REEXAMINE_RATE if args.reexamine_rate is None else args.reexamine_rate
     s = learn(
@@ -213,8 +213,8 @@ def run_learn(args: argparse.Namespace) -> int:
 
 def _mean_width(kb_path: Path, interval: str) -> float:
     """The store's mean interval width read with ``interval``."""
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.knowledge.store import EvidenceStore
 
     with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
         return store.knowledge_base(interval=interval).mean_width()
@@ -222,9 +222,9 @@ def _mean_width(kb_path: Path, interval: str) -> float:
 
 def _forget_width(kb_path: Path, run: str, forgetting) -> float:
     """The run's mean interval width on its last day, read with ``forgetting``."""
-    from knowledge.catalog import load_catalog
-    from knowledge.drift import ForgetKnowledgeBase, evidence_of
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
+    from ctxsearch.knowledge.store import EvidenceStore
 
     with EvidenceStore.open(kb_path, load_catalog(), read_only=True) as store:
         ev = evidence_of(store.examinations(run))
@@ -354,8 +354,8 @@ def register_drift(bench_sub: argparse._SubParsersAction) -> None:
 def run_drift(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench drift``."""
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from knowledge.catalog import load_catalog
-    from scripts.experiments.bench_drift import (
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.scripts.experiments.bench_drift import (
         DriftBenchConfig,
         bench_drift,
         drifting_style,
@@ -414,7 +414,7 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
 def run_intervals(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench intervals``."""
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from scripts.experiments.bench_intervals import (
+    from ctxsearch.scripts.experiments.bench_intervals import (
         SETTINGS,
         IntervalsBenchConfig,
         bench_intervals,
@@ -449,7 +449,7 @@ def run_intervals(args: argparse.Namespace) -> int:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench learning``."""
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from scripts.experiments.bench_learning import LearningBenchConfig, bench_learning
+    from ctxsearch.scripts.experiments.bench_learning import LearningBenchConfig, bench_learning
 
     names = [s.strip() for s in args.strategies.split(",") if s.strip()]
     if not names:

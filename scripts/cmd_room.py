@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scripts import argtypes
+from ctxsearch.scripts import argtypes
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch room``."""
     # Imported here: the room views pull in MuJoCo and OpenCV, which `--help` must not wait for.
-    from scripts.room_views import RoomViewConfig, show_room
+    from ctxsearch.scripts.room_views import RoomViewConfig, show_room
 
     config = RoomViewConfig(
         style=args.style,

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from knowledge.errors import CtxsearchError
-from scripts import argtypes
-from scripts.sweep import add_sweep_arguments
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.sweep import add_sweep_arguments
 
 # Copies of agent.search.POLICIES' names, agent.search.DEFAULT_BUDGET_S and agent.search_space's
 # RANK_MODES / DEFAULT_RANK, so building the parser (``ctxsearch --help``, ``kb show``) does not
@@ -144,8 +144,8 @@ def map_of(args: argparse.Namespace) -> str:
     """The map scenario: ``--map``, else the style's default (episodes.default_map)."""
     if args.map is not None:
         return args.map
-    from envs.houses import resolve_style
-    from scripts.experiments.episodes import default_map
+    from ctxsearch.envs.houses import resolve_style
+    from ctxsearch.scripts.experiments.episodes import default_map
 
     return default_map(resolve_style(args.style))
 
@@ -171,9 +171,9 @@ def _config_fields(args: argparse.Namespace) -> dict:
 def _forgetting_knowledge(args: argparse.Namespace):
     """The store at --kb read with --forget on its last day (knowledge.drift), and the room seeds
     it learned in (held out of the search)."""
-    from knowledge.catalog import load_catalog
-    from knowledge.drift import ForgetKnowledgeBase, evidence_of
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
+    from ctxsearch.knowledge.store import EvidenceStore
 
     if args.interval != "wilson":
         raise CtxsearchError(
@@ -193,8 +193,8 @@ def _forgetting_knowledge(args: argparse.Namespace):
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
-    from knowledge.catalog import load_catalog
-    from scripts.experiments.episodes import SearchConfig, search_once
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.scripts.experiments.episodes import SearchConfig, search_once
 
     fields = _config_fields(args)
     policy = args.policy or DEFAULT_POLICY[fields["map"]]
@@ -276,9 +276,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
-    from agent.search import parse_policies
-    from scripts.experiments.bench_search import SearchBenchConfig, bench_search
-    from scripts.sweep import SweepOptions
+    from ctxsearch.agent.search import parse_policies
+    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    from ctxsearch.scripts.sweep import SweepOptions
 
     fields = _config_fields(args)
     names = parse_policies(args.policies or DEFAULT_POLICIES[fields["map"]])

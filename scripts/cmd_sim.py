@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from scripts import argtypes
+from ctxsearch.scripts import argtypes
 
 
 def register_bench(sub: argparse._SubParsersAction) -> None:
@@ -53,7 +53,7 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench sim``."""
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
-    from scripts.experiments.bench_sim import format_table, run
+    from ctxsearch.scripts.experiments.bench_sim import format_table, run
 
     results = run(
         args.out,

@@ -10,10 +10,10 @@ import sys
 import time
 from pathlib import Path
 
-from envs.houses import resolve_style
-from knowledge.catalog import load_catalog
-from scripts import argtypes
-from scripts.sweep import SweepOptions, add_sweep_arguments, run_units
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments, run_units
 
 SEEDS_PER_UNIT = 10  # worlds per sweep unit (one unit: ~0.3 s for single rooms)
 
@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
     # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
-    from envs.truth import sample_counts, truth_document
+    from ctxsearch.envs.truth import sample_counts, truth_document
 
     catalog = load_catalog(args.catalog)
     style = resolve_style(args.style, catalog)

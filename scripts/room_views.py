@@ -11,21 +11,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from agent.navigation import OccupancyGrid, nearest_free
-from agent.recording import Recorder
-from agent.rr_layout import ROOM_APP, room_blueprint
-from agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
-from envs.arena import MAX_IMAGE_SIZE
-from envs.detector import SimDetector, default_or_named
-from envs.floorplan import generate_layout, layout_dict
-from envs.houses import resolve_style
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotPose
-from envs.world import World
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import relation_volume
-from scripts.overview_rooms import draw_room_labels
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
+from ctxsearch.agent.recording import Recorder
+from ctxsearch.agent.rr_layout import ROOM_APP, room_blueprint
+from ctxsearch.agent.viewplan import GazePlanOptions, execute_gaze, plan_gazes
+from ctxsearch.envs.arena import MAX_IMAGE_SIZE
+from ctxsearch.envs.detector import SimDetector, default_or_named
+from ctxsearch.envs.floorplan import generate_layout, layout_dict
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import relation_volume
+from ctxsearch.scripts.overview_rooms import draw_room_labels
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 

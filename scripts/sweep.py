@@ -20,8 +20,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
-from knowledge.errors import CtxsearchError
-from scripts import argtypes
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import argtypes
 
 U = TypeVar("U")
 R = TypeVar("R")

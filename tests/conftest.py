@@ -11,7 +11,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 import pytest  # noqa: E402
 
-from knowledge.catalog import Catalog, load_catalog  # noqa: E402
+from ctxsearch.knowledge.catalog import Catalog, load_catalog  # noqa: E402
 
 
 @pytest.fixture(scope="session")
@@ -23,7 +23,7 @@ def catalog() -> Catalog:
 @pytest.fixture(scope="session")
 def other_catalog() -> Catalog:
     """A tiny in-memory catalog whose fingerprint differs from the default one."""
-    from knowledge.catalog import ObjectType, RelationSpec
+    from ctxsearch.knowledge.catalog import ObjectType, RelationSpec
 
     u, v = (-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)
     return Catalog(
@@ -51,7 +51,7 @@ def other_catalog() -> Catalog:
 def desk_cup_store(catalog):
     """A factory: ``desk_cup_store(path, rooms)`` writes a store in which each of ``rooms``
     office rooms had one desk with a cup on top (run 't'), and returns ``path``."""
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.store import EvidenceStore
 
     def make(path, rooms: int = 5):
         with EvidenceStore.open(path, catalog, create=True) as s:

@@ -7,17 +7,17 @@ import math
 
 import pytest
 
-from agent import learning
-from agent.acquisition import start_pose
-from agent.exam_volumes import group_volumes, relation_boxes
-from agent.learning import LearnConfig, room_seed
-from agent.navigation import OccupancyGrid
-from agent.perception_modes import KinematicBody, OraclePerception
-from envs.layout import Door, RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.catalog import parse_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent import learning
+from ctxsearch.agent.acquisition import start_pose
+from ctxsearch.agent.exam_volumes import group_volumes, relation_boxes
+from ctxsearch.agent.learning import LearnConfig, room_seed
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.perception_modes import KinematicBody, OraclePerception
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.catalog import parse_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 
 def learn(*args, **kw):
@@ -176,7 +176,7 @@ def _learn(tmp_path, name="kb.sqlite", rooms=1, **kw):
 
 
 def _kb(path, cat):
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.store import EvidenceStore
 
     with EvidenceStore.open(path, cat, create=False) as st:
         return st.knowledge_base()
@@ -211,9 +211,9 @@ def test_hand_made_room_two_rooms_add_up(tmp_path):
 
 @pytest.mark.parametrize("strategy", ["random", "round-robin", "cost-hif"])
 def test_resume_gives_the_same_counts_as_an_uninterrupted_run(tmp_path, strategy):
-    from envs.rooms import generate_room
-    from envs.styles import load_style
-    from knowledge.catalog import load_catalog
+    from ctxsearch.envs.rooms import generate_room
+    from ctxsearch.envs.styles import load_style
+    from ctxsearch.knowledge.catalog import load_catalog
 
     cat = load_catalog()
     style = load_style("office", cat)
@@ -394,7 +394,7 @@ def test_camera_mode_on_the_hand_made_room_with_recording(tmp_path):
 def test_group_volumes_keeps_far_apart_volumes_apart():
     import numpy as np
 
-    from knowledge.geometry import Box
+    from ctxsearch.knowledge.geometry import Box
 
     a = Box(np.array([0.0, 0.0, 0.5]), 0.3, np.array([0.2, 0.2, 0.2]))
     b = Box(np.array([3.0, 0.0, 0.5]), 0.3, np.array([0.2, 0.2, 0.2]))
@@ -405,9 +405,9 @@ def test_group_volumes_keeps_far_apart_volumes_apart():
 
 # ------------------------------------------------------------------ limited time per room
 def _office_layouts():
-    from envs.rooms import generate_room
-    from envs.styles import load_style
-    from knowledge.catalog import load_catalog
+    from ctxsearch.envs.rooms import generate_room
+    from ctxsearch.envs.styles import load_style
+    from ctxsearch.knowledge.catalog import load_catalog
 
     cat = load_catalog()
     style = load_style("office", cat)
@@ -441,7 +441,7 @@ def _office_learn(path, cat, layouts, rooms=1, **kw):
 
 
 def _end_times(path, cat, run):
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.store import EvidenceStore
 
     with EvidenceStore.open(path, cat, create=False) as st:
         return [st.room_end_time(r, sty, seed) for r, sty, seed, _ in st.rooms(run)]
@@ -550,7 +550,7 @@ def test_resume_replays_an_object_that_could_not_be_examined(tmp_path):
 
 @pytest.mark.render
 def test_camera_mode_charges_the_given_time_model_and_robot(tmp_path):
-    from agent.perception_modes import CameraPerception
+    from ctxsearch.agent.perception_modes import CameraPerception
 
     cat = tiny_catalog()
     room = tiny_room(0)

@@ -7,8 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from knowledge.store import EvidenceStore
-from scripts.examples import real_robot_api
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.examples import real_robot_api
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,7 +30,7 @@ def test_example_learns_and_ranks(tmp_path, capsys):
 
 def test_example_imports_no_simulator():
     code = (
-        "import sys; from scripts.examples import real_robot_api as m; m.main([]); "
+        "import sys; from ctxsearch.scripts.examples import real_robot_api as m; m.main([]); "
         "bad = [k for k in ('mujoco', 'dm_control', 'rerun', 'cv2', 'agent', 'envs') "
         "if k in sys.modules]; assert not bad, bad"
     )

@@ -7,10 +7,10 @@ import itertools
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, ObjectType, RelationSpec
-from knowledge.errors import CtxsearchError
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, ObjectType, RelationSpec
+from ctxsearch.knowledge.errors import CtxsearchError
 
 _U = (-0.5, -0.5, -0.5)
 _V = (0.5, 0.5, 0.5)
@@ -272,7 +272,7 @@ def test_random_operations_match_a_dict_model():
 
 
 def test_fast_impact_equals_intervals_impact():
-    from knowledge.base import _impact_fixed_n
+    from ctxsearch.knowledge.base import _impact_fixed_n
 
     for alpha in (0.10, 0.05):
         for n in (0, 1, 2, 3, 7, 50, 999):
@@ -320,7 +320,7 @@ def test_add_count_arrays_sums_repeats_and_validates(cat):
 
 
 def test_more_than_65536_types():
-    from scripts.experiments.bench_kb import synthetic_catalog
+    from ctxsearch.scripts.experiments.bench_kb import synthetic_catalog
 
     cat = synthetic_catalog(70_000, relations_per_type=1)
     kb = KnowledgeBase(cat)

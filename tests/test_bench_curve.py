@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from knowledge.catalog import load_catalog
-from knowledge.store import EvidenceStore
-from scripts.cli import main
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.cli import main
 
 # The default scenarios' policies, named by the flags that choose them per scenario.
 POLICY_FLAGS = [
@@ -131,8 +131,8 @@ def test_curve_files_and_ratios(curve_dir):
 
 def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_store):
     """What lets the curve run the baseline and the asymptote only once."""
-    from scripts.experiments.bench_search import SearchBenchConfig, bench_search
-    from scripts.experiments.episodes import remembered_draws
+    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    from ctxsearch.scripts.experiments.episodes import remembered_draws
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     base = SearchBenchConfig(style="office", policies=("exhaustive", "location"), kb=kb,
@@ -215,14 +215,14 @@ def test_an_earlier_runs_stores_are_never_overwritten(curve_dir, transfer_dir, c
 
 
 def test_default_scenarios_match_the_cli_copy():
-    from scripts.cmd_context import SCENARIO_POLICIES
-    from scripts.experiments.scenarios import DEFAULT_SCENARIOS
+    from ctxsearch.scripts.cmd_context import SCENARIO_POLICIES
+    from ctxsearch.scripts.experiments.scenarios import DEFAULT_SCENARIOS
 
     assert {n: ",".join(s.policies) for n, s in DEFAULT_SCENARIOS.items()} == SCENARIO_POLICIES
 
 
 def test_paired_ratio_counts_wins_and_losses():
-    from scripts.experiments.scenarios import paired_ratio
+    from ctxsearch.scripts.experiments.scenarios import paired_ratio
 
     r = paired_ratio([1.0, 4.0, 3.0, 2.0], [2.0, 2.0, 3.0, 4.0], seed=0)
     assert r["median"] == pytest.approx(0.75) and (r["wins"], r["losses"]) == (2, 1)

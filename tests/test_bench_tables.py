@@ -18,7 +18,7 @@ def _rows(path) -> list[dict]:
 
 
 def test_bench_intervals_writes_per_seed_csv(tmp_path):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     out = tmp_path / "iv"
     args = ["bench", "intervals", "--styles", "office", "--rooms", "1", "--seeds", "2"]

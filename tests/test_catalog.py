@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog, relation_suffix
-from knowledge.errors import CatalogError, CtxsearchError
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog, relation_suffix
+from ctxsearch.knowledge.errors import CatalogError, CtxsearchError
 
 GOOD = """\
 schema = 1

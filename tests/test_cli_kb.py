@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.store import EvidenceStore
-from scripts.cli import main
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.cli import main
 
 
 def digest(path: Path) -> str:
@@ -250,8 +250,8 @@ def test_bench_kb_tiny(capsys, tmp_path):
 
 
 def test_bench_dense_and_sparse_agree():
-    from knowledge.base import KnowledgeBase
-    from scripts.experiments.bench_kb import DenseKB, fill_random, synthetic_catalog
+    from ctxsearch.knowledge.base import KnowledgeBase
+    from ctxsearch.scripts.experiments.bench_kb import DenseKB, fill_random, synthetic_catalog
 
     cat = synthetic_catalog(60)
     kb = KnowledgeBase(cat)

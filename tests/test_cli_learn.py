@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from scripts.cli import main
+from ctxsearch.scripts.cli import main
 
 
 def test_learn_then_resume_then_kb_show(tmp_path, capsys):

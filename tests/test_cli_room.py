@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from scripts import cli, cmd_room, room_views
+from ctxsearch.scripts import cli, cmd_room, room_views
 
 
 def test_room_is_registered():
-    assert "scripts.cmd_room" in cli.COMMAND_MODULES
+    assert "ctxsearch.scripts.cmd_room" in cli.COMMAND_MODULES
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
@@ -34,7 +34,7 @@ def test_arguments_and_defaults(tmp_path):
 
 
 def test_bad_arguments_are_one_line_errors(tmp_path):
-    from knowledge.errors import CtxsearchError
+    from ctxsearch.knowledge.errors import CtxsearchError
 
     for argv in (["--views", "-1"], ["--width", "100000"]):
         args = _parse(["room", "--out", str(tmp_path), *argv])
@@ -111,8 +111,8 @@ def test_room_without_record_or_views(tmp_path):
 
 
 def test_draw_detections_enlarges_and_labels(catalog):
-    from envs.detector import Detection
-    from knowledge.geometry import ObjectInstance
+    from ctxsearch.envs.detector import Detection
+    from ctxsearch.knowledge.geometry import ObjectInstance
 
     desk = ObjectInstance("Desk", 1, (0, 0, 0.37), 0.0, (0.7, 1.4, 0.74))
     dets = [

@@ -9,9 +9,9 @@ import tomllib
 
 import pytest
 
-from knowledge.catalog import DEFAULT_CATALOG, parse_catalog
-from knowledge.store import EvidenceStore
-from scripts.cli import main
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, parse_catalog
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.cli import main
 
 
 def _one_line_error(capsys, code: int, pattern: str) -> str:
@@ -193,8 +193,8 @@ def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
 
 
 def test_parser_constants_match_the_search_stack():
-    from agent import search, search_space
-    from scripts import cmd_search
+    from ctxsearch.agent import search, search_space
+    from ctxsearch.scripts import cmd_search
 
     assert tuple(search.POLICIES) == cmd_search.POLICY_NAMES
     assert cmd_search.DEFAULT_BUDGET_S == search.DEFAULT_BUDGET_S
@@ -203,7 +203,7 @@ def test_parser_constants_match_the_search_stack():
     assert tuple(search_space.ESTIMATES) == cmd_search.ESTIMATES
     assert cmd_search.DEFAULT_ESTIMATE == search_space.DEFAULT_ESTIMATE
     assert cmd_search.DEFAULT_MIN_EVIDENCE == search_space.DEFAULT_MIN_EVIDENCE
-    from agent.mapping import MAP_MODES
+    from ctxsearch.agent.mapping import MAP_MODES
 
     assert set(cmd_search.MAP_MODES) == set(MAP_MODES)
     assert {k: tuple(v.split(",")) for k, v in cmd_search.DEFAULT_POLICIES.items()} == dict(

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from knowledge import intervals
-from knowledge.clustered import (
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.clustered import (
     ClusteredIntervals,
     RoomCounts,
     design_effect,

@@ -11,15 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.learning import LearnConfig, learn
-from envs.floorplan import generate_layout, layout_dict
-from envs.houses import resolve_style
-from envs.styles import Drift, StyleError, load_style, parse_style
-from envs.truth import ground_truth, lookup
-from knowledge.drift import DayEvidence, ForgetKnowledgeBase, Forgetting, evidence_of
-from knowledge.errors import StoreError
-from knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, NewExamination
-from scripts.cli import main
+from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.envs.floorplan import generate_layout, layout_dict
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.styles import Drift, StyleError, load_style, parse_style
+from ctxsearch.envs.truth import ground_truth, lookup
+from ctxsearch.knowledge.drift import DayEvidence, ForgetKnowledgeBase, Forgetting, evidence_of
+from ctxsearch.knowledge.errors import StoreError
+from ctxsearch.knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, NewExamination
+from ctxsearch.scripts.cli import main
 from tests.old_stores import as_version
 
 # sha256 of the layouts of office, kitchen and apartment seeds 0, 1, 7 as the code before days
@@ -225,7 +225,7 @@ def test_half_life_counts_from_the_log_match_a_hand_computation(catalog, tmp_pat
     assert kb.counts("Desk", ("NEAR-DESK", "Bed")) == pytest.approx((0.0, 2.0))
     assert kb.n("Desk") == 4 and kb.y("ON-TOP-OF-DESK", "Cup") == 2  # raw counts: the paper's
     lo, hi = kb.interval("ON-TOP-OF-DESK", "Cup")
-    from knowledge import intervals
+    from ctxsearch.knowledge import intervals
 
     assert (lo, hi) == pytest.approx(tuple(float(v) for v in intervals.interval(1.25, 2.0, 0.1)))
     none = ForgetKnowledgeBase(catalog, 0.1, ev, 2, Forgetting())
@@ -255,7 +255,7 @@ def test_detect_flags_a_crafted_change_and_a_stable_entry_at_its_rate():
     assert np.mean([bool(a) for a in changed]) >= 0.9
     assert all(a[0] >= 10 for a in changed if a)  # never before the change
     ev = _crafted(rng, 0.3, 0.9)
-    kb = ForgetKnowledgeBase(__import__("knowledge.catalog").catalog.load_catalog(), 0.1, ev, 19, f)
+    kb = ForgetKnowledgeBase(__import__("ctxsearch.knowledge.catalog").catalog.load_catalog(), 0.1, ev, 19, f)
     y, n = kb.counts("Desk", key)
     assert n < 8 * 20 and y / n > 0.7  # only the evidence since the change
 

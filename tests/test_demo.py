@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from scripts.experiments.demo import DemoConfig, run_demo
+from ctxsearch.scripts.experiments.demo import DemoConfig, run_demo
 
 
 @pytest.mark.render

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from envs.camera import PinholeCamera, camera_axes
-from envs.detector import (
+from ctxsearch.envs.camera import PinholeCamera, camera_axes
+from ctxsearch.envs.detector import (
     Detection,
     ImageDraws,
     box_distance,
@@ -22,7 +22,7 @@ from envs.detector import (
     parse_detector,
     ray_scale,
 )
-from knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 DESK = ObjectInstance("Desk", 3, (2.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))
 CUP = ObjectInstance("Cup", 7, (2.0, 0.2, 0.79), 0.0, (0.08, 0.08, 0.10))
@@ -231,8 +231,8 @@ def test_a_model_needs_its_rng(catalog):
 
 @pytest.mark.render
 def test_a_resumed_realistic_run_equals_an_uninterrupted_one(tmp_path, catalog):
-    from agent.learning import LearnConfig, learn
-    from knowledge.store import EvidenceStore
+    from ctxsearch.agent.learning import LearnConfig, learn
+    from ctxsearch.knowledge.store import EvidenceStore
 
     def run(path, limit):
         cfg = LearnConfig("office", 1, path, perception="camera", progress=False,
@@ -286,9 +286,9 @@ def test_scores_are_the_recall_for_true_boxes_and_weak_for_clutter(catalog):
 def test_split_detections_are_the_full_detections_in_two_steps(catalog):
     """``SimDetector.split``: the true detections now and every detection (false positives
     drawn from the same stream afterwards) when asked: the same list ``SimDetector`` gives."""
-    from envs.camera import Frame
-    from envs.detector import SimDetector
-    from envs.layout import RoomLayout
+    from ctxsearch.envs.camera import Frame
+    from ctxsearch.envs.detector import SimDetector
+    from ctxsearch.envs.layout import RoomLayout
 
     layout = RoomLayout("t", 4, 5.0, 4.0, 2.6, None, tuple(OBJECTS.values()))
     rng = np.random.default_rng(3)

@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from envs.detector import (
+from ctxsearch.envs.detector import (
     DetectorError,
     detection_rng,
     keep,
@@ -17,7 +17,7 @@ from envs.detector import (
     min_pixels_at,
     parse_detector,
 )
-from knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.drift import (
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.drift import (
     ChangeDetector,
     EntrySeries,
     chi2_1_quantile,

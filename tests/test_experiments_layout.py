@@ -21,14 +21,20 @@ FORBIDDEN = {
 HEAVY = ("mujoco", "dm_control", "rerun", "scipy")
 
 
+def _layer(module: str) -> str:
+    """``ctxsearch.agent.search`` -> ``agent``; ``mujoco.viewer`` -> ``mujoco``."""
+    parts = module.split(".")
+    return parts[1] if parts[0] == "ctxsearch" and len(parts) > 1 else parts[0]
+
+
 def _imported_packages(path: Path) -> set[str]:
     """The top-level packages a module imports (anywhere in it, lazy imports included)."""
     out: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
-            out |= {a.name.split(".")[0] for a in node.names}
+            out |= {_layer(a.name) for a in node.names}
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            out.add(node.module.split(".")[0])
+            out.add(_layer(node.module))
     return out
 
 
@@ -54,8 +60,8 @@ def test_no_benchmark_or_demo_below_scripts_and_no_code_in_results():
 )
 def test_help_and_kb_show_load_no_simulator(argv, tmp_path):
     """`ctxsearch --help` and `kb show` import none of MuJoCo, dm_control, rerun and scipy."""
-    from knowledge.catalog import load_catalog
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.knowledge.store import EvidenceStore
 
     store = tmp_path / "kb.sqlite"
     with EvidenceStore.open(store, load_catalog()):
@@ -63,7 +69,7 @@ def test_help_and_kb_show_load_no_simulator(argv, tmp_path):
     argv = [str(store) if a == "STORE" else a for a in argv]
     code = (
         "import json, sys\n"
-        "from scripts.cli import main\n"
+        "from ctxsearch.scripts.cli import main\n"
         "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
         f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r}))))"
     )

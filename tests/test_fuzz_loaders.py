@@ -27,13 +27,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from envs.detector import DETECTORS_DIR, load_detector
-from envs.houses import HOUSES_DIR, load_house
-from envs.styles import STYLES_DIR, load_style
-from envs.truth import ground_truth, load_truth
-from knowledge.catalog import DEFAULT_CATALOG, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
+from ctxsearch.envs.detector import DETECTORS_DIR, load_detector
+from ctxsearch.envs.houses import HOUSES_DIR, load_house
+from ctxsearch.envs.styles import STYLES_DIR, load_style
+from ctxsearch.envs.truth import ground_truth, load_truth
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
 
 CATALOG = load_catalog()
 # CTXSEARCH_FUZZ_EXAMPLES=2000 for a long local run (then also CTXSEARCH_FUZZ_RANDOM=1 to draw

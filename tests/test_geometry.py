@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from knowledge.catalog import Catalog, ObjectType, RelationSpec
-from knowledge.geometry import (
+from ctxsearch.knowledge.catalog import Catalog, ObjectType, RelationSpec
+from ctxsearch.knowledge.geometry import (
     EPS,
     Box,
     BoxArray,

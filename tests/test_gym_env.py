@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import agent.gym_env as G
-from agent import search as S
-from envs.houses import resolve_style
-from envs.robot_spec import TimeModel
-from knowledge.base import KnowledgeBase
-from knowledge.errors import CtxsearchError
-from scripts.examples import gym_random_agent
+import ctxsearch.agent.gym_env as G
+from ctxsearch.agent import search as S
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.robot_spec import TimeModel
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts.examples import gym_random_agent
 
 pytestmark = pytest.mark.render
 SIZE = {"width": 64, "height": 48}
@@ -42,7 +42,7 @@ def test_registered_on_import_and_passes_gymnasiums_checker():
 
 
 def test_reset_draws_the_benchmarks_episodes(catalog):
-    from scripts.experiments.episodes import make_episodes
+    from ctxsearch.scripts.experiments.episodes import make_episodes
 
     style = resolve_style("office", catalog)
     env = make()

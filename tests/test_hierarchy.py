@@ -8,10 +8,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog
-from knowledge.errors import CatalogError
-from knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog
+from ctxsearch.knowledge.errors import CatalogError
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +160,7 @@ def test_backoff_beats_flat_for_rare_types(catalog):
 
 
 def _store_with_desks(path, catalog):
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.store import EvidenceStore
 
     with EvidenceStore.open(path, catalog) as s:
         for i, pairs in enumerate(
@@ -179,7 +179,7 @@ def _store_with_desks(path, catalog):
 
 
 def test_kb_show_prints_classes_and_backoff(tmp_path, catalog, capsys):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     store = tmp_path / "kb.sqlite"
     _store_with_desks(store, catalog)

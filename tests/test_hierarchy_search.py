@@ -10,12 +10,12 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from agent import search_space as ss
-from agent.strategies import STRATEGIES, BackoffHIF, HighestImpactFirst, make_strategy
-from knowledge import ranking
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import load_catalog
-from knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.strategies import STRATEGIES, BackoffHIF, HighestImpactFirst, make_strategy
+from ctxsearch.knowledge import ranking
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 
 EXAMS = [
     ("Desk", [("ON-TOP-OF-DESK", "Cup"), ("ON-TOP-OF-DESK", "Monitor")]),
@@ -89,7 +89,7 @@ def h_lift_none(catalog, rel: str) -> bool:
 
 
 def test_candidate_volumes_around_a_never_seen_type_only_with_backoff(catalog):
-    from knowledge.geometry import ObjectInstance
+    from ctxsearch.knowledge.geometry import ObjectInstance
 
     kb = _kb(catalog)
     counter = ObjectInstance("Counter", 7, (0.0, 0.0, 0.45), 0.0, (0.6, 2.0, 0.9))
@@ -117,9 +117,9 @@ def test_hif_backoff_is_registered_and_hif_unchanged(catalog):
 
 
 def test_the_workbench_experiment_leaves_the_catalog_alone():
-    from envs.floorplan import generate_layout
-    from envs.houses import resolve_style
-    from scripts.experiments.bench_hierarchy import (
+    from ctxsearch.envs.floorplan import generate_layout
+    from ctxsearch.envs.houses import resolve_style
+    from ctxsearch.scripts.experiments.bench_hierarchy import (
         NEW_TYPE,
         extended_catalog,
         main_work_surface,
@@ -142,7 +142,7 @@ def test_the_workbench_experiment_leaves_the_catalog_alone():
 
 
 def test_bench_hierarchy_writes_its_files(tmp_path):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     out = tmp_path / "h"
     args = ["bench", "hierarchy", "--out", str(out), "--rooms", "3", "--episodes", "2"]
@@ -185,7 +185,7 @@ def test_bench_hierarchy_writes_its_files(tmp_path):
     ],
 )
 def test_bad_flags_are_one_line_errors(argv, tmp_path, capsys):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     argv = [str(tmp_path / a) if a in ("OUT", "KB") else a for a in argv]
     try:

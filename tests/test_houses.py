@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from agent.navigation import OccupancyGrid
-from envs.floorplan import (
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.floorplan import (
     _shared_edge,
     generate_house,
     generate_layout,
@@ -20,7 +20,7 @@ from envs.floorplan import (
     wall_boxes,
     wall_obstacles,
 )
-from envs.houses import (
+from ctxsearch.envs.houses import (
     CORRIDOR,
     HouseError,
     HouseStyle,
@@ -28,14 +28,14 @@ from envs.houses import (
     load_house,
     resolve_style,
 )
-from envs.layout import Door
-from envs.parts import world_parts
-from envs.robot_spec import RobotSpec
-from envs.rooms import RoomShell, door_entry, generate_room
-from envs.styles import Style, StyleError, available_styles, load_style
-from envs.truth import estimate, ground_truth, world_counts
-from knowledge.catalog import load_catalog
-from knowledge.geometry import BoxArray, holds, overlaps
+from ctxsearch.envs.layout import Door
+from ctxsearch.envs.parts import world_parts
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.rooms import RoomShell, door_entry, generate_room
+from ctxsearch.envs.styles import Style, StyleError, available_styles, load_style
+from ctxsearch.envs.truth import estimate, ground_truth, world_counts
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.geometry import BoxArray, holds, overlaps
 
 HOUSES = ["apartment", "family_house", "office_floor"]
 SEEDS = {"apartment": range(6), "family_house": range(4), "office_floor": range(3)}
@@ -133,7 +133,7 @@ def test_bad_house_files_give_one_line_errors(tmp_path, text, where):
 
 
 def test_bad_house_style_through_the_cli(tmp_path, capsys):
-    from scripts import cli
+    from ctxsearch.scripts import cli
 
     p = tmp_path / "bad_house.toml"
     p.write_text("[house]\nrooms = 3\nfootprint = 80\n[rooms]\nbedroom = 3\nsauna = 1\n")
@@ -323,8 +323,8 @@ def test_truth_of_a_house_is_the_mix_of_its_rooms():
 def test_house_world_builds_with_robot_at_the_entrance():
     import time
 
-    from envs.task import start_pose
-    from envs.world import World
+    from ctxsearch.envs.task import start_pose
+    from ctxsearch.envs.world import World
 
     lay = next(h for h in houses("family_house") if len(h.rooms) == 6)
     t0 = time.perf_counter()
@@ -345,7 +345,7 @@ def test_house_world_builds_with_robot_at_the_entrance():
 def test_truth_cli_on_a_house(tmp_path, capsys):
     import json
 
-    from scripts import cli
+    from ctxsearch.scripts import cli
 
     out = tmp_path / "t.json"
     assert cli.main(["truth", "--style", "apartment", "--samples", "2", "--out", str(out)]) == 0
@@ -355,7 +355,7 @@ def test_truth_cli_on_a_house(tmp_path, capsys):
 
 
 def test_every_style_flag_says_house(capsys):
-    from scripts import cli
+    from ctxsearch.scripts import cli
 
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
@@ -379,7 +379,7 @@ def test_room_cli_on_a_house_writes_plan_views_and_layout(tmp_path, capsys):
 
     import cv2
 
-    from scripts import cli
+    from ctxsearch.scripts import cli
 
     out = tmp_path / "house"
     argv = ["room", "--style", "apartment", "--seed", "1", "--out", str(out), "--views", "1"]
@@ -398,7 +398,7 @@ def test_room_cli_on_a_house_writes_plan_views_and_layout(tmp_path, capsys):
 
 
 def test_visible_rooms_by_portals():
-    from envs.floorplan import visible_rooms
+    from ctxsearch.envs.floorplan import visible_rooms
 
     lay = houses("office_floor")[0]
     corridor = lay.rooms[-1]
@@ -420,8 +420,8 @@ def test_visible_rooms_by_portals():
 
 @pytest.mark.render
 def test_room_culling_leaves_the_images_unchanged():
-    from envs.robot_spec import RobotPose
-    from envs.world import World
+    from ctxsearch.envs.robot_spec import RobotPose
+    from ctxsearch.envs.world import World
 
     rng = np.random.default_rng(5)
     hidden = 0

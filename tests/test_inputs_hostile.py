@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from envs.styles import STYLES_DIR, StyleError, load_style
-from envs.truth import TruthError, load_truth
-from knowledge.catalog import DEFAULT_CATALOG, load_catalog
-from knowledge.errors import CatalogError, CtxsearchError
-from scripts.cli import main
+from ctxsearch.envs.styles import STYLES_DIR, StyleError, load_style
+from ctxsearch.envs.truth import TruthError, load_truth
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog
+from ctxsearch.knowledge.errors import CatalogError, CtxsearchError
+from ctxsearch.scripts.cli import main
 
 
 def _one_line_error(capsys, *fragments: str) -> str:
@@ -128,7 +128,7 @@ def test_non_finite_or_absurd_room_dimensions_are_refused(tmp_path, room, match)
 # ---- ground-truth files -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def truth_doc() -> dict:
-    from envs.truth import ground_truth
+    from ctxsearch.envs.truth import ground_truth
 
     return ground_truth("office", 3, 0)
 
@@ -176,7 +176,7 @@ def test_a_ground_truth_file_that_is_not_json_is_refused(tmp_path, raw, match):
 
 
 def test_search_reads_a_valid_truth_file_and_refuses_an_empty_one(tmp_path, truth_doc):
-    from agent.search import truth_probabilities
+    from ctxsearch.agent.search import truth_probabilities
 
     catalog = load_catalog()
     p = tmp_path / "truth.json"
@@ -229,7 +229,7 @@ def test_truth_out_naming_a_directory_is_a_usage_error(tmp_path, capsys):
 
 
 def test_ctrl_c_during_start_up_exits_130_without_a_traceback(monkeypatch, capsys):
-    import scripts.cli as cli
+    import ctxsearch.scripts.cli as cli
 
     def interrupted():
         raise KeyboardInterrupt

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
-from scripts.experiments.learning_trace import TruthTracker, informative, interval_metrics
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments.learning_trace import TruthTracker, informative, interval_metrics
 
 REL = "ON-TOP-OF-DESK"
 
@@ -110,7 +110,7 @@ def test_truth_tracker_clustered_beside_wilson(catalog):
 
 
 def test_bench_learning_clustered_writes_coverage_informative(tmp_path):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     out = tmp_path / "bench"
     rc = main(
@@ -146,7 +146,7 @@ def test_bench_learning_clustered_writes_coverage_informative(tmp_path):
     ],
 )  # fmt: skip
 def test_a_bad_detector_file_gets_the_one_line_error(tmp_path, capsys, argv):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     bad = tmp_path / "bad.toml"
     bad.write_text('kind = "model"\n[recall]\nmax_recall = 2.0\n')
@@ -168,8 +168,8 @@ def test_a_confidence_threshold_counts_fewer_related_objects(catalog, tmp_path):
     """``min_score`` counts a related object only once one of its detections scored that
     confidence: at 1.0 (above the realistic preset's best, 0.95) nothing is ever related; the run
     key says the threshold; at 0 the run is the default one."""
-    from agent.learning import LearnConfig, learn
-    from knowledge.store import EvidenceStore
+    from ctxsearch.agent.learning import LearnConfig, learn
+    from ctxsearch.knowledge.store import EvidenceStore
 
     def run(path, score):
         cfg = LearnConfig("office", 1, path, progress=False, max_examinations=4, min_score=score)
@@ -190,7 +190,7 @@ def test_a_confidence_threshold_counts_fewer_related_objects(catalog, tmp_path):
 
 @pytest.mark.parametrize("bad", ["1.5", "-0.1", "x"])
 def test_min_score_outside_0_1_is_refused(capsys, tmp_path, bad):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     kb = tmp_path / "kb.sqlite"
     with pytest.raises(SystemExit) as exc:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from knowledge import intervals
+from ctxsearch.knowledge import intervals
 
 
 def _grid(nmax: int) -> tuple[np.ndarray, np.ndarray]:

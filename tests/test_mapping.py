@@ -7,14 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent import learning
-from agent.acquisition import start_pose
-from agent.learning import LearnConfig
-from agent.mapping import BuiltMap, default_map_mode, map_quality
-from agent.navigation import OccupancyGrid
-from envs.camera import Frame, camera_at
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.errors import CtxsearchError
+from ctxsearch.agent import learning
+from ctxsearch.agent.acquisition import start_pose
+from ctxsearch.agent.learning import LearnConfig
+from ctxsearch.agent.mapping import BuiltMap, default_map_mode, map_quality
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.camera import Frame, camera_at
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.errors import CtxsearchError
 
 
 def _plane_frame(pose: RobotPose, spec: RobotSpec, wall_x: float | None = None) -> Frame:
@@ -58,12 +58,12 @@ def test_an_empty_map_knows_nothing_but_the_robot_and_grows_with_images():
 def test_the_built_map_never_calls_an_occupied_cell_free_and_drives_touch_nothing(
     style, seeds, budget
 ):
-    from agent.frontiers import explore_world
-    from envs.floorplan import generate_layout
-    from envs.houses import resolve_style
-    from envs.world import World
-    from knowledge.catalog import load_catalog
-    from scripts.experiments.bench_map import body_grid, unsafe_segments
+    from ctxsearch.agent.frontiers import explore_world
+    from ctxsearch.envs.floorplan import generate_layout
+    from ctxsearch.envs.houses import resolve_style
+    from ctxsearch.envs.world import World
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.scripts.experiments.bench_map import body_grid, unsafe_segments
 
     cat, spec, tm = load_catalog(), RobotSpec(), TimeModel()
     st = resolve_style(style, cat)
@@ -127,7 +127,7 @@ def test_learning_on_the_built_map_resumes_exactly(tmp_path):
 
 
 def test_learn_says_which_map_and_takes_the_world_budget(tmp_path, capsys):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     kb = tmp_path / "k.sqlite"
     args = ["learn", "--style", "office", "--rooms", "1", "--kb", str(kb), "--no-progress"]

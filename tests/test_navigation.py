@@ -8,15 +8,15 @@ import time
 import numpy as np
 import pytest
 
-import agent.navigation as navigation
-from agent.navigation import OccupancyGrid, nearest_free, obstacle_boxes, plan_path
-from envs.layout import Door, RoomLayout
-from envs.parts import world_parts
-from envs.robot_spec import RobotSpec
-from envs.rooms import generate_room
-from envs.styles import available_styles, load_style
-from envs.task import start_pose
-from knowledge.geometry import Box, ObjectInstance
+import ctxsearch.agent.navigation as navigation
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free, obstacle_boxes, plan_path
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.parts import world_parts
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.rooms import generate_room
+from ctxsearch.envs.styles import available_styles, load_style
+from ctxsearch.envs.task import start_pose
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 SPEC = RobotSpec()
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from envs.parts import solid_parts, support_surfaces, world_parts, world_surfaces
-from knowledge.catalog import SHAPES, load_catalog
-from knowledge.geometry import BoxArray, ObjectInstance, overlaps
+from ctxsearch.envs.parts import solid_parts, support_surfaces, world_parts, world_surfaces
+from ctxsearch.knowledge.catalog import SHAPES, load_catalog
+from ctxsearch.knowledge.geometry import BoxArray, ObjectInstance, overlaps
 
 FURNITURE_SIZES = [
     (0.7, 1.4, 0.74),
@@ -98,7 +98,7 @@ def test_desk_knee_space_is_open():
         np.zeros(len(solid_parts("desk", size))),
         np.array([p.half for p in solid_parts("desk", size)]),
     )
-    from knowledge.geometry import Box
+    from ctxsearch.knowledge.geometry import Box
 
     knee = Box(np.array([0.0, 0.3, -0.1]), 0.0, np.array([0.2, 0.2, 0.2]))
     assert not overlaps(parts, knee).any()

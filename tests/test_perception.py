@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from envs.detector import Detection, box_distance, detect, detect_ids, min_pixels_at, ray_scale
-from knowledge.geometry import ObjectInstance
+from ctxsearch.envs.detector import Detection, box_distance, detect, detect_ids, min_pixels_at, ray_scale
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 DESK = ObjectInstance("Desk", 3, (2.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))
 CUP = ObjectInstance("Cup", 7, (2.0, 0.2, 0.79), 0.0, (0.08, 0.08, 0.10))
@@ -123,10 +123,10 @@ def test_detect_on_a_frame_object(catalog):
 # --------------------------------------------------------------------------- rendered
 @pytest.mark.render
 def test_desk_seen_across_the_room_pen_is_not(catalog):
-    world_mod = pytest.importorskip("envs.world")
-    from agent.viewplan import aim
-    from envs.layout import Door, RoomLayout
-    from envs.robot_spec import RobotPose
+    world_mod = pytest.importorskip("ctxsearch.envs.world")
+    from ctxsearch.agent.viewplan import aim
+    from ctxsearch.envs.layout import Door, RoomLayout
+    from ctxsearch.envs.robot_spec import RobotPose
 
     small = next(t for t in ("Pen", "Remote", "Phone", "Cup") if t in catalog)
     sz = catalog.type(small).size_min

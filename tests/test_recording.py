@@ -8,12 +8,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from agent.recording import Recorder, wall_boxes
-from envs.camera import camera_at
-from envs.detector import detect_ids
-from envs.layout import Door, RoomLayout
-from envs.robot_spec import RobotPose
-from knowledge.geometry import ObjectInstance, relation_volume
+from ctxsearch.agent.recording import Recorder, wall_boxes
+from ctxsearch.envs.camera import camera_at
+from ctxsearch.envs.detector import detect_ids
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
 
 OBJECTS = (
     ObjectInstance("Desk", 1, (0.0, 0.0, 0.37), 0.3, (0.7, 1.4, 0.74)),
@@ -154,7 +154,7 @@ def test_close_twice_and_empty_volumes(catalog, tmp_path):
 
 @pytest.mark.render
 def test_recording_a_rendered_frame(catalog, tmp_path):
-    world_mod = pytest.importorskip("envs.world")
+    world_mod = pytest.importorskip("ctxsearch.envs.world")
     world = world_mod.World(LAYOUT, catalog)
     try:
         world.reset_pose(RobotPose(-2.0, -1.5, math.atan2(1.5, 2.0), 0.0, -0.3))
@@ -168,7 +168,7 @@ def test_recording_a_rendered_frame(catalog, tmp_path):
 
 
 def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog, tmp_path):
-    from agent.learning import LearnConfig, learn, room_seed, style_layouts
+    from ctxsearch.agent.learning import LearnConfig, learn, room_seed, style_layouts
     from tests.rrd_files import read_rrd
 
     rrd = tmp_path / "run.rrd"
@@ -212,7 +212,7 @@ def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog
 
 @pytest.mark.render
 def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_store):
-    from scripts.experiments.episodes import SearchConfig, search_once
+    from ctxsearch.scripts.experiments.episodes import SearchConfig, search_once
     from tests.rrd_files import read_rrd
 
     kb = desk_cup_store(tmp_path / "kb.sqlite")

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from envs.parts import world_parts, world_surfaces
-from envs.robot_spec import RobotSpec
-from envs.rooms import door_entry, generate_room
-from envs.styles import available_styles, load_style
-from knowledge.catalog import load_catalog
-from knowledge.geometry import Box, BoxArray, box_overlap, holds, overlap_any, overlaps
+from ctxsearch.envs.parts import world_parts, world_surfaces
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.rooms import door_entry, generate_room
+from ctxsearch.envs.styles import available_styles, load_style
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.geometry import Box, BoxArray, box_overlap, holds, overlap_any, overlaps
 
 STYLES = ("office", "biology_lab", "living_room", "kitchen", "bedroom")
 SEEDS = range(30)

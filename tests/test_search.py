@@ -8,16 +8,16 @@ import math
 import numpy as np
 import pytest
 
-from agent import search as S
-from agent import search_space as ss
-from agent.navigation import OccupancyGrid
-from envs.layout import Door, RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.base import KnowledgeBase
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import Box, ObjectInstance
-from scripts.experiments.bench_search import aggregate, bootstrap_ci
-from scripts.experiments.episodes import make_episodes, run_episodes
+from ctxsearch.agent import search as S
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
+from ctxsearch.scripts.experiments.bench_search import aggregate, bootstrap_ci
+from ctxsearch.scripts.experiments.episodes import make_episodes, run_episodes
 
 # A hand-made room: a desk against the north wall with a cup on it, a shelf against the west wall.
 DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
@@ -42,7 +42,7 @@ def room(*objects: ObjectInstance) -> RoomLayout:
 
 def Cam(position, heading, tilt, width=320, height=240, fovy=58.0):  # noqa: N802
     """A camera for SeenMap.update."""
-    from envs.camera import PinholeCamera, camera_axes
+    from ctxsearch.envs.camera import PinholeCamera, camera_axes
 
     return PinholeCamera(
         np.asarray(position, float), camera_axes(heading, tilt), fovy, width, height
@@ -220,7 +220,7 @@ def test_aggregate_counts_failures_at_the_budget():
 
 
 def test_held_out_seeds_differ_from_learning_seeds():
-    from agent.learning import room_seed
+    from ctxsearch.agent.learning import room_seed
 
     learn = {room_seed(0, i) for i in range(200)}
     search = {S.held_out_seed(0, i) for i in range(200)}
@@ -229,7 +229,7 @@ def test_held_out_seeds_differ_from_learning_seeds():
 
 
 def test_episodes_are_deterministic_and_skip_excluded_rooms(catalog):
-    from envs.styles import load_style
+    from ctxsearch.envs.styles import load_style
 
     style = load_style("office", catalog)
     a = make_episodes(style, 2, 7, catalog, 60.0)
@@ -251,7 +251,7 @@ def test_unknown_policy_and_rank_are_one_line_errors():
 
 # =========================================================================== policies (rendered)
 def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, world=None):
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     ep = S.Episode(0, "test", 0, "Cup", START, budget)
     own = world is None
@@ -266,7 +266,7 @@ def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, wor
 
 @pytest.mark.render
 def test_every_policy_finds_a_cup_in_plain_sight(catalog):
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP)
     probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Cup"): 0.8, ("ON-SHELF", "Cup"): 0.2})
@@ -282,7 +282,7 @@ def test_every_policy_finds_a_cup_in_plain_sight(catalog):
 
 @pytest.mark.render
 def test_location_looks_first_where_the_store_ranks_highest(catalog, tmp_path):
-    from knowledge.store import EvidenceStore
+    from ctxsearch.knowledge.store import EvidenceStore
 
     # A crafted store: cups are always on shelves, never on desks.
     with EvidenceStore.open(tmp_path / "kb.sqlite", catalog, create=True) as store:
@@ -323,7 +323,7 @@ def test_location_looks_first_where_the_store_ranks_highest(catalog, tmp_path):
 
 @pytest.mark.render
 def test_paired_benchmark_gives_every_policy_the_same_episodes(catalog, monkeypatch):
-    from envs.styles import load_style
+    from ctxsearch.envs.styles import load_style
 
     style = load_style("office", catalog)
     eps = make_episodes(style, 2, 11, catalog, budget_s=6.0)
@@ -391,8 +391,8 @@ def test_time_model_charges_match_result(catalog):
 def test_search_recording_shows_candidates_path_and_camera_views(catalog, tmp_path):
     import rerun as rr
 
-    from agent.recording import Recorder
-    from envs.world import World
+    from ctxsearch.agent.recording import Recorder
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP)
     probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Cup"): 0.8, ("ON-SHELF", "Cup"): 0.2})
@@ -424,8 +424,8 @@ def test_a_detection_of_the_target_ends_the_search_only_once_a_second_image_conf
     the real cup); the confirming image costs one image's seconds."""
     from dataclasses import replace as dc_replace
 
-    from envs.detector import Detection
-    from envs.world import World
+    from ctxsearch.envs.detector import Detection
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP)
     fake_pose = dc_replace(CUP, id=-7, position=(-1.5, 1.0, 0.79))

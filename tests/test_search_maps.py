@@ -12,14 +12,14 @@ import sys
 import numpy as np
 import pytest
 
-from agent import search as S
-from agent import search_explore as sx
-from agent import search_space as ss
-from envs.layout import Door, RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
-from scripts.experiments.bench_indirect import NONE_PREDICTED, indirect_analysis
+from ctxsearch.agent import search as S
+from ctxsearch.agent import search_explore as sx
+from ctxsearch.agent import search_space as ss
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.scripts.experiments.bench_indirect import NONE_PREDICTED, indirect_analysis
 
 DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
 SHELF = ObjectInstance("Shelf", 2, (-2.2, -0.2, 0.8), 0.0, (0.35, 1.0, 1.6))
@@ -95,7 +95,7 @@ def test_policy_scenario_mismatch_is_a_one_line_error():
 
 
 def test_cli_policy_scenario_mismatch_exits_2_with_one_line(tmp_path):
-    cmd = [sys.executable, "-m", "scripts.cli", "bench", "search", "--kb", str(tmp_path / "k"),
+    cmd = [sys.executable, "-m", "ctxsearch.scripts.cli", "bench", "search", "--kb", str(tmp_path / "k"),
            "--style", "apartment", "--policies", "frontier,location", "--out", str(tmp_path / "o")]  # fmt: skip
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
@@ -124,7 +124,7 @@ def test_indirect_analysis_groups_by_intermediate():
 # =========================================================================== rendered
 @pytest.mark.render
 def test_frontier_finds_a_cup_out_of_view_and_its_map_starts_unknown(catalog):
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP)
     with World(layout, catalog) as world:
@@ -145,7 +145,7 @@ def test_frontier_finds_a_cup_out_of_view_and_its_map_starts_unknown(catalog):
 
 @pytest.mark.render
 def test_map_only_looks_into_the_furniture_volumes_without_probabilities(catalog):
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP)
     with World(layout, catalog) as world:
@@ -157,7 +157,7 @@ def test_map_only_looks_into_the_furniture_volumes_without_probabilities(catalog
 
 @pytest.mark.render
 def test_indirect_records_the_intermediate_it_searched_for(catalog):
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, PEN)
     probs = ss.TableProbabilities(
@@ -192,7 +192,7 @@ def _brute_best(scorer, grid, todo, here, rng, images, weights=None):
 def _looked_around(catalog):
     """A built-map search for the Pen in a room with a desk, a shelf and a cup, after the first
     look around (the World closed on exit)."""
-    from envs.world import World
+    from ctxsearch.envs.world import World
 
     layout = room(DESK, SHELF, CUP, PEN)
     with World(layout, catalog) as world:

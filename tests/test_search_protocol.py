@@ -10,14 +10,14 @@ import math
 import numpy as np
 import pytest
 
-from agent import search as S
-from agent.episode_draw import draw_world
-from agent.navigation import OccupancyGrid
-from envs.detector import SimDetector, load_detector
-from envs.styles import load_style
-from envs.world import World
-from scripts.experiments import episodes as E
-from scripts.experiments.bench_search import (
+from ctxsearch.agent import search as S
+from ctxsearch.agent.episode_draw import draw_world
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.envs.detector import SimDetector, load_detector
+from ctxsearch.envs.styles import load_style
+from ctxsearch.envs.world import World
+from ctxsearch.scripts.experiments import episodes as E
+from ctxsearch.scripts.experiments.bench_search import (
     SearchBenchConfig,
     aggregate,
     bench_search,
@@ -206,7 +206,7 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
     next), the first pair that confirms a true instance ends it; none after ``until`` and at
     most ``images`` of them. And the Oracle policy, executing its first view, finds the target
     at that second plus the confirming image when its drive ends where it planned."""
-    from envs.floorplan import generate_layout
+    from ctxsearch.envs.floorplan import generate_layout
 
     real = load_detector("realistic", catalog)
     ep = E.draw_episodes(office, 1, 5, catalog, 60.0, detector=real).episodes[0]
@@ -264,7 +264,7 @@ def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
     """``--draw-cache``: the second command reads the first's draw (episodes, counts and the
     oracle's first plans, to the last bit) instead of drawing; a file of any other bytes is a
     miss, drawn again and replaced."""
-    from scripts.experiments import draw_store
+    from ctxsearch.scripts.experiments import draw_store
 
     first = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
     files = list(tmp_path.glob("*.json"))

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.errors import CtxsearchError, StoreError
-from knowledge.store import SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.store import SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
 from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -317,8 +317,8 @@ def test_failure_inside_the_transaction_keeps_earlier_examinations(tmp_path, cat
 KILLER = r"""
 import os, sys
 sys.path.insert(0, sys.argv[2])
-from knowledge.catalog import load_catalog
-from knowledge.store import EvidenceStore
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.store import EvidenceStore
 
 cat = load_catalog()
 on = next(r for r in cat.type("Desk").relation_names if r.startswith("ON-TOP-OF"))

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from knowledge.errors import CtxsearchError, StoreError
-from knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
-from scripts.cli import main
+from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
+from ctxsearch.scripts.cli import main
 from tests.old_stores import as_version
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,7 +70,7 @@ def test_two_learn_processes_of_one_run_leave_the_single_run_counts(tmp_path):
     single = tmp_path / "single.sqlite"
     assert main([*args, "--kb", str(single)]) == 0
     both = tmp_path / "both.sqlite"
-    cmd = [sys.executable, "-m", "scripts.cli", *args, "--kb", str(both)]
+    cmd = [sys.executable, "-m", "ctxsearch.scripts.cli", *args, "--kb", str(both)]
     procs = [
         subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         for _ in range(2)
@@ -88,7 +88,7 @@ def test_two_learn_processes_of_one_run_leave_the_single_run_counts(tmp_path):
 
 
 def _cat():
-    from knowledge.catalog import load_catalog
+    from ctxsearch.knowledge.catalog import load_catalog
 
     return load_catalog()
 
@@ -357,7 +357,7 @@ def test_run_names_with_control_characters_are_refused_on_write_and_read(tmp_pat
 
 
 def test_ctrl_c_while_a_store_is_created_leaves_no_file(tmp_path, catalog, monkeypatch):
-    import knowledge.store as store_mod
+    import ctxsearch.knowledge.store as store_mod
 
     real = store_mod.sqlite3.connect
 
@@ -377,7 +377,7 @@ def test_learn_on_a_store_sqlite_cannot_write_is_a_one_line_error(
 ):
     """As learn on a read-only file sees it (root, running the tests, can write any file: the
     connection is opened read-only instead)."""
-    import knowledge.store as store_mod
+    import ctxsearch.knowledge.store as store_mod
 
     path = _store(tmp_path / "s.sqlite", catalog)
     before = digest(path)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.strategies import STRATEGIES, EuclideanCosts, choose, make_strategy
-from envs.robot_spec import RobotPose
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import parse_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
+from ctxsearch.agent.strategies import STRATEGIES, EuclideanCosts, choose, make_strategy
+from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import parse_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 NAMES = ["Desk", "Chair", "Cup", "Book", "Pen"]
 

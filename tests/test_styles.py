@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from envs.styles import StyleError, available_styles, load_style
-from knowledge.catalog import load_catalog
-from knowledge.errors import CtxsearchError
+from ctxsearch.envs.styles import StyleError, available_styles, load_style
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 
 GOOD = """
 name = "tiny"

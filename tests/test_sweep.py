@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from knowledge.errors import CtxsearchError
-from scripts.sweep import run_units
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts.sweep import run_units
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,7 +32,7 @@ def refuse_three(x: int) -> int:
 
 def test_one_worker_is_a_loop_without_ray():
     code = (
-        "import sys; from scripts.sweep import SweepOptions, run_units, session; "
+        "import sys; from ctxsearch.scripts.sweep import SweepOptions, run_units, session; "
         "from tests.test_sweep import square_with_pid as f; "
         "s = session(SweepOptions()); s.__enter__(); "
         "r = run_units(f, [1, 2, 3], progress=False); assert [u['y'] for u in r] == [1, 4, 9]; "
@@ -63,7 +63,7 @@ def test_two_workers_give_the_serial_results_in_order():
 def test_a_session_keeps_one_ray_for_several_sweeps():
     import ray
 
-    from scripts.sweep import SweepOptions, session
+    from ctxsearch.scripts.sweep import SweepOptions, session
 
     with session(SweepOptions(workers=2)):
         a = run_units(square_with_pid, [1, 2], workers=2, progress=False)
@@ -95,7 +95,7 @@ def _strip_timing(x):
 def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
     import json
 
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     args = ["bench", "learning", "--style", "office", "--rooms", "2", "--seeds", "2"]
     args += ["--strategies", "hif,random", "--truth-samples", "10"]
@@ -110,7 +110,7 @@ def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
 
 @pytest.mark.slow
 def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     args = ["truth", "--style", "office", "--samples", "25", "--no-progress"]
     assert main([*args, "--out", str(tmp_path / "a.json")]) == 0
@@ -122,7 +122,7 @@ def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
 def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_store):
     import json
 
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     args = ["bench", "search", "--kb", str(kb), "--style", "office", "--episodes", "2"]

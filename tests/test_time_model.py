@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from envs.robot_spec import TimeModel, wrap_angle, wrap_angles
+from ctxsearch.envs.robot_spec import TimeModel, wrap_angle, wrap_angles
 
 
 def test_vectorised_forms_equal_the_scalar_ones():

@@ -7,12 +7,12 @@ import functools
 import json
 import math
 
-from envs.rooms import generate_room
-from envs.styles import load_style
-from envs.truth import estimate, ground_truth, lookup, room_counts
-from knowledge.catalog import load_catalog
-from knowledge.geometry import ObjectInstance, related
-from scripts import cmd_truth
+from ctxsearch.envs.rooms import generate_room
+from ctxsearch.envs.styles import load_style
+from ctxsearch.envs.truth import estimate, ground_truth, lookup, room_counts
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.geometry import ObjectInstance, related
+from ctxsearch.scripts import cmd_truth
 
 
 @functools.cache

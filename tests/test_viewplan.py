@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-import agent.viewplan as viewplan_module
-from agent.navigation import OccupancyGrid, plan_path
-from agent.viewplan import (
+import ctxsearch.agent.viewplan as viewplan_module
+from ctxsearch.agent.navigation import OccupancyGrid, plan_path
+from ctxsearch.agent.viewplan import (
     Gaze,
     aim,
     box_samples,
@@ -18,10 +18,10 @@ from agent.viewplan import (
     in_view,
     plan_gazes,
 )
-from envs.camera import PinholeCamera, camera_at, camera_axes
-from envs.layout import Door, RoomLayout
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from knowledge.geometry import Box, ObjectInstance, relation_volume
+from ctxsearch.envs.camera import PinholeCamera, camera_at, camera_axes
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.knowledge.geometry import Box, ObjectInstance, relation_volume
 
 SPEC = RobotSpec()
 DESK = ObjectInstance("Desk", 1, (0.0, 0.0, 0.37), 0.3, (0.7, 1.4, 0.74))
@@ -304,7 +304,7 @@ def _visibility_reference(cams, heading, tilt, points, width, height, max_distan
 
 @pytest.mark.parametrize("block", [1, 700, 65536])
 def test_visibility_matches_the_plain_frustum_test(monkeypatch, block):
-    import envs.camera as camera_module
+    import ctxsearch.envs.camera as camera_module
 
     monkeypatch.setattr(camera_module, "_FRUSTUM_BLOCK", block)
     rng = np.random.default_rng(3)
@@ -348,7 +348,7 @@ def test_pinhole_view_is_a_camera():
 # --------------------------------------------------------------------------- rendered
 @pytest.mark.render
 def test_model_matches_the_simulated_camera(catalog):
-    world_mod = pytest.importorskip("envs.world")
+    world_mod = pytest.importorskip("ctxsearch.envs.world")
     world = world_mod.World(OFFICE, catalog)
     try:
         for pose in (RobotPose(-2.0, -1.5, 0.4, 0.3, -0.4), RobotPose(2.0, 1.5, -2.5, -1.0, 0.2)):

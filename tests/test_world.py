@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from envs.entities import OBJECT_GEOM_GROUP, body_name
-from envs.layout import Door, RoomLayout
-from envs.robot import JOINTS, ROBOT_GEOM_GROUP
-from envs.robot_spec import RobotPose, RobotSpec, TimeModel
-from envs.task import RoomTask
-from envs.world import World
-from knowledge.errors import CtxsearchError
-from knowledge.geometry import ObjectInstance
+from ctxsearch.envs.entities import OBJECT_GEOM_GROUP, body_name
+from ctxsearch.envs.layout import Door, RoomLayout
+from ctxsearch.envs.robot import JOINTS, ROBOT_GEOM_GROUP
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
+from ctxsearch.envs.task import RoomTask
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 DESK, CUP, CHAIR, PEN = 1, 2, 3, 4
 
@@ -216,7 +216,7 @@ def test_renderers_close(layout, catalog):
 
 
 def test_egl_failure_is_a_one_line_error(layout, catalog, monkeypatch):
-    import envs.world as world_mod
+    import ctxsearch.envs.world as world_mod
 
     def broken(*args, **kwargs):
         raise ImportError("Cannot initialize a EGL device display.\nsecond line")
@@ -237,7 +237,7 @@ def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
     import json
     import statistics
 
-    from scripts.cli import main
+    from ctxsearch.scripts.cli import main
 
     assert main(["bench", "sim", "--out", str(tmp_path), "--rooms", "2", "--gazes", "5"]) == 0
     r = json.loads((tmp_path / "bench_sim.json").read_text())

@@ -23,9 +23,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is first imported
 
 import gymnasium
 
-from agent import search as S
-from agent.gym_env import ENV_ID, ObjectSearchEnv
-from knowledge.errors import CtxsearchError
+from ctxsearch.agent import search as S
+from ctxsearch.agent.gym_env import ENV_ID, ObjectSearchEnv
+from ctxsearch.knowledge.errors import CtxsearchError
 
 
 def random_agent(env: gymnasium.Env, seed: int, steps: int) -> dict:

@@ -22,10 +22,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from knowledge.catalog import parse_catalog
-from knowledge.geometry import ObjectInstance, related
-from knowledge.ranking import KBProbabilities, candidate_volumes
-from knowledge.store import EvidenceStore
+from ctxsearch.knowledge.catalog import parse_catalog
+from ctxsearch.knowledge.geometry import ObjectInstance, related
+from ctxsearch.knowledge.ranking import KBProbabilities, candidate_volumes
+from ctxsearch.knowledge.store import EvidenceStore
 
 # 1. The catalog as a parsed TOML document (the format of assets/types.toml).
 CATALOG = {

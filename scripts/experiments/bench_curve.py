@@ -27,15 +27,15 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from agent.learning import LearnConfig, learn
-from envs.houses import resolve_style
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
-from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
-from scripts.experiments.episodes import remembered_draws
-from scripts.experiments.scenarios import (
+from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from ctxsearch.scripts.experiments.episodes import remembered_draws
+from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
     check_no_stores,
@@ -46,8 +46,8 @@ from scripts.experiments.scenarios import (
     search,
     times,
 )
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, session
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, session
 
 
 def check_rooms(rooms: tuple[int, ...]) -> tuple[int, ...]:

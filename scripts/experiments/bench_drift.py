@@ -49,18 +49,18 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from agent.learning import LearnConfig, learn, room_seed
-from envs.floorplan import generate_layout
-from envs.styles import Drift, Style, load_style
-from envs.truth import estimate, sample_counts
-from knowledge import intervals
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.drift import FORGET_METHODS, ForgetKnowledgeBase, Forgetting, evidence_of
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
-from scripts.experiments import episodes as E
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units
+from ctxsearch.agent.learning import LearnConfig, learn, room_seed
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.styles import Drift, Style, load_style
+from ctxsearch.envs.truth import estimate, sample_counts
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.drift import FORGET_METHODS, ForgetKnowledgeBase, Forgetting, evidence_of
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments import episodes as E
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, run_units
 
 CHANGE_MIN = 0.10  # |p_true(last) - p_true(0)| of a changed entry
 STABLE_MAX = 0.02  # at most this much for an unchanged one

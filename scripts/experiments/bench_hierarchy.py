@@ -58,22 +58,22 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from agent import search as S
-from agent import search_space as ss
-from agent.learning import LearnConfig, learn
-from agent.strategies import BackoffHIF, Choice
-from envs.houses import resolve_style
-from envs.styles import Style, parse_style
-from envs.truth import ground_truth
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import DEFAULT_CATALOG, Catalog, load_catalog, parse_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.pooling import Backoff, PooledCounts
-from knowledge.store import EvidenceStore
-from scripts.experiments.bench_search import aggregate, bootstrap_ci
-from scripts.experiments.episodes import SearchConfig, load_priors, make_episodes, search_room
-from scripts.experiments.tables import write_csv
+from ctxsearch.agent import search as S
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.strategies import BackoffHIF, Choice
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.styles import Style, parse_style
+from ctxsearch.envs.truth import ground_truth
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, Catalog, load_catalog, parse_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments.bench_search import aggregate, bootstrap_ci
+from ctxsearch.scripts.experiments.episodes import SearchConfig, load_priors, make_episodes, search_room
+from ctxsearch.scripts.experiments.tables import write_csv
 
 NEW_TYPE = "Workbench"
 NEW_SHAPE = "table"

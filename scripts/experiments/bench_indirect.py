@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import search as S
+from ctxsearch.agent import search as S
 
 NONE_PREDICTED = "(none chosen; model predicts no gain)"
 NONE_UNUSED = "(none chosen; model predicts a gain)"

@@ -31,13 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from envs.truth import ground_truth
-from knowledge import intervals
-from knowledge.catalog import load_catalog
-from scripts.experiments.bench_learning import TRUTH_SEED
-from scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units
+from ctxsearch.envs.truth import ground_truth
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
+from ctxsearch.scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, run_units
 
 # (label, detector preset, confirm, min score): the detector settings compared. ``confirm2``
 # counts an object once two images detected it; ``score0.5`` once a detection of it scored 0.5.

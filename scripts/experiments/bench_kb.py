@@ -34,10 +34,10 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from knowledge import intervals
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, ObjectType, RelationSpec
-from scripts.experiments.tables import write_csv
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, ObjectType, RelationSpec
+from ctxsearch.scripts.experiments.tables import write_csv
 
 DEFAULT_SIZES = (100, 1000, 10_000, 30_000)
 RELATION_PREFIXES = ("ON-TOP-OF", "UNDER", "NEAR", "LEFT-OF", "RIGHT-OF", "BEHIND")

@@ -47,14 +47,14 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.mapping import default_map_mode
-from agent.perception_modes import DEFAULT_DETECTOR
-from envs.detector import default_or_named
-from envs.houses import resolve_style
-from envs.truth import sample_counts, truth_document
-from knowledge.catalog import Catalog, load_catalog
-from scripts.experiments.learning_report import decision_stats, fmt, markdown, plot
-from scripts.experiments.learning_trace import (
+from ctxsearch.agent.mapping import default_map_mode
+from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
+from ctxsearch.envs.detector import default_or_named
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.truth import sample_counts, truth_document
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.scripts.experiments.learning_report import decision_stats, fmt, markdown, plot
+from ctxsearch.scripts.experiments.learning_trace import (
     EXAM_MARKS,
     METRICS,
     WILSON_METRICS,
@@ -63,8 +63,8 @@ from scripts.experiments.learning_trace import (
     median_curve,
     run_trace,
 )
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units, session
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 
 TRUTH_SEED = 10_000_019  # first room seed of the ground truth (no learning run uses it)
 TRUTH_ROOMS_PER_UNIT = 10  # rooms of the ground truth per sweep unit

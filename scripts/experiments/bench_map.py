@@ -26,14 +26,14 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from agent.acquisition import start_pose
-from agent.frontiers import Exploration, explore_world
-from agent.mapping import BuiltMap, MapQuality, map_quality
-from agent.navigation import OccupancyGrid, obstacle_boxes
-from envs.layout import RoomLayout
-from envs.robot_spec import RobotSpec, TimeModel
-from envs.world import World
-from knowledge.catalog import Catalog
+from ctxsearch.agent.acquisition import start_pose
+from ctxsearch.agent.frontiers import Exploration, explore_world
+from ctxsearch.agent.mapping import BuiltMap, MapQuality, map_quality
+from ctxsearch.agent.navigation import OccupancyGrid, obstacle_boxes
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.catalog import Catalog
 
 
 def body_grid(layout: RoomLayout, spec: RobotSpec) -> OccupancyGrid:

@@ -58,15 +58,15 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from agent import search as S
-from agent import search_space as ss
-from envs.detector import DetectorModel
-from envs.houses import resolve_style
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from scripts.experiments.bench_indirect import indirect_analysis, write_indirect
-from scripts.experiments.episodes import (
+from ctxsearch.agent import search as S
+from ctxsearch.agent import search_space as ss
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts.experiments.bench_indirect import indirect_analysis, write_indirect
+from ctxsearch.scripts.experiments.episodes import (
     EpisodeDraw,
     Priors,
     SearchConfig,
@@ -75,8 +75,8 @@ from scripts.experiments.episodes import (
     run_episode,
     split_name,
 )
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, run_units
 
 BOOTSTRAP_SAMPLES = 2000
 EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode either way)

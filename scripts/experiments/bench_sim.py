@@ -33,15 +33,15 @@ import numpy as np
 from dm_control import mjcf
 from matplotlib.figure import Figure
 
-from envs.detector import detect
-from envs.floorplan import generate_layout
-from envs.houses import resolve_style
-from envs.layout import RoomLayout
-from envs.task import RoomTask, start_pose
-from envs.world import World, gl_renderer
-from knowledge.catalog import Catalog, load_catalog
-from scripts.experiments.bench_map import explore_results
-from scripts.experiments.tables import write_csv
+from ctxsearch.envs.detector import detect
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.task import RoomTask, start_pose
+from ctxsearch.envs.world import World, gl_renderer
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.scripts.experiments.bench_map import explore_results
+from ctxsearch.scripts.experiments.tables import write_csv
 
 TARGETS = {"compile_ms": 150.0, "gazes_per_s": 60.0, "overhead_ratio": 1.3}
 WARMUP_GAZES = 5
@@ -276,7 +276,7 @@ def _results(times: _Times, gen_ms: list[float]) -> dict:
         "capture_ms": med(times.capture),
         "detect_ms": med(times.detect),
         "bare_render_ms": med(times.bare),
-        "detector": "envs.detector.detect",
+        "detector": "ctxsearch.envs.detector.detect",
     }
 
 

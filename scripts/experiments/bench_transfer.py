@@ -33,16 +33,16 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from agent.learning import LearnConfig, learn
-from envs.houses import resolve_style
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
-from scripts.experiments.bench_curve import snapshot
-from scripts.experiments.bench_search import BenchResult, SearchBenchConfig
-from scripts.experiments.episodes import remembered_draws
-from scripts.experiments.scenarios import (
+from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments.bench_curve import snapshot
+from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from ctxsearch.scripts.experiments.episodes import remembered_draws
+from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
     check_no_stores,
@@ -53,8 +53,8 @@ from scripts.experiments.scenarios import (
     search,
     times,
 )
-from scripts.experiments.tables import write_csv
-from scripts.sweep import SweepOptions, run_units, session
+from ctxsearch.scripts.experiments.tables import write_csv
+from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 
 INTERVALS = ("wilson", "clustered")
 PROBE_SEED_OFFSET = 1  # the probe's learning seed: seed + 1 (other rooms than the knowledge's)

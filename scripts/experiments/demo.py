@@ -28,17 +28,17 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agent import search_space as ss
-from agent.learning import LearnConfig, learn, room_seed, run_id
-from agent.mapping import default_map_mode
-from agent.perception_modes import perception_label
-from agent.search import SearchResult, check_target, open_knowledge
-from envs.detector import DetectorModel
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.store import EvidenceStore
-from scripts.experiments.episodes import OneSearch, SearchConfig, search_once
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.learning import LearnConfig, learn, room_seed, run_id
+from ctxsearch.agent.mapping import default_map_mode
+from ctxsearch.agent.perception_modes import perception_label
+from ctxsearch.agent.search import SearchResult, check_target, open_knowledge
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
+from ctxsearch.scripts.experiments.episodes import OneSearch, SearchConfig, search_once
 
 DEMO_STYLE = "office"
 DEMO_TARGET = "Cup"

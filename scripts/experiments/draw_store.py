@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import search as S
-from agent.viewplan import Gaze
-from envs.robot_spec import RobotPose
+from ctxsearch.agent import search as S
+from ctxsearch.agent.viewplan import Gaze
+from ctxsearch.envs.robot_spec import RobotPose
 
 FORMAT = 1
 _PACKAGES = ("agent", "envs", "knowledge")

@@ -24,23 +24,23 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from agent import search as S
-from agent import search_space as ss
-from agent.episode_draw import draw_world
-from agent.perception_modes import DEFAULT_DETECTOR
-from agent.recording import Recorder, open_stream
-from agent.rr_layout import SEARCH_APP, search_blueprint
-from envs.detector import DetectorModel, default_or_named
-from envs.floorplan import generate_layout
-from envs.houses import HouseStyle, WorldStyle, resolve_style
-from envs.layout import RoomLayout
-from envs.world import World
-from knowledge.base import KnowledgeBase
-from knowledge.catalog import Catalog, load_catalog
-from knowledge.errors import CtxsearchError
-from knowledge.pooling import PooledCounts
-from scripts.experiments import draw_store
-from scripts.sweep import SweepOptions, run_units
+from ctxsearch.agent import search as S
+from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.episode_draw import draw_world
+from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
+from ctxsearch.agent.recording import Recorder, open_stream
+from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
+from ctxsearch.envs.detector import DetectorModel, default_or_named
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.pooling import PooledCounts
+from ctxsearch.scripts.experiments import draw_store
+from ctxsearch.scripts.sweep import SweepOptions, run_units
 
 ProbsFor = Callable[[str, str | None], ss.ProbabilitySource | None]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from scripts.experiments.learning_trace import (
+from ctxsearch.scripts.experiments.learning_trace import (
     EXAM_MARKS,
     METRICS,
     TIME_FRACTIONS,

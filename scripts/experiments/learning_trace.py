@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.learning import LearnConfig, learn, style_layouts
-from knowledge import intervals
-from knowledge.catalog import Catalog
-from knowledge.clustered import ClusteredIntervals, RoomCounts
-from knowledge.errors import CtxsearchError
+from ctxsearch.agent.learning import LearnConfig, learn, style_layouts
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts
+from ctxsearch.knowledge.errors import CtxsearchError
 
 METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage_informative", "coverage")
 # Under --interval clustered, the paper's Wilson figures beside the clustered ones.
@@ -231,7 +231,7 @@ class LearningBenchConfig:
         """The detector the results were made with ('none' for the oracle perception)."""
         if self.perception != "camera":
             return "none"
-        from envs.detector import load_detector
+        from ctxsearch.envs.detector import load_detector
 
         return load_detector(self.detector or "realistic").name
 

@@ -19,16 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import search as S
-from knowledge.base import KnowledgeBase
-from knowledge.errors import CtxsearchError
-from scripts.experiments.bench_search import (
+from ctxsearch.agent import search as S
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts.experiments.bench_search import (
     BenchResult,
     SearchBenchConfig,
     bench_search,
     bootstrap_ci,
 )
-from scripts.sweep import SweepOptions
+from ctxsearch.scripts.sweep import SweepOptions
 
 SCENARIO_NAMES = ("built", "given")
 
