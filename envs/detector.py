@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import functools
 import math
-import tomllib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -47,6 +46,7 @@ from ctxsearch.envs.camera import Frame, PinholeCamera, focal_length
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, ObjectType, asset_file
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.files import InputFileError, read_toml
 from ctxsearch.knowledge.geometry import ObjectInstance
 
 DETECTORS_DIR = ASSETS_DIR / "detectors"
@@ -351,17 +351,13 @@ def load_detector(path_or_name: str | Path, catalog: Catalog | None = None) -> D
     """Load and validate a preset (a name in assets/detectors or a path); with ``catalog``, its
     type names are checked too. DetectorError (one line) on any problem."""
     path = detector_path(path_or_name)
-    if not path.is_file():
-        known = ", ".join(available_detectors())
-        raise DetectorError(path, f"no such detector preset (shipped: {known})")
     try:
-        doc = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        raise DetectorError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise DetectorError(path, f"not valid TOML: {' '.join(str(exc).split())}") from None
-    except OSError as exc:
-        raise DetectorError(path, f"cannot read: {exc.strerror or exc}") from None
+        doc = read_toml(path)  # a regular file, size and nesting limited
+    except InputFileError as exc:
+        if exc.missing:
+            known = ", ".join(available_detectors())
+            raise DetectorError(path, f"no such detector preset (shipped: {known})") from None
+        raise DetectorError(path, exc.problem) from None
     model = parse_detector(doc, path)
     return model.check_catalog(catalog) if catalog is not None else model
 

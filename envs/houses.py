@@ -9,7 +9,6 @@ path) into a ``Style`` or a ``HouseStyle``; ``generate_layout`` makes the layout
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from ctxsearch.envs.styles import (
     range_field,
 )
 from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
+from ctxsearch.knowledge.files import InputFileError, read_toml
 
 HOUSES_DIR = ASSETS_DIR / "houses"
 TOP_FIELDS = {"name", "description", "house", "rooms"}
@@ -94,9 +94,12 @@ def _room_style(path, key: str, catalog: Catalog) -> Style:
     p = Path(key)
     if not p.is_absolute():
         p = Path(path).parent / p
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():
         raise HouseError(path, f"no such room style file {str(p)!r}", field=field)
-    return load_style(p, catalog)
+    try:
+        return load_style(p, catalog)
+    except StyleError as exc:  # its one line, and where the house names it
+        raise HouseError(path, str(exc), field=field) from None
 
 
 def _unknown(path, given: dict, allowed: set[str], prefix: str = "") -> None:
@@ -219,17 +222,12 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
 
 
 def _read(path: Path, cls: type[StyleError]) -> dict:
+    """The TOML document of a house or room style file (``knowledge.files.read_toml``: a regular
+    file, size and nesting limited); ``cls`` words the error."""
     try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except FileNotFoundError:
-        raise cls(path, "no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise cls(path, f"TOML syntax error: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise cls(path, f"not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise cls(path, f"cannot read: {exc.strerror}") from None
+        return read_toml(path)
+    except InputFileError as exc:
+        raise cls(path, exc.problem) from None
 
 
 def load_house(path_or_name: str | Path, catalog: Catalog | None = None) -> HouseStyle:
@@ -269,10 +267,9 @@ def resolve_style(path_or_name: str | Path, catalog: Catalog | None = None) -> W
         )
     path = Path(path_or_name)
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except (OSError, ValueError):
-        doc = None  # load_style reports the problem in its words
+        doc = read_toml(path)
+    except InputFileError:
+        doc = None  # load_style reports the problem in its words (reading it once more)
     if isinstance(doc, dict) and "house" in doc:
         return parse_house(doc, path, catalog)
     return load_style(path, catalog)

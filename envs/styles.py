@@ -10,13 +10,13 @@ ground-truth tool and the oracle baselines do.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.files import InputFileError, read_toml
 
 STYLES_DIR = ASSETS_DIR / "styles"
 TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter", "drift"}
@@ -110,9 +110,19 @@ class Style:
                      self.drift)  # fmt: skip
 
     def with_drift(self, drift: tuple[Drift, ...], catalog: Catalog | None = None) -> Style:
-        """The style with another drift schedule (checked like a file's: ``check_drift_rule``)."""
+        """The style with another drift schedule (checked like a file's: ``check_drift_rule``;
+        two entries for the same rule and day are refused: which one applies would be a guess)."""
+        first: dict[tuple[str, int], int] = {}
         for i, d in enumerate(drift):
             check_drift_rule(self.path, f"drift[{i}]", d, self, catalog)
+            j = first.setdefault((d.rule, d.from_day), i)
+            if j != i:
+                raise StyleError(
+                    self.path,
+                    f"a second entry for {d.rule} from day {d.from_day} (drift[{j}] is the "
+                    "first): give each rule at most one p per day",
+                    field=f"drift[{i}]",
+                )
         return Style(self.name, self.path, self.description, self.width, self.depth,
                      self.height, self.door_width, self.furniture, self.rules, self.clutter,
                      tuple(drift))  # fmt: skip
@@ -435,25 +445,19 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
 
 
 def load_style(path_or_name: str | Path, catalog: Catalog | None = None) -> Style:
-    """Load and validate a style by path or bare name (see ``available_styles()``)."""
+    """Load and validate a style by path or bare name (see ``available_styles()``); the file is
+    read as ``knowledge.files.read_toml`` reads (a regular file, size and nesting limited)."""
     path = style_path(path_or_name)
     catalog = catalog or load_catalog()
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except FileNotFoundError:
+        doc = read_toml(path)
+    except InputFileError as exc:
         hint = (
             f" (available: {', '.join(available_styles())})"
-            if not Path(path_or_name).suffix
+            if exc.missing and not Path(path_or_name).suffix
             else ""
         )
-        raise StyleError(path, f"no such style file{hint}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise StyleError(path, f"TOML syntax error: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise StyleError(path, f"not UTF-8 text (byte {exc.start}); TOML must be UTF-8") from None
-    except RecursionError:
-        raise StyleError(path, "TOML nested too deeply") from None
-    except OSError as exc:
-        raise StyleError(path, f"cannot read: {exc.strerror}") from None
+        raise StyleError(
+            path, "no such style file" + hint if exc.missing else exc.problem
+        ) from None
     return parse_style(doc, path, catalog)

@@ -24,7 +24,6 @@ rooms', and ``se_room`` treats the rooms as the independent units.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable
 from pathlib import Path
@@ -38,6 +37,7 @@ from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.styles import Style
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.files import InputFileError, read_json
 from ctxsearch.knowledge.geometry import ObjectInstance, related
 
 
@@ -250,20 +250,12 @@ def load_truth(path: str | Path, catalog: Catalog, style: str | None = None) -> 
     naming the file) for a missing, unreadable, non-UTF-8, non-JSON or wrong-shaped file."""
     p = Path(path)
     try:
-        text = p.read_bytes().decode("utf-8")
-        doc = json.loads(text, parse_constant=_reject_constant)
-    except FileNotFoundError:
-        raise TruthError(
-            f"{p}: no such ground-truth file (make one with: ctxsearch truth)"
-        ) from None
-    except IsADirectoryError:
-        raise TruthError(f"{p}: is a directory, not a ground-truth file") from None
-    except OSError as exc:
-        raise TruthError(f"{p}: cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise TruthError(f"{p}: not UTF-8 text (byte {exc.start})") from None
-    except RecursionError:
-        raise TruthError(f"{p}: not a ground-truth JSON file (nested too deeply)") from None
-    except ValueError as exc:
-        raise TruthError(f"{p}: not a ground-truth JSON file ({exc})") from None
+        # a regular file, at most files.MAX_FILE_BYTES, nested at most files.MAX_NESTING deep
+        doc = read_json(p, parse_constant=_reject_constant)
+    except InputFileError as exc:
+        if exc.missing:
+            raise TruthError(
+                f"{p}: no such ground-truth file (make one with: ctxsearch truth)"
+            ) from None
+        raise TruthError(f"{p}: not a ground-truth JSON file ({exc.problem})") from None
     return parse_truth(doc, p, catalog, style)

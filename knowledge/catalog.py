@@ -25,13 +25,13 @@ import hashlib
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ctxsearch.knowledge.errors import CatalogError
+from ctxsearch.knowledge.files import InputFileError, read_toml
 from ctxsearch.knowledge.hierarchy import Hierarchy, parse_hierarchy
 
 ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
@@ -438,19 +438,11 @@ def parse_catalog(doc: dict, path: str | Path = "<memory>") -> Catalog:
 
 
 def load_catalog(path: str | Path | None = None) -> Catalog:
-    """Load and validate a catalog TOML file (default ``assets/types.toml``)."""
+    """Load and validate a catalog TOML file (default ``assets/types.toml``): a regular file of at
+    most ``files.MAX_FILE_BYTES`` bytes, nested at most ``files.MAX_NESTING`` deep."""
     path = Path(path) if path is not None else DEFAULT_CATALOG
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except FileNotFoundError:
-        raise CatalogError(path, "no such file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise CatalogError(path, f"TOML syntax error: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise CatalogError(path, f"not UTF-8 text (byte {exc.start}); TOML must be UTF-8") from None
-    except RecursionError:
-        raise CatalogError(path, "TOML nested too deeply") from None
-    except OSError as exc:
-        raise CatalogError(path, f"cannot read: {exc.strerror}") from None
+        doc = read_toml(path)
+    except InputFileError as exc:
+        raise CatalogError(path, exc.problem) from None
     return parse_catalog(doc, path)

@@ -56,6 +56,7 @@ class Loader:
     example: Callable[[], bytes]
     name: str
     kind: str  # "toml" | "json" | "sqlite"
+    focus: tuple = ()  # structure-aware mutations only under this path (e.g. ("drift",))
 
 
 def _store_example() -> bytes:
@@ -93,6 +94,15 @@ def _truth_example() -> bytes:
     return json.dumps(doc).encode()
 
 
+def _drift_example() -> bytes:
+    """The office style with a drift schedule (two rules, three days)."""
+    return (STYLES_DIR / "office.toml").read_bytes() + (
+        b'\n[[drift]]\nrule = "Desk/ON-TOP-OF-DESK/Laptop"\np = 0.9\nfrom_day = 2\n'
+        b'\n[[drift]]\nrule = "Desk/ON-TOP-OF-DESK/Laptop"\np = 0.1\nfrom_day = 5\n'
+        b'\n[[drift]]\nrule = "Desk/ON-TOP-OF-DESK/Monitor"\np = 0.5\nfrom_day = 5\n'
+    )
+
+
 LOADERS = {
     "catalog": Loader(load_catalog, DEFAULT_CATALOG.read_bytes, "types.toml", "toml"),
     "style": Loader(
@@ -114,6 +124,12 @@ LOADERS = {
         (DETECTORS_DIR / "realistic.toml").read_bytes,
         "d.toml",
         "toml",
+    ),
+    # The catalog's [[class]] tables (the type hierarchy) and a style's [[drift]] schedule: the
+    # same loaders, their structure-aware mutations aimed at those tables.
+    "classes": Loader(load_catalog, DEFAULT_CATALOG.read_bytes, "types.toml", "toml", ("class",)),
+    "drift": Loader(
+        lambda p: load_style(p, CATALOG).on_day(5), _drift_example, "style.toml", "toml", ("drift",)
     ),
 }
 _EXAMPLES: dict[str, bytes] = {}
@@ -239,10 +255,11 @@ def field_mutations(draw, name: str) -> bytes:
     kind = LOADERS[name].kind
     raw = example(name)
     doc = tomllib.loads(raw.decode()) if kind == "toml" else json.loads(raw)
-    paths = list(_paths(doc))[1:]
+    focus = LOADERS[name].focus
+    paths = [p for p in _paths(doc) if p and p[: len(focus)] == focus]
     for _ in range(draw(st.integers(1, 3))):
         doc = _replace(doc, draw(st.sampled_from(paths)), draw(HOSTILE))
-        paths = [p for p in _paths(doc) if p][:5000]
+        paths = [p for p in _paths(doc) if p and p[: len(focus)] == focus][:5000] or [focus]
     if kind == "toml":
         if not isinstance(doc, dict):
             return _toml_value(doc).encode()

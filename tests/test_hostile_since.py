@@ -1,0 +1,248 @@
+"""Hostile inputs on the surfaces added after issue 9 (issue 24): special files given as input
+files (FIFOs, devices, dangling symlinks, symlink loops), nesting and size limits, the store's
+symlinks and day stamps, drift schedules, flags of the change test, Ctrl-C, an unreachable Ray
+cluster and the Gymnasium task's arguments. Each gets one line ``ctxsearch: error: ...`` and
+exit 2 (130 for Ctrl-C), quickly, and a refused file is left as it was."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ctxsearch.envs.detector import DetectorError, load_detector
+from ctxsearch.envs.houses import HOUSES_DIR, HouseError, load_house, resolve_style
+from ctxsearch.envs.styles import STYLES_DIR, StyleError, load_style
+from ctxsearch.envs.truth import TruthError, load_truth
+from ctxsearch.knowledge import files
+from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog
+from ctxsearch.knowledge.errors import CatalogError, CtxsearchError
+from ctxsearch.scripts.cli import main
+
+CATALOG = load_catalog()
+
+
+@contextlib.contextmanager
+def no_hang(seconds: int = 10):
+    """Fail (instead of hanging the suite) if the body blocks for ``seconds``."""
+
+    def expired(signum, frame):
+        raise TimeoutError(f"blocked for {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _one_line(capsys, *fragments: str) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("ctxsearch: error: "), err
+    assert "Traceback" not in err, err
+    for f in fragments:
+        assert f in err, err
+    return err
+
+
+# ---- special files as input files -------------------------------------------------------------
+def _special(tmp_path: Path, kind: str, name: str) -> Path:
+    p = tmp_path / name
+    if kind == "fifo":
+        os.mkfifo(p)
+    elif kind == "dev-zero":
+        p.symlink_to("/dev/zero")
+    elif kind == "dangling":
+        p.symlink_to(tmp_path / "nowhere.toml")
+    elif kind == "loop":
+        p.symlink_to(tmp_path / f"loop-{name}")
+        (tmp_path / f"loop-{name}").symlink_to(p)
+    elif kind == "directory":
+        p.mkdir()
+    return p
+
+
+SPECIAL = {
+    "fifo": "FIFO",
+    "dev-zero": "character device",
+    "dangling": "symlink to a file that does not exist",
+    "loop": "symlink loop",
+    "directory": "is a directory",
+}
+LOADERS = {
+    "catalog": (load_catalog, CatalogError),
+    "style": (lambda p: load_style(p, CATALOG), StyleError),
+    "house": (lambda p: load_house(p, CATALOG), HouseError),
+    "world style": (lambda p: resolve_style(p, CATALOG), StyleError),
+    "detector": (lambda p: load_detector(p, CATALOG), DetectorError),
+    "truth": (lambda p: load_truth(p, CATALOG, "office"), TruthError),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(SPECIAL))
+@pytest.mark.parametrize("loader", sorted(LOADERS))
+def test_a_special_file_is_refused_by_every_loader_without_blocking(tmp_path, loader, kind):
+    load, error = LOADERS[loader]
+    p = _special(tmp_path, kind, "input.toml")
+    with no_hang(), pytest.raises(error) as exc:
+        load(p)
+    msg = str(exc.value)
+    assert msg.startswith(str(p)) and "\n" not in msg, msg
+    assert SPECIAL[kind] in msg, msg
+
+
+@pytest.mark.parametrize("kind", ["fifo", "dev-zero"])
+def test_a_special_file_as_a_house_room_style_is_refused_naming_the_house(tmp_path, kind):
+    _special(tmp_path, kind, "den.toml")
+    text = (HOUSES_DIR / "apartment.toml").read_text()
+    house = tmp_path / "h.toml"
+    house.write_text(text.replace('name = "apartment"', 'name = "h"') + '"den.toml" = 1\n')
+    with no_hang(), pytest.raises(HouseError, match=r"h.toml: field 'rooms.den.toml': .*den.toml"):
+        load_house(house, CATALOG)
+
+
+def test_the_cli_refuses_special_files_as_catalog_style_and_truth(tmp_path, capsys):
+    fifo = _special(tmp_path, "fifo", "f.toml")
+    zero = _special(tmp_path, "dev-zero", "z.toml")
+    with no_hang():
+        assert main(["kb", "show", str(tmp_path / "kb.sqlite"), "--catalog", str(fifo)]) == 2
+        _one_line(capsys, "f.toml: is a FIFO")
+        out = str(tmp_path / "t.json")
+        assert main(["truth", "--style", str(zero), "--samples", "1", "--out", out]) == 2
+        _one_line(capsys, "z.toml: is a character device (through a symlink)")
+        assert main(["truth", "--style", str(fifo), "--samples", "1", "--out", out]) == 2
+        _one_line(capsys, "f.toml: is a FIFO")
+    assert not Path(out).exists()
+
+
+# ---- nesting and size -------------------------------------------------------------------------
+@pytest.mark.parametrize("loader", sorted(LOADERS))
+def test_a_file_nested_100000_deep_is_refused_before_parsing(tmp_path, loader):
+    load, error = LOADERS[loader]
+    p = tmp_path / "deep.toml"
+    deep = 100_000
+    if loader == "truth":
+        p.write_text("[" * deep + "]" * deep)
+    else:
+        p.write_text("a = " + "[" * deep + "]" * deep + "\n")
+    with pytest.raises(error, match="nested more than 64 levels deep") as exc:
+        load(p)
+    assert str(exc.value).startswith(str(p))
+
+
+def test_nesting_just_within_the_limit_parses_and_one_past_it_does_not(tmp_path):
+    p = tmp_path / "n.toml"
+    depth = files.MAX_NESTING
+    p.write_text("a = " + "[" * depth + "]" * depth + "\n")
+    assert files.read_toml(p)["a"] is not None
+    p.write_text("a = " + "[" * (depth + 1) + "]" * (depth + 1) + "\n")
+    with pytest.raises(files.InputFileError, match="nested more than"):
+        files.read_toml(p)
+    j = tmp_path / "n.json"
+    j.write_text('{"a": ' + "[" * depth + "]" * depth + "}")
+    with pytest.raises(files.InputFileError, match="nested more than"):
+        files.read_json(j)  # the object is one level more
+    j.write_text('{"a": ' + "[" * (depth - 1) + "]" * (depth - 1) + "}")
+    assert files.read_json(j) == {"a": json.loads("[" * (depth - 1) + "]" * (depth - 1))}
+
+
+def test_brackets_in_strings_and_comments_do_not_count_as_nesting(tmp_path):
+    p = tmp_path / "s.toml"
+    deep = "[" * 500
+    p.write_text(
+        f'a = "{deep}"\nb = \'{deep}\'\n# {deep}\nc = """\n{deep}\\"""\n"""\nd = \'\'\'{deep}\'\'\'\n'
+    )
+    assert files.read_toml(p)["a"] == deep
+    j = tmp_path / "s.json"
+    j.write_text(json.dumps({"a": deep + '\\"' + deep}))
+    assert files.read_json(j)["a"] == deep + '\\"' + deep
+
+
+@given(doc=st.recursive(st.integers(), lambda c: st.lists(c, max_size=3), max_leaves=30))
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+def test_the_nesting_scan_measures_json_arrays_exactly(doc):
+    def depth(d):
+        return 1 + max(map(depth, d), default=0) if isinstance(d, list) else 0
+
+    assert files.nesting_depth(json.dumps(doc), "json") == depth(doc)
+
+
+def test_a_file_larger_than_the_limit_is_refused_without_reading_it(tmp_path, monkeypatch):
+    p = tmp_path / "big.toml"
+    with open(p, "wb") as f:  # sparse: 1 byte past the limit
+        f.truncate(files.MAX_FILE_BYTES + 1)
+    with pytest.raises(StyleError, match=f"larger than {files.MAX_FILE_BYTES:_} bytes"):
+        load_style(p, CATALOG)
+    p.write_bytes(b'name = "x"\n' * 10)
+    with pytest.raises(files.InputFileError, match="larger than 50 bytes"):
+        files.read_bytes(p, limit=50)
+    assert files.read_bytes(p, limit=110) == b'name = "x"\n' * 10
+
+
+def test_the_shipped_files_are_well_within_the_limits():
+    shipped = [DEFAULT_CATALOG, *STYLES_DIR.glob("*.toml"), *HOUSES_DIR.glob("*.toml")]
+    for p in shipped:
+        text = p.read_text()
+        assert len(text.encode()) < files.MAX_FILE_BYTES / 100
+        assert files.nesting_depth(text, "toml") <= 4, p
+
+
+# ---- drift schedules ----------------------------------------------------------------------------
+def _drift_style(tmp_path: Path, entries: list[tuple[str, float, int]]) -> Path:
+    text = (STYLES_DIR / "office.toml").read_text().replace('name = "office"', 'name = "drifty"')
+    for rule, p, day in entries:
+        text += f'\n[[drift]]\nrule = "{rule}"\np = {p}\nfrom_day = {day}\n'
+    out = tmp_path / "drifty.toml"
+    out.write_text(text)
+    return out
+
+
+def test_two_drift_entries_for_the_same_rule_and_day_are_refused(tmp_path, capsys):
+    rule = "Desk/ON-TOP-OF-DESK/Monitor"
+    p = _drift_style(tmp_path, [(rule, 0.9, 2), (rule, 0.1, 2)])
+    before = p.read_bytes()
+    with pytest.raises(StyleError, match=r"field 'drift\[1\]': a second entry for .* from day 2"):
+        load_style(p, CATALOG)
+    out = str(tmp_path / "t.json")
+    assert main(["truth", "--style", str(p), "--samples", "1", "--out", out]) == 2
+    _one_line(capsys, "drifty.toml: field 'drift[1]'", "drift[0] is the first")
+    assert p.read_bytes() == before
+
+
+def test_drift_entries_of_one_rule_on_different_days_apply_in_day_order(tmp_path):
+    rule = "Desk/ON-TOP-OF-DESK/Monitor"
+    style = load_style(_drift_style(tmp_path, [(rule, 0.1, 5), (rule, 0.9, 2)]), CATALOG)
+    p = {d: next(r.p for r in style.on_day(d).rules if r.type == "Monitor") for d in (1, 2, 5, 9)}
+    assert p == {1: 0.85, 2: 0.9, 5: 0.1, 9: 0.1}
+
+
+def test_with_drift_refuses_duplicates_given_in_code_too():
+    from ctxsearch.envs.styles import Drift
+
+    style = load_style("office", CATALOG)
+    d = Drift("Desk/ON-TOP-OF-DESK/Monitor", 0.5, 3)
+    with pytest.raises(StyleError, match="a second entry"):
+        style.with_drift((d, Drift(d.rule, 0.2, 3)), CATALOG)
+
+
+# ---- helpers shared with the store and ray tests ------------------------------------------------
+def sha(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_a_refused_input_file_is_left_as_it_was(tmp_path):
+    p = tmp_path / "deep.json"
+    p.write_bytes(b"[" * 1000)
+    before = sha(p)
+    with pytest.raises(CtxsearchError):
+        load_truth(p, CATALOG)
+    assert sha(p) == before and sorted(x.name for x in tmp_path.iterdir()) == ["deep.json"]
