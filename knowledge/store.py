@@ -81,6 +81,7 @@ from ctxsearch.knowledge.clustered import (
     room_counts_from_rows,
 )
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 
 SCHEMA_VERSION = 4
 APP = "ctxsearch"
@@ -88,6 +89,9 @@ ROOM_STATUSES = ("started", "done")
 # What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on;
 # the day from v4 on).
 EXAM_KEY = ("run", "style", "room_seed", "day", "object_id")
+# The last day a store holds (``learn --days`` is at most 10^6): a stamp outside [0, MAX_DAY], or
+# not an integer, is a damaged store.
+MAX_DAY = 1_000_000
 _V3_EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _TABLES = ("meta", "rooms", "examinations", "observations")
@@ -175,6 +179,16 @@ def _not_a_store(path: Path, why: str = "") -> StoreError:
     return StoreError(f"{path}: not a ctxsearch knowledge store" + (f" ({why})" if why else ""))
 
 
+def _store_exists(path: Path) -> bool:
+    """Whether a store file is at ``path`` (a regular file, or a symlink resolving to one);
+    False if nothing is there; a StoreError for anything else: a dangling symlink or a symlink
+    loop (a store is never created or written through one), a directory, FIFO or device."""
+    try:
+        return regular_file_exists(path)
+    except InputFileError as exc:
+        raise _not_a_store(path, exc.problem) from None
+
+
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
@@ -199,10 +213,8 @@ def inspect_store(path: str | Path, catalog: Catalog | None = None) -> dict[str,
     beside it).
     """
     path = Path(path)
-    if not path.exists():
+    if not _store_exists(path):
         raise StoreError(f"{path}: no such knowledge store")
-    if not path.is_file():
-        raise _not_a_store(path, "not a regular file")
     try:
         with open(path, "rb") as f:
             head = f.read(100)
@@ -292,6 +304,10 @@ def _check_store(conn: sqlite3.Connection, path: Path, *, quick_check: bool) -> 
             f"{path}: refused: its schema is not the one ctxsearch writes for version {version} "
             f"({problem})"
         )
+    if version >= 4:
+        bad = _bad_day(conn)
+        if bad:
+            raise StoreError(f"{path}: damaged knowledge store: {bad}")
     try:
         _check_alpha(meta["alpha"])
     except CtxsearchError:
@@ -305,6 +321,19 @@ def _check_store(conn: sqlite3.Connection, path: Path, *, quick_check: bool) -> 
                 f"{path}: corrupt knowledge store (sqlite quick_check: {_one_line(check)})"
             )
     return meta
+
+
+def _bad_day(conn: sqlite3.Connection) -> str | None:
+    """The first day stamp that is not an integer in [0, MAX_DAY] (a row written past the
+    CHECK, e.g. with ignore_check_constraints), worded; None if every one is."""
+    bad = f"typeof(day) != 'integer' OR day < 0 OR day > {MAX_DAY}"
+    row = conn.execute(f"SELECT id, day FROM examinations WHERE {bad} LIMIT 1").fetchone()
+    if row is not None:
+        return f"examination {row[0]!r}: day {row[1]!r} is not a day in [0, {MAX_DAY}]"
+    row = conn.execute(f"SELECT style, seed, day FROM rooms WHERE {bad} LIMIT 1").fetchone()
+    if row is not None:
+        return f"room {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in [0, {MAX_DAY}]"
+    return None
 
 
 def _schema_signature(conn: sqlite3.Connection, names: Iterable[str] | None = None):
@@ -485,7 +514,7 @@ class EvidenceStore:
         path = Path(path)
         if alpha is not None:
             alpha = _check_alpha(alpha)
-        if not path.exists():
+        if not _store_exists(path):
             if not create or read_only:
                 raise StoreError(f"{path}: no such knowledge store")
             _create(path, catalog, intervals.DEFAULT_ALPHA if alpha is None else alpha)
@@ -750,7 +779,7 @@ class EvidenceStore:
                     self._number(sim, f"{where}: sim_time"),
                     self._name(strategy, f"{where}: strategy"),
                     rows,
-                    self._integer(d, f"{where}: day"),
+                    self._day_stamp(d, f"{where}: day"),
                 )
 
     def examined(self, run: str, style: str, room_seed: int, day: int | None = None) -> set[int]:
@@ -918,6 +947,12 @@ class EvidenceStore:
             raise self._bad(f"{what} {v!r} is not an integer")
         return v
 
+    def _day_stamp(self, v: object, what: str) -> int:
+        d = self._integer(v, what)
+        if not 0 <= d <= MAX_DAY:
+            raise self._bad(f"{what} {d} is not a day in [0, {MAX_DAY}]")
+        return d
+
     def _number(self, v: object, what: str) -> float:
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise self._bad(f"{what} {v!r} is not a finite number")
@@ -1064,9 +1099,9 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
         if r in seen:
             raise StoreError(f"{p}: given twice as an input (its evidence would count twice)")
         seen[r] = p
-    if out_path.exists() and out_path.resolve() in seen:
+    new_out = not _store_exists(out_path)
+    if not new_out and out_path.resolve() in seen:
         raise StoreError(f"{out_path}: the output is also an input")
-    new_out = not out_path.exists()
     store = EvidenceStore.open(
         out_path, catalog, alpha=float(metas[0]["alpha"]) if new_out else None
     )
@@ -1153,8 +1188,8 @@ def _int(v: object, what: str) -> int:
 
 def _day(v: object) -> int:
     d = _int(v, "day")
-    if d < 0:
-        raise CtxsearchError(f"day must be >= 0, got {d}")
+    if not 0 <= d <= MAX_DAY:
+        raise CtxsearchError(f"day must be in [0, {MAX_DAY}], got {d}")
     return d
 
 

@@ -10,6 +10,7 @@ from ctxsearch.knowledge.drift import (
     ChangeDetector,
     EntrySeries,
     chi2_1_quantile,
+    fisher_p,
     forget_counts,
     g_statistic,
     half_life_counts,
@@ -88,3 +89,56 @@ def test_series_validation():
         EntrySeries(np.array([2, 1]), np.array([True, False]))
     with pytest.raises(ValueError):
         forget_counts(EntrySeries(np.array([0]), np.array([True])), 0, "sometimes")
+
+
+def _changes_testing_every_day(det: ChangeDetector, series, first_day, last_day) -> list[int]:
+    """The change test as defined: tested at the end of every day (the reference)."""
+    alarms, start = [], first_day
+    days, hits = series.days, series.hits
+    level = det.false_alarm / det.looks
+    for today in range(first_day, last_day + 1):
+        cut = today - det.window + 1
+        old, new = (days >= start) & (days < cut), (days >= cut) & (days <= today)
+        if cut <= start or old.sum() < det.min_evidence or new.sum() < det.min_evidence:
+            continue
+        y1, n1, y2, n2 = hits[old].sum(), old.sum(), hits[new].sum(), new.sum()
+        g_ok = g_statistic(y1, n1, y2, n2) > chi2_1_quantile(level) * 0.8
+        if g_ok and fisher_p(y1, n1, y2, n2) < level:
+            alarms.append(today)
+            start = cut
+    return alarms
+
+
+def test_testing_only_the_days_with_evidence_gives_the_alarms_of_testing_every_day():
+    rng = np.random.default_rng(24)
+    alarmed = 0
+    for _ in range(600):
+        span = int(rng.integers(1, 60))
+        days = np.sort(rng.integers(0, span, int(rng.integers(0, 50))))
+        p = np.where(days < rng.integers(0, span), rng.random(), rng.random())
+        series = EntrySeries(days, rng.random(len(days)) < p)
+        det = ChangeDetector(
+            window=int(rng.integers(1, 8)),
+            false_alarm=float(rng.choice([0.05, 0.5, 0.9])),
+            looks=int(rng.integers(1, 4)),
+            min_evidence=int(rng.integers(0, 6)),
+        )
+        first, last = int(rng.integers(0, 4)), int(rng.integers(0, span + 8))
+        expected = _changes_testing_every_day(det, series, first, last)
+        assert det.changes(series, first, last) == expected
+        alarmed += bool(expected)
+    assert alarmed > 100  # the comparison saw many alarms, not only quiet series
+
+
+def test_the_change_test_over_a_million_days_is_quick_and_any_rate_has_a_quantile():
+    import time
+
+    days = np.array([0] * 10 + [500_000] * 10 + [1_000_000] * 10)
+    series = EntrySeries(days, np.array([True] * 10 + [False] * 20))
+    t = time.perf_counter()
+    assert ChangeDetector(window=3, looks=30).changes(series, 0, 1_000_000) == [500_000]
+    assert time.perf_counter() - t < 1.0
+    assert chi2_1_quantile(1e-300) == pytest.approx(1373.87, abs=0.01)  # 1 - p/2 rounds to 1
+    assert chi2_1_quantile(5e-324) > chi2_1_quantile(1e-300)
+    with pytest.raises(ValueError):
+        chi2_1_quantile(0.0)

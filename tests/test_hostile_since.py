@@ -246,3 +246,122 @@ def test_a_refused_input_file_is_left_as_it_was(tmp_path):
     with pytest.raises(CtxsearchError):
         load_truth(p, CATALOG)
     assert sha(p) == before and sorted(x.name for x in tmp_path.iterdir()) == ["deep.json"]
+
+
+# ---- the store: symlinks and day stamps ---------------------------------------------------------
+def _store(tmp_path: Path, name: str = "kb.sqlite") -> Path:
+    from ctxsearch.knowledge.store import EvidenceStore
+
+    p = tmp_path / name
+    with EvidenceStore.open(p, CATALOG) as s:
+        on = next(r for r in CATALOG.type("Desk").relation_names if "ON-TOP" in r)
+        for i in range(3):
+            s.record(
+                run="r", style="office", room_seed=1, object_id=i, ref_type="Desk",
+                sim_time=float(i), strategy="hif", related=[(on, "Monitor", 10 + i)],
+            )  # fmt: skip
+        s.mark_room("r", "office", 1, "done", end_time=3.0)
+    return p
+
+
+@pytest.mark.parametrize("kind", ["dangling", "loop", "dev-zero", "directory", "fifo"])
+def test_a_store_path_that_is_not_a_regular_file_is_refused_and_nothing_is_created(
+    tmp_path, capsys, kind
+):
+    from ctxsearch.knowledge.store import EvidenceStore, StoreError
+
+    p = _special(tmp_path, kind, "kb.sqlite")
+    before = sorted(x.name for x in tmp_path.iterdir())
+    why = {"dev-zero": "character device", "fifo": "FIFO"}.get(kind, SPECIAL[kind])
+    with no_hang():
+        with pytest.raises(StoreError, match=why):
+            EvidenceStore.open(p, CATALOG)  # would create a new store
+        argv = ["learn", "--style", "office", "--rooms", "1", "--perception", "oracle"]
+        assert main([*argv, "--no-progress", "--kb", str(p)]) == 2
+        _one_line(capsys, "kb.sqlite: not a ctxsearch knowledge store", why)
+        assert main(["kb", "merge", str(p), str(_store(tmp_path, "in.sqlite"))]) == 2
+        _one_line(capsys, "kb.sqlite: not a ctxsearch knowledge store", why)
+    assert sorted(x.name for x in tmp_path.iterdir() if x.name != "in.sqlite") == before
+    assert not (tmp_path / "nowhere.toml").exists()  # the dangling link's target: not created
+
+
+def test_a_symlink_to_a_store_is_read_and_written_through(tmp_path):
+    from ctxsearch.knowledge.store import EvidenceStore
+
+    real = _store(tmp_path)
+    link = tmp_path / "link.sqlite"
+    link.symlink_to(real)
+    with EvidenceStore.open(link, CATALOG) as s:
+        s.mark_room("r", "office", 2, "started")
+    with EvidenceStore.open(real, CATALOG, read_only=True) as s:
+        assert s.room_status("r", "office", 2) == "started"
+
+
+def _with_day(p: Path, table: str, day: str) -> None:
+    import sqlite3
+
+    conn = sqlite3.connect(p)
+    conn.execute("PRAGMA ignore_check_constraints = 1")  # written past the CHECK (day >= 0)
+    with conn:
+        conn.execute(
+            f"UPDATE {table} SET day = {day} WHERE rowid = (SELECT MIN(rowid) FROM {table})"
+        )
+    conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    conn.close()
+
+
+@pytest.mark.parametrize("table", ["examinations", "rooms"])
+@pytest.mark.parametrize("day", [str(2**62), "-5", "'tomorrow'", "2.5", "1000001", "x'00'"])
+def test_a_store_with_a_bad_day_stamp_is_refused_by_every_command_untouched(
+    tmp_path, capsys, table, day
+):
+    p = _store(tmp_path)
+    _with_day(p, table, day)
+    before = {x.name: sha(x) for x in tmp_path.iterdir()}
+    runs = [
+        ["kb", "stats", str(p)],
+        ["kb", "show", str(p), "--forget", "detect"],
+        ["kb", "show", str(p), "--forget", "half-life"],
+        ["learn", "--style", "office", "--rooms", "2", "--perception", "oracle", "--no-progress",
+         "--kb", str(p)],
+        ["kb", "merge", str(tmp_path / "out.sqlite"), str(p)],
+    ]  # fmt: skip
+    for argv in runs:
+        with no_hang():
+            assert main(argv) == 2, argv
+        _one_line(capsys, "kb.sqlite: damaged knowledge store", "is not a day in [0, 1000000]")
+    assert {x.name: sha(x) for x in tmp_path.iterdir()} == before
+
+
+def test_the_last_day_a_store_holds_is_read(tmp_path, capsys):
+    from ctxsearch.knowledge.store import MAX_DAY, EvidenceStore
+
+    p = _store(tmp_path)
+    _with_day(p, "examinations", str(MAX_DAY))
+    with EvidenceStore.open(p, CATALOG, read_only=True) as s:
+        assert max(e.day for e in s.examinations()) == MAX_DAY
+    with no_hang(20):  # the change test over 10^6 days tests only the days with evidence
+        assert main(["kb", "show", str(p), "--forget", "detect"]) == 0
+    assert "day 1000000" in capsys.readouterr().out
+    with EvidenceStore.open(p, CATALOG) as s, pytest.raises(CtxsearchError, match="day must be"):
+        s.mark_room("r", "office", 1, "done", day=MAX_DAY + 1)
+
+
+# ---- flags of the change test -------------------------------------------------------------------
+@pytest.mark.parametrize("rate", ["1e-300", "5e-324", "0.999999"])
+def test_any_false_alarm_rate_in_0_1_gives_a_table(tmp_path, capsys, rate):
+    p = _store(tmp_path)
+    assert main(["kb", "show", str(p), "--forget", "detect", "--false-alarm", rate]) == 0
+    out = capsys.readouterr().out
+    assert "ON-TOP-OF-DESK" in out and f"detect:{float(rate):g}" in out
+
+
+@pytest.mark.parametrize("rate", ["0", "1", "nan", "-1e-300", "inf"])
+def test_a_false_alarm_rate_outside_0_1_is_a_usage_error(tmp_path, capsys, rate):
+    with pytest.raises(SystemExit) as e:
+        main(
+            ["kb", "show", str(tmp_path / "kb.sqlite"), "--forget", "detect", "--false-alarm", rate]
+        )
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--false-alarm" in err.splitlines()[-1] and "Traceback" not in err
