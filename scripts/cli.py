@@ -6,7 +6,13 @@ import heavy modules (MuJoCo, dm_control, rerun, scipy) lazily, so building the 
 ``ctxsearch --help`` or ``ctxsearch kb show`` does not load them.
 
 Errors a user can fix (bad files, unknown names, incompatible stores) are CtxsearchError: they
-print one line, ``ctxsearch: error: ...``, and exit with code 2. Ctrl-C exits with 130.
+print one line, ``ctxsearch: error: ...``, and exit with code 2. Ctrl-C at any moment prints one
+line, ``ctxsearch: interrupted``, and exits with 130: while a command runs it is a
+KeyboardInterrupt (the learning loop finishes its bookkeeping: at most the examination in flight
+is lost, its transaction rolled back); before it (the CLI's imports: ``scripts/__init__.py``, run
+as the console script) and after it (Python's exit) it ends the process at once (nothing is open
+then). Only a Ctrl-C in the first milliseconds, while Python itself starts and before any line of
+ctxsearch runs, gets Python's own message.
 """
 
 from __future__ import annotations
@@ -14,9 +20,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 
 from ctxsearch.knowledge.errors import CtxsearchError, printable
+from ctxsearch.scripts import INTERRUPTED, exit_interrupted, interrupt_reported
+
+if __name__ == "__main__":  # python -m ctxsearch.scripts.cli (the console script: scripts/__init__)
+    signal.signal(signal.SIGINT, exit_interrupted)
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
@@ -59,6 +71,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ctxsearch`` console script."""
+    if threading.current_thread() is not threading.main_thread():
+        return _run(argv)  # signal handlers belong to the main thread: leave them as they are
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return _run(argv)
+    finally:  # run as the console script, ``before`` covers Python's exit
+        signal.signal(signal.SIGINT, before)
+
+
+def _run(argv: list[str] | None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
     try:  # Ctrl-C while the parser imports the sub-commands is an interrupt too, not a traceback
@@ -66,7 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        print("ctxsearch: interrupted", file=sys.stderr)
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C: not in this print
+        print(INTERRUPTED, file=sys.stderr)
+        interrupt_reported.append(True)
         return 130
     except BrokenPipeError:  # e.g. `ctxsearch kb show ... | head`
         devnull = os.open(os.devnull, os.O_WRONLY)

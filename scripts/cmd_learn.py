@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ctxsearch.agent.strategies import STRATEGIES, make_strategy
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.scripts import argtypes
+from ctxsearch.scripts import INTERRUPTED, argtypes
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
 ROOM_BUDGET_HELP = (
@@ -208,7 +209,11 @@ def run_learn(args: argparse.Namespace) -> int:
     for f in s.files:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
-    return 130 if s.interrupted else 0
+    if s.interrupted:  # the summary above says what was kept; the one line says why it stopped
+        print(f"{INTERRUPTED} (every examination finished is kept: the same command resumes)",
+              file=sys.stderr)  # fmt: skip
+        return 130
+    return 0
 
 
 def _mean_width(kb_path: Path, interval: str) -> float:

@@ -365,3 +365,72 @@ def test_a_false_alarm_rate_outside_0_1_is_a_usage_error(tmp_path, capsys, rate)
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert "--false-alarm" in err.splitlines()[-1] and "Traceback" not in err
+
+
+# ---- Ctrl-C -------------------------------------------------------------------------------------
+def _interrupt(argv: list[str], delay: float, cwd: Path) -> tuple[int, str]:
+    """Run ``argv`` as a user would, send it SIGINT (Ctrl-C) after ``delay`` s; (code, stderr)."""
+    import subprocess
+    import time
+
+    proc = subprocess.Popen(
+        argv,
+        cwd=cwd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as from a terminal
+    )
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    return proc.returncode, err.decode(errors="replace")
+
+
+def test_ctrl_c_while_the_cli_modules_load_is_one_line_and_130(tmp_path):
+    import subprocess
+    import sys
+
+    # As the console script: its first ctxsearch line (scripts/__init__) takes over SIGINT.
+    code = (
+        "import os, signal, sys, time\n"
+        "sys.argv[0] = 'ctxsearch'\n"
+        "import ctxsearch.scripts\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(5)\n"
+        "print('not interrupted')\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=30)
+    assert r.returncode == 130 and r.stderr == b"ctxsearch: interrupted\n" and r.stdout == b""
+
+
+def test_ctrl_c_during_learning_is_one_line_130_and_the_store_stays_usable(tmp_path, capsys):
+    import shutil
+    import sys
+
+    exe = shutil.which("ctxsearch", path=str(Path(sys.executable).parent))
+    assert exe is not None
+    kb = tmp_path / "kb.sqlite"
+    argv = [exe, "learn", "--style", "apartment", "--rooms", "40", "--perception", "oracle"]
+    for delay in (0.15, 0.6, 1.2):
+        code, err = _interrupt([*argv, "--no-progress", "--kb", str(kb)], delay, tmp_path)
+        assert "Traceback" not in err, err
+        assert (code, err.count("\n")) in {(130, 1), (0, 0)}, (delay, code, err)
+        assert err == "" or err.startswith("ctxsearch: interrupted"), err
+    assert main(["kb", "stats", str(kb)]) == 0  # every examination kept is readable
+    assert "examinations" in capsys.readouterr().out
+
+
+def test_a_keyboard_interrupt_in_a_command_is_one_line_and_the_handler_is_restored(
+    monkeypatch, capsys
+):
+    import ctxsearch.scripts.cmd_kb as cmd_kb
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    before = signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(cmd_kb, "run_stats", interrupted)  # the parser binds it when built
+    assert main(["kb", "stats", "x.sqlite"]) == 130
+    assert capsys.readouterr().err == "ctxsearch: interrupted\n"
+    assert signal.getsignal(signal.SIGINT) is before
