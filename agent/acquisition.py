@@ -79,6 +79,7 @@ from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import MapMode
 from ctxsearch.knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
@@ -99,26 +100,26 @@ class RoomLearner:
     ):
         self.run, self.log, self.layout, self.room_index = run, log, layout, room_index
         self.day = int(day)
-        self.catalog, self.kb, self.spec = run.catalog, run.kb, run.spec
+        self.catalog, self.kb, self.spec = run.services.catalog, run.services.kb, run.settings.config.spec
         self.prior = list(prior)  # stored examinations to replay
         self.given_grid = OccupancyGrid.from_layout(layout, self.spec)  # the true layout's
         self.start_pose = start_pose(layout, self.given_grid)
         self.built = (
             BuiltMap.for_layout(layout, self.spec, self.start_pose)
-            if run.map_mode == "built"
+            if run.settings.map_mode == MapMode.BUILT
             else None
         )
         self.perception = run.perception_in(layout, rgb=log.recording)
         self.body = self.perception.body
         self.body.reset_pose(self.start_pose)
         self._t0 = self.body.sim_time
-        self.rng = room_rng(run.seed, room_index, self.day)
+        self.rng = room_rng(run.settings.config.seed, room_index, self.day)
         self._gaze_s: dict[int, float] = {}
-        self._costs = GridCosts(self.grid, run.time_model, self._gaze_seconds)
+        self._costs = GridCosts(self.grid, run.settings.config.time_model, self._gaze_seconds)
         self.explorer: Explorer | FrontierExplorer = (
             Explorer(self, self.start_pose.xy)
             if self.built is None
-            else FrontierExplorer(self, self.built, run.time_model, run.frontier_rule)
+            else FrontierExplorer(self, self.built, run.settings.config.time_model, run.settings.config.frontier_rule)
         )
         self.examined: set[int] = set()  # line 1
         self.unexamined: dict[int, ObjectInstance] = {}  # line 2
@@ -135,15 +136,15 @@ class RoomLearner:
         if not known:
             return 0
         run = self.run
-        if run.reexamine == "never":
+        if run.settings.config.reexamine == "never":
             self.examined.update(o.id for o in known)
             return 0
-        kb = ForgetKnowledgeBase(self.catalog, self.kb.alpha, run.evidence, self.day,
-                                 run.forgetting, last_day=run.days - 1)  # fmt: skip
-        costs = EuclideanCosts(self.start_pose, run.time_model)
+        kb = ForgetKnowledgeBase(self.catalog, self.kb.alpha, run.services.evidence, self.day,
+                                 run.settings.config.forgetting, last_day=run.settings.config.days - 1)  # fmt: skip
+        costs = EuclideanCosts(self.start_pose, run.settings.config.time_model)
         for o in sorted(known, key=lambda o: o.id):
             rate = kb.type_impact_now(o.type) / max(costs.examine_s(o), 1e-6)
-            if rate >= run.reexamine_rate:
+            if rate >= run.settings.config.reexamine_rate:
                 self.unexamined[o.id] = o
             else:
                 self.examined.add(o.id)
@@ -159,7 +160,7 @@ class RoomLearner:
     def costs(self) -> GridCosts:
         """The strategies' cost model on the current grid."""
         if self._costs.grid is not self.grid:
-            self._costs = GridCosts(self.grid, self.run.time_model, self._gaze_seconds)
+            self._costs = GridCosts(self.grid, self.run.settings.config.time_model, self._gaze_seconds)
         return self._costs
 
     def _mapped(self, frame: Frame | None) -> None:
@@ -171,7 +172,7 @@ class RoomLearner:
     @property
     def clock(self) -> float:
         """The run clock: seconds before this room plus the room's own."""
-        return self.run.clock_offset + (self.body.sim_time - self._t0)
+        return self.run.counters.clock_offset + (self.body.sim_time - self._t0)
 
     @property
     def room_elapsed(self) -> float:
@@ -180,7 +181,7 @@ class RoomLearner:
 
     def budget_spent(self) -> bool:
         """True once the room's time budget (if any) is used up."""
-        budget = self.run.room_budget_s
+        budget = self.run.settings.config.room_budget_s
         return budget is not None and self.room_elapsed >= budget
 
     def drive_to(self, xy: np.ndarray) -> None:
@@ -275,10 +276,10 @@ class RoomLearner:
         pose = self.body.pose()
         cands = [self.unexamined[i] for i in sorted(self.unexamined)]
         choice = strat.choose(
-            self.run.strategy, self.kb, cands, pose, self.costs.at(pose), self.rng
+            self.run.services.strategy, self.kb, cands, pose, self.costs.at(pose), self.rng
         )
-        if self.run.on_choice is not None:
-            self.run.on_choice(self.kb, choice)
+        if self.run.services.on_choice is not None:
+            self.run.services.on_choice(self.kb, choice)
         self.log.choice(self, choice)
         return choice
 
@@ -287,7 +288,7 @@ class RoomLearner:
         gazes: list[Gaze] = []
         pose = start
         for box, _members in group_volume_members(relation_boxes(self.catalog, obj)):
-            gs = plan_gazes(self.grid, box, pose, self.spec, self.run.time_model)
+            gs = plan_gazes(self.grid, box, pose, self.spec, self.run.settings.config.time_model)
             gazes.extend(gs)
             if gs:
                 pose = gs[-1].pose
@@ -299,7 +300,7 @@ class RoomLearner:
         t = self._gaze_s.get(obj.id)
         if t is None:
             gazes = self.plan_examination(obj, self.body.pose())
-            t = sum(g.cost for g in gazes[1:]) + (self.run.time_model.image_cost if gazes else 0.0)
+            t = sum(g.cost for g in gazes[1:]) + (self.run.settings.config.time_model.image_cost if gazes else 0.0)
             self._gaze_s[obj.id] = t
         return t
 
@@ -335,9 +336,9 @@ class RoomLearner:
         store does not hold (and ``confirm`` counts sightings): such a replay takes the images
         again (the same draws: the stream is keyed by the image's simulated second) instead of
         reading the stored relations."""
-        det, run = self.run.detector, self.run
+        det, run = self.run.settings.detector, self.run
         errs = det is not None and not det.perfect
-        return run.perceive is None and (errs or run.confirm > 1 or run.min_score > 0)
+        return run.services.perceive is None and (errs or run.settings.config.confirm > 1 or run.settings.config.min_score > 0)
 
     def _reexamine(self, obj: ObjectInstance, stored: StoredExam, gazes: Sequence[Gaze]) -> Related:
         """A replayed examination made again with images, checked against the store."""
@@ -356,22 +357,22 @@ class RoomLearner:
         counts in the knowledge base and the strategy."""
         obj, run = choice.obj, self.run
         if stored is None:
-            run.store.append(
+            run.services.store.append(
                 NewExamination(
-                    run.run,
-                    run.style,
+                    run.settings.key,
+                    run.settings.style,
                     self.layout.seed,
                     obj.id,
                     obj.type,
                     self.clock,
-                    run.strategy.name,
+                    run.services.strategy.name,
                     tuple(sorted({(r, o.type, o.id) for r, o in related})),
                     self.day,
                 )  # fmt: skip
             )
         self.kb.record_examination(obj.type, geometry.related_pairs(related))
-        run.evidence.add(obj.type, self.day, geometry.related_pairs(related))
-        run.strategy.observe(obj.type)
+        run.services.evidence.add(obj.type, self.day, geometry.related_pairs(related))
+        run.services.strategy.observe(obj.type)
 
     def _done_exam(
         self, choice: Choice, related: Related, n_gazes: int, stored: StoredExam | None
@@ -380,14 +381,14 @@ class RoomLearner:
         if stored is not None and self.n_room == 0:
             # The run clock of a replayed room comes from the store: the room started when its
             # first examination was stored minus the time the replay took to get there.
-            self.run.clock_offset += stored.sim_time - self.clock
+            self.run.counters.clock_offset += stored.sim_time - self.clock
         self.n_room += 1
-        self.run.examinations += 1
+        self.run.counters.examinations += 1
         self.last_exam_clock = self.clock
         if self.n_room == len(self.prior):
             self.new_since = self.clock
         return ExamResult(
-            self.run.examinations,
+            self.run.counters.examinations,
             self.room_index,
             self.layout.seed,
             choice,

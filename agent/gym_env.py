@@ -7,9 +7,9 @@
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
-An episode is the benchmark's (``ctxsearch bench search``, ``scripts.experiments.episodes``):
+An episode is the benchmark's (``ctxsearch bench search``, ``agent.search.draw``):
 ``reset(seed=s)`` draws the benchmark's episode 0 for seed s (``options={"index": k}``: its
-episode k) with agent.episode_draw, as the benchmark does: held-out rooms the store (``kb``) did
+episode k) with agent.search.draw, as the benchmark does: held-out rooms the store (``kb``) did
 not learn in, a target drawn among the room's small types, a start from which it is not visible
 and from which the oracle's planner detects it within the budget (with the env's detector). ``reset()`` without a seed draws the seed from the
 environment's own generator, so one seeded reset fixes every later episode.
@@ -29,9 +29,11 @@ Actions (``Discrete(8)``, ``ACTIONS``), each charged by the one time model
  7    look        take an image (``image_cost``) and run the detector on it
 ====  ==========  ======================================================================
 
-Reward: minus the simulated seconds the action took. ``terminated``: the detector reported a
-true instance of the target (a false positive or a look-alike reported as the target does not
-end the episode); ``truncated``: the budget (``budget_s``) is spent, or ``MAX_EPISODE_STEPS``
+Reward: minus the simulated seconds the action took. ``terminated``: the search ended as the
+benchmark's do (agent.search.measures): a ``look`` whose image shows the target is followed by a
+confirming image from the same pose (its seconds charged too), and a detection it confirms ends
+the episode; ``info["success"]`` says whether it was a true instance of the target (a confirmed
+look-alike or false positive ends the episode as a failure); ``truncated``: the budget (``budget_s``) is spent, or ``MAX_EPISODE_STEPS``
 steps were taken (Gymnasium's TimeLimit: a blocked forward or a head at its limit costs 0 s).
 
 Observations (a Dict): ``rgb`` (H, W, 3) uint8 and ``depth`` (H, W, 1) float32 metres (clipped
@@ -58,10 +60,14 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent.episode_draw import draw_world
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
+from ctxsearch.agent.search import measures
+from ctxsearch.agent.search.context import confirming_detection
+from ctxsearch.agent.search.draw import DrawSpec, draw_world
+from ctxsearch.agent.search.episode import Episode
+from ctxsearch.agent.search.priors import open_knowledge
+from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import Detection, DetectorModel, SimDetector, default_or_named
 from ctxsearch.envs.floorplan import generate_layout
@@ -105,19 +111,18 @@ def draw_episode(
     catalog: Catalog,
     *,
     index: int = 0,
-    budget_s: float = S.DEFAULT_BUDGET_S,
+    budget_s: float = DEFAULT_BUDGET_S,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
     detector: DetectorModel | None = None,
-) -> tuple[S.Episode, RoomLayout]:
-    """Episode ``index`` of the benchmark's episodes for ``seed`` (``make_episodes(style,
-    index + 1, seed, ..., detector=detector)[index]``: agent.episode_draw's worlds in order, the
+) -> tuple[Episode, RoomLayout]:
+    """Episode ``index`` of the benchmark's episodes for ``seed`` (the draw of ``DrawSpec.make(
+    style, index + 1, seed, ..., detector=detector)``: agent.search.draw's worlds in order, the
     target not visible from the start and detectable within the budget) and its room's layout."""
+    spec = DrawSpec.make(style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector)
     n, i = 0, 0
     limit = 50 * (index + 1) + 100
     while i < limit:
-        world = draw_world(
-            style, int(seed), catalog, float(budget_s), frozenset(exclude_seeds), None, detector, i
-        )
+        world = draw_world(spec, catalog, i)
         i += 1
         if world.episode is None:
             continue
@@ -152,7 +157,7 @@ class ObjectSearchEnv(gymnasium.Env):
         *,
         width: int = CAMERA_SIZE[0],
         height: int = CAMERA_SIZE[1],
-        budget_s: float = S.DEFAULT_BUDGET_S,
+        budget_s: float = DEFAULT_BUDGET_S,
         top_k: int = DEFAULT_TOP_K,
         render_mode: str | None = None,
     ) -> None:
@@ -175,14 +180,14 @@ class ObjectSearchEnv(gymnasium.Env):
         self.action_space = spaces.Discrete(len(ACTIONS))
         self.observation_space = self._observation_space()
         self.world: World | None = None
-        self.episode: S.Episode | None = None
+        self.episode: Episode | None = None
         self.layout: RoomLayout | None = None
 
     # ----------------------------------------------------------------- construction
     def _knowledge(self, kb) -> tuple[KnowledgeBase | None, frozenset[int]]:
         if kb is None or isinstance(kb, KnowledgeBase):
             return kb, frozenset()
-        knowledge, learned = S.open_knowledge(kb, self.catalog)
+        knowledge, learned = open_knowledge(kb, self.catalog)
         return knowledge, frozenset(learned)
 
     def _observation_space(self) -> spaces.Dict:
@@ -236,6 +241,7 @@ class ObjectSearchEnv(gymnasium.Env):
         self._detected = np.zeros(len(self._types), np.int8)
         self._known: dict[int, ObjectInstance] = {}
         self.found_id: int | None = None
+        self.success = False
         return self._observation(), self._info([])
 
     def step(self, action) -> tuple[dict, float, bool, bool, dict]:
@@ -301,7 +307,8 @@ class ObjectSearchEnv(gymnasium.Env):
         n = len(free) if free.all() else int(np.argmin(free))
         return pts[n - 1] if n > 0 and ts[n - 1] >= 0.01 else None
 
-    def _look(self) -> list[Detection]:
+    def _image(self) -> list[Detection]:
+        """One image where the head points, read by the detector; the observation kept."""
         frame: Frame = self.world.capture(rgb=True, depth=True)
         dets = self._detect(frame, float(self.world.sim_time))
         self._rgb = frame.rgb.copy()
@@ -310,13 +317,26 @@ class ObjectSearchEnv(gymnasium.Env):
         for d in dets:
             self._known.setdefault(d.instance_id, d.pose)
             self._detected[self._types.index(d.type)] = 1
-        hit = next(
-            (d for d in dets if d.type == self.episode.target and d.instance_id in self._true_ids),
-            None,
-        )
-        if hit is not None and self.found_id is None:
-            self.found_id = hit.instance_id
         return dets
+
+    def _look(self) -> list[Detection]:
+        """An image; a detection of the target in it is confirmed by a second image from the same
+        pose, as the benchmark's searches are (agent.search.context): a confirmed detection ends
+        the episode, judged by ``measures.judge`` (a confirmed look-alike or false positive ends
+        it as a failure); one not confirmed is forgotten."""
+        target = self.episode.target
+        dets = self._image()
+        hit = next((d for d in dets if d.type == target), None)
+        if hit is None or self.found_id is not None:
+            return dets
+        again = self._image()
+        confirmed = confirming_detection(hit, again, target)
+        if confirmed is None:
+            self._known.pop(hit.instance_id, None)
+        else:
+            self.found_id = confirmed.instance_id
+            self.success = measures.judge(self.found_id, self._true_ids)
+        return dets + again
 
     # ----------------------------------------------------------------- observing
     def _observation(self) -> dict:
@@ -361,6 +381,7 @@ class ObjectSearchEnv(gymnasium.Env):
             "target": ep.target,
             "elapsed": self.elapsed,
             "found_id": self.found_id,
+            "success": bool(self.success),
             "detections": [(d.type, d.instance_id) for d in dets],
         }
 

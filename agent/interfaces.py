@@ -27,13 +27,19 @@ class Body(Protocol):
     ``drive`` follows a path and turns (a one-point path only turns), ``move_head`` points the
     camera, ``capture`` takes one image (None where nothing is rendered) of ``width`` x
     ``height`` pixels; each returns after charging ``time_model``'s seconds to ``sim_time``.
+    This is what a real base offers; rendering a view without charging time is the oracle's
+    (agent.search.oracle.RenderingBody).
     """
 
     spec: RobotSpec
     time_model: TimeModel
-    sim_time: float
     width: int
     height: int
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated seconds charged so far."""
+        ...
 
     def pose(self) -> RobotPose:
         """Where the base is and where the head points."""
@@ -53,12 +59,6 @@ class Body(Protocol):
 
     def capture(self, rgb: bool = False, depth: bool = True) -> Frame | None:
         """One image from the head camera where it points now (one ``image_cost`` charged)."""
-        ...
-
-    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray | None:
-        """The object instance each ray from ``origin`` (3,) through ``points`` (N, 3) meets
-        first among what the head camera shows (-1: none); None where nothing is rendered. No
-        time charged."""
         ...
 
     def close(self) -> None:
@@ -99,10 +99,6 @@ class WrappedBody:
     def capture(self, rgb: bool = False, depth: bool = True) -> Frame | None:
         """An image from the wrapped body."""
         return self._b.capture(rgb=rgb, depth=depth)
-
-    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray | None:
-        """The wrapped body's rays."""
-        return self._b.ray_instances(origin, points)
 
     def close(self) -> None:
         """Close the wrapped body."""

@@ -71,7 +71,7 @@ class RunLog:
         if self.path is None:
             return
         if self.rec is None:
-            name = f"learn: {L.layout.style}, strategy {L.run.strategy.name}, run {L.run.run}"
+            name = f"learn: {L.layout.style}, strategy {L.run.services.strategy.name}, run {L.run.settings.key}"
             self.rec = Recorder(
                 self.path, LEARN_APP, name=name, blueprint=learn_blueprint(L.layout)
             )
@@ -82,7 +82,7 @@ class RunLog:
         self._types |= {o.type for o in L.layout.objects}
         self.rec.log_text(
             f"room {L.room_index} (style {L.layout.style}, seed {L.layout.seed}): "
-            f"{len(L.layout.objects)} objects; run {L.run.run}"
+            f"{len(L.layout.objects)} objects; run {L.run.settings.key}"
         )
         self.robot(L)
         self.knowledge(L)
@@ -94,7 +94,7 @@ class RunLog:
         self.rec.set_time(L.clock)
         self.rec.log_text(
             f"room {L.room_index} done: {n_exams} examinations, "
-            f"{L.clock - L.run.clock_offset:.1f} s simulated"
+            f"{L.clock - L.run.counters.clock_offset:.1f} s simulated"
             + (" (time budget spent: leaving)" if L.left_early else "")
         )
         self.rec.flush()
@@ -139,7 +139,7 @@ class RunLog:
         scores = ", ".join(f"{t} {s:.4f}" for t, s in ranked)
         n_unex = len(L.unexamined)
         self.rec.log_text(
-            f"exam {L.run.examinations + 1}: {L.run.strategy.name} chooses {choice.type} "
+            f"exam {L.run.counters.examinations + 1}: {L.run.services.strategy.name} chooses {choice.type} "
             f"(object #{choice.obj.id}) among {n_unex} unexamined; scores: {scores}"
         )
 

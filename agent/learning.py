@@ -21,11 +21,10 @@ from __future__ import annotations
 
 import ctypes
 import gc
-import math
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,30 +32,29 @@ from tqdm import tqdm
 
 from ctxsearch.agent import strategies as strat
 from ctxsearch.agent.acquisition import RoomLearner
-from ctxsearch.agent.frontiers import FRONTIER_RULES
 from ctxsearch.agent.learn_log import RunLog
-from ctxsearch.agent.mapping import MAP_MODES, default_map_mode
-from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR, PERCEPTION_MODES, perception_label
+from ctxsearch.agent.perception_modes import perception_label
 from ctxsearch.agent.resume import RunHistory
 from ctxsearch.agent.run_state import (
-    DEFAULT_REEXAMINE_RATE,
-    REEXAMINE_POLICIES,
     ROOM_DONE,
     ROOM_STARTED,
     ChoiceCallback,
     ExamResult,
+    LearnConfig,
     PerceptionFactory,
     Run,
+    RunServices,
+    RunSettings,
+    run_id,
 )
-from ctxsearch.envs.detector import DetectorModel, default_or_named
+
+__all__ = ["LearnConfig", "Summary", "learn", "room_seed", "run_id"]  # LearnConfig, run_id: the
+# configuration lives with the run's state (agent.run_state); learn's callers find it here
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
-from ctxsearch.knowledge.drift import Forgetting
-from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.store import EvidenceStore
 
 ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
@@ -68,21 +66,6 @@ LayoutFn = Callable[..., RoomLayout]
 def room_seed(seed: int, index: int) -> int:
     """The seed of room ``index`` of a run started with ``seed`` (deterministic, spread out)."""
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0] & 0x7FFFFFFF)
-
-
-def run_id(
-    strategy: str,
-    perception: str,
-    seed: int,
-    room_budget_s: float | None = None,
-    map_mode: str = "given",
-) -> str:
-    """The store's run key: runs with another strategy, perception, seed, room budget or map are
-    separate runs (no budget: the key has no budget part; the given map: no map part)."""
-    key = f"{strategy}/{perception}/seed={int(seed)}"
-    if map_mode != "given":
-        key = f"{key}/map={map_mode}"
-    return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
 
 
 def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
@@ -116,126 +99,6 @@ _LIBC = _load_libc()
 
 
 # =========================================================================== configuration
-@dataclass(frozen=True)
-class LearnConfig:
-    """What to learn from and how (``learn``).
-
-    ``kb_path`` is the evidence store, created or resumed; ``alpha`` defaults to the store's.
-    ``max_examinations`` stops the call after that many new examinations (run it again to go
-    on). ``room_budget_s`` limits the simulated seconds spent in each room (None: every room to
-    completion, Figure 2 as published; in a house it is the house's budget). ``spec`` and
-    ``time_model`` are the robot's. ``map_mode`` is the grid the robot plans on
-    (agent.mapping.MAP_MODES; None: ``built`` for the camera, ``given`` otherwise); the oracle
-    perception needs ``given``. ``frontier_rule`` picks frontier goals on a built map
-    (agent.frontiers).
-    ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
-    ``confirm``: camera mode counts an object as related once that many images of the room
-    detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
-    detections scored at least that confidence (0: any detection counts).
-    ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
-    ``reexamine`` (agent.run_state.REEXAMINE_POLICIES) and ``reexamine_rate``: whether a known
-    object is examined again on a later day; ``forgetting``: how old evidence counts for that
-    decision (knowledge.drift).
-    """
-
-    style: str
-    rooms: int
-    kb_path: str | Path
-    strategy: str = "hif"
-    perception: str = "camera"
-    alpha: float | None = None
-    seed: int = 0
-    record: str | Path | None = None
-    max_examinations: int | None = None
-    progress: bool = True
-    room_budget_s: float | None = None
-    spec: RobotSpec = field(default_factory=RobotSpec)
-    time_model: TimeModel = field(default_factory=TimeModel)
-    map_mode: str | None = None
-    frontier_rule: str = "info"
-    detector: str | None = None
-    confirm: int = 1
-    min_score: float = 0.0
-    days: int = 1
-    reexamine: str = "never"
-    reexamine_rate: float = DEFAULT_REEXAMINE_RATE
-    forgetting: Forgetting = field(default_factory=Forgetting)
-
-    @property
-    def map_used(self) -> str:
-        """The map mode the run uses (``map_mode`` or the perception's default)."""
-        return self.map_mode or default_map_mode(self.perception)
-
-    def detector_model(self, catalog: Catalog) -> DetectorModel | None:
-        """The camera mode's preset, loaded and checked (None in oracle mode)."""
-        if self.perception != "camera":
-            return None
-        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
-
-    def checked(self, own_perception: bool = False) -> LearnConfig:
-        """The configuration with the budget as a float; a one-line error for bad values
-        (``own_perception``: ``perception`` names the caller's own, any name goes)."""
-        if self.rooms < 0:
-            raise CtxsearchError(f"rooms must be >= 0, got {self.rooms}")
-        if self.max_examinations is not None and self.max_examinations < 0:
-            raise CtxsearchError(f"max_examinations must be >= 0, got {self.max_examinations}")
-        budget = self.room_budget_s
-        if budget is not None:
-            try:
-                budget = float(budget)
-            except (TypeError, ValueError):
-                raise CtxsearchError(
-                    f"room budget must be a number of seconds, got {budget!r}"
-                ) from None
-            if not (math.isfinite(budget) and budget > 0):
-                raise CtxsearchError(
-                    f"room budget must be a positive number of seconds, got {budget}"
-                )
-        if self.confirm < 1:
-            raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
-        if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
-            raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
-        if self.days < 1:
-            raise CtxsearchError(f"days must be >= 1, got {self.days}")
-        if self.reexamine not in REEXAMINE_POLICIES:
-            raise CtxsearchError(
-                f"unknown re-examination policy '{self.reexamine}' "
-                f"(known: {', '.join(REEXAMINE_POLICIES)})"
-            )
-        if not (math.isfinite(self.reexamine_rate) and self.reexamine_rate >= 0):
-            raise CtxsearchError(
-                f"re-examination rate must be a number >= 0, got {self.reexamine_rate}"
-            )
-        if not own_perception and self.perception not in PERCEPTION_MODES:
-            raise CtxsearchError(
-                f"unknown perception mode '{self.perception}' "
-                f"(known: {', '.join(PERCEPTION_MODES)})"
-            )
-        if self.map_used not in MAP_MODES:
-            raise CtxsearchError(
-                f"unknown map mode '{self.map_used}' (known: {', '.join(MAP_MODES)})"
-            )
-        if self.map_used == "built" and self.perception == "oracle":
-            raise CtxsearchError("the oracle perception renders no depth: it needs --map given")
-        if self.frontier_rule not in FRONTIER_RULES:
-            raise CtxsearchError(
-                f"unknown frontier rule '{self.frontier_rule}' (known: {', '.join(FRONTIER_RULES)})"
-            )
-        return replace(self, room_budget_s=budget, map_mode=self.map_used)
-
-    def run_key(self, label: str) -> str:
-        """The store's run key (``run_id``, and the re-examination policy where it is not the
-        paper's) for the perception ``label``."""
-        rid = run_id(self.strategy, label, self.seed, self.room_budget_s, self.map_used)
-        if self.reexamine == "never":
-            return rid
-        return f"{rid}/reexamine={self.reexamine}:{self.reexamine_rate:g}/forget={self.forgetting.label}"
-
-    def limit_reached(self, examinations: int) -> bool:
-        """Whether ``examinations`` new examinations end the call."""
-        return self.max_examinations is not None and examinations >= self.max_examinations
-
-
 @dataclass
 class Summary:
     """What a ``learn`` call did and what the knowledge base holds at its end."""
@@ -332,13 +195,9 @@ def learn(
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)
         history = RunHistory.load(store, rid, style, kb, strategy)
-        run = Run(catalog, kb, store, strategy, label, style, config.seed, rid,
-                  config.spec, config.time_model, room_budget_s=config.room_budget_s,
-                  on_choice=on_choice, perceive=perceive, map_mode=map_mode,
-                  frontier_rule=config.frontier_rule, detector=detector,
-                  confirm=config.confirm, min_score=config.min_score, reexamine=config.reexamine,
-                  reexamine_rate=config.reexamine_rate, forgetting=config.forgetting,
-                  evidence=history.evidence, days=config.days)  # fmt: skip
+        settings = RunSettings(config, style, rid, label, map_mode, detector)
+        services = RunServices(catalog, kb, store, strategy, history.evidence, on_choice, perceive)
+        run = Run(settings, services)
         rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
         try:
             if rooms.learn(config):
@@ -383,10 +242,10 @@ class _Rooms:
             for i in range(config.rooms):
                 s = room_seed(config.seed, i)
                 if self.history.is_done(s, day):
-                    run.clock_offset = self.history.done_clock(run.store, run.run, run.style, s,
-                                                               run.clock_offset, day)  # fmt: skip
+                    run.counters.clock_offset = self.history.done_clock(run.services.store, run.settings.key, run.settings.style, s,
+                                                               run.counters.clock_offset, day)  # fmt: skip
                     summary.rooms += int(day == 0)
-                    self._advance(run.clock_offset)
+                    self._advance(run.counters.clock_offset)
                     continue
                 if config.limit_reached(summary.examinations):
                     return False
@@ -403,21 +262,21 @@ class _Rooms:
         run = self.run
         if day == 0:
             return []
-        ids = run.store.examined_before(run.run, run.style, seed, day)
+        ids = run.services.store.examined_before(run.settings.key, run.settings.style, seed, day)
         return [o for o in layout.objects
-                if o.id in ids and run.catalog.type(o.type).is_furniture]  # fmt: skip
+                if o.id in ids and run.services.catalog.type(o.type).is_furniture]  # fmt: skip
 
     def room(self, config: LearnConfig, index: int, seed: int, day: int = 0) -> bool:
         """Learn in room ``index`` on ``day`` (a replay first, if it is in progress); False when
         the call's examination limit stopped it before the room was done."""
-        run, store, summary = self.run, self.run.store, self.summary
+        run, store, summary = self.run, self.run.services.store, self.summary
         layout = self._layout(index, seed, day)
         L = RoomLearner(run, self.log, layout, index, self.history.replay(seed, day), day,
                         self._known(layout, seed, day))  # fmt: skip
         summary.revisits += L.revisits
         try:
-            if store.room_status(run.run, run.style, seed, day) is None:
-                store.mark_room(run.run, run.style, seed, ROOM_STARTED, day=day)
+            if store.room_status(run.settings.key, run.settings.style, seed, day) is None:
+                store.mark_room(run.settings.key, run.settings.style, seed, ROOM_STARTED, day=day)
             self.log.start_room(L)
             stopped = False
             for res in L.run_room():
@@ -429,16 +288,16 @@ class _Rooms:
         finally:
             L.close()
             release_memory()
-        run.sim_new += L.clock - L.new_since
-        summary.sim_s = run.sim_new
+        run.counters.sim_new += L.clock - L.new_since
+        summary.sim_s = run.counters.sim_new
         if stopped:
             return False
-        store.mark_room(run.run, run.style, seed, ROOM_DONE, end_time=L.clock, day=day)
-        run.clock_offset = L.clock
+        store.mark_room(run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day)
+        run.counters.clock_offset = L.clock
         summary.rooms += int(day == 0)
         summary.rooms_done_now += 1
         summary.rooms_left_early += int(L.left_early)
-        self._advance(run.clock_offset)
+        self._advance(run.counters.clock_offset)
         return True
 
     def _examined(self, L: RoomLearner, res: ExamResult) -> None:
@@ -446,18 +305,18 @@ class _Rooms:
         self.log.examination(L, res)
         if not res.replayed:
             self.summary.examinations += 1
-            self.summary.sim_s = self.run.sim_new + (L.clock - L.new_since)
+            self.summary.sim_s = self.run.counters.sim_new + (L.clock - L.new_since)
         if self.on_examination is not None:
-            self.on_examination(res, self.run.kb)
+            self.on_examination(res, self.run.services.kb)
         if self.bar is not None and time.perf_counter() - self._last_post > 0.2:
             self._last_post = time.perf_counter()
             self.bar.set_postfix_str(
-                f"exams {self.run.examinations}, sim {res.sim_time:.0f} s", refresh=True
+                f"exams {self.run.counters.examinations}, sim {res.sim_time:.0f} s", refresh=True
             )
 
     def _advance(self, clock: float) -> None:
         if self.bar is not None:
             self.bar.update(1)
             self.bar.set_postfix_str(
-                f"exams {self.run.examinations}, sim {clock:.0f} s", refresh=True
+                f"exams {self.run.counters.examinations}, sim {clock:.0f} s", refresh=True
             )

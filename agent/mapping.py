@@ -42,8 +42,9 @@ from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.envs.camera import NEAR_CLIP, Frame, PinholeCamera
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.knowledge.options import MapMode, PerceptionMode, values
 
-MAP_MODES = ("given", "built")
+MAP_MODES = values(MapMode)
 FLOOR_EPS = 0.005  # m: depth points below this height are floor (a pen lying there is not)
 HEAD_MARGIN = 0.10  # m above the camera: the head's top (points up to here are obstacles)
 VOXEL = 0.10  # m: the seen-space record's voxel edge
@@ -56,7 +57,7 @@ COL_STRIDE = 2
 def default_map_mode(perception: str) -> str:
     """The map a perception mode uses by default: ``built`` for the camera, ``given`` for the
     oracle (which reads the true layout anyway) and for a user's own perception."""
-    return "built" if perception == "camera" else "given"
+    return MapMode.BUILT if perception == PerceptionMode.CAMERA else MapMode.GIVEN
 
 
 class BuiltMap:

@@ -28,8 +28,9 @@ from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import PerceptionMode, values
 
-PERCEPTION_MODES = ("camera", "oracle")
+PERCEPTION_MODES = values(PerceptionMode)
 DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors)
 
 
@@ -51,7 +52,7 @@ def perception_label(
     """The perception's name in run keys and results: the mode, and in camera mode the detector
     unless it is the perfect one (so runs made before detector models keep their keys), the
     confirmation count if above 1 and the minimum confidence if above 0."""
-    if mode != "camera" or detector is None:
+    if mode != PerceptionMode.CAMERA or detector is None:
         return mode
     label = mode if detector.perfect else f"{mode}+{detector.name}"
     if confirm > 1:
@@ -112,10 +113,6 @@ class KinematicBody:
     def capture(self, rgb: bool = False, depth: bool = True) -> None:
         """Charge one image; the oracle renders nothing."""
         self.sim_time += self.time_model.image_cost
-
-    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> None:
-        """Nothing is rendered: no rays."""
-        return None
 
     def close(self) -> None:
         """Nothing to release."""
@@ -343,8 +340,8 @@ def make_perception(
 ) -> Perception:
     """A perception mode by name ('camera' or 'oracle'); ``sensing`` is the camera mode's
     detector (CameraPerception; the oracle has none)."""
-    if mode == "oracle":
+    if mode == PerceptionMode.ORACLE:
         return OraclePerception(layout, catalog, spec, time_model)
-    if mode == "camera":
+    if mode == PerceptionMode.CAMERA:
         return CameraPerception(layout, catalog, spec, time_model, rgb=rgb, sensing=sensing)
     raise CtxsearchError(f"unknown perception mode '{mode}' (known: {', '.join(PERCEPTION_MODES)})")

@@ -52,7 +52,7 @@ from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.parts import world_parts
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
-from ctxsearch.knowledge.geometry import Box
+from ctxsearch.knowledge.geometry import Box, ObjectInstance
 
 WALL_THICKNESS = 0.1  # m, drawn outside the room's boundary
 RDF_FROM_MUJOCO = np.diag([1.0, -1.0, -1.0])
@@ -232,34 +232,26 @@ class Recorder:
             ),
             static=static,
         )
-        infos = []
-        for o in layout.objects:
-            typ = catalog.type(o.type)
-            color = rgb255(typ.color)
-            infos.append(rr.AnnotationInfo(id=o.id + 1, label=f"{o.type} #{o.id}", color=color))
-            entity = e(f"world/objects/{o.type}_{o.id}")
-            rec.log(
-                entity,
-                _boxes3d(
-                    [o.box()],
-                    labels=[o.type],
-                    colors=[color],
-                    show_labels=typ.is_furniture,
-                    fill_mode=rr.components.FillMode.MajorWireframe,
-                ),
-                static=static,
-            )
-            parts = world_parts(o, catalog)
-            if parts:
-                rec.log(
-                    f"{entity}/parts",
-                    _boxes3d(
-                        parts, colors=[color] * len(parts), fill_mode=rr.components.FillMode.Solid
-                    ),
-                    static=static,
-                )
+        infos = [self._log_object(o, catalog, static) for o in layout.objects]
         infos.append(rr.AnnotationInfo(id=0, label="background", color=[0, 0, 0]))
         rec.log(e("world"), rr.AnnotationContext(infos), static=static)
+
+    def _log_object(self, o: ObjectInstance, catalog: Catalog, static: bool):
+        """One object's bounding box and solid parts; its annotation (id, label, colour)."""
+        import rerun as rr
+
+        typ = catalog.type(o.type)
+        color = rgb255(typ.color)
+        entity = self.entity(f"world/objects/{o.type}_{o.id}")
+        fill = rr.components.FillMode
+        box = _boxes3d([o.box()], labels=[o.type], colors=[color], show_labels=typ.is_furniture,
+                       fill_mode=fill.MajorWireframe)  # fmt: skip
+        self._rec.log(entity, box, static=static)
+        parts = world_parts(o, catalog)
+        if parts:
+            solid = _boxes3d(parts, colors=[color] * len(parts), fill_mode=fill.Solid)
+            self._rec.log(f"{entity}/parts", solid, static=static)
+        return rr.AnnotationInfo(id=o.id + 1, label=f"{o.type} #{o.id}", color=color)
 
     def log_volumes(
         self,

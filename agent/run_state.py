@@ -1,4 +1,5 @@
-"""The state a learning run carries from room to room, and the records its rooms produce.
+"""The configuration of a learning run (``LearnConfig``, its run key), the state it carries from
+room to room (``Run``: settings, services, counters), and the records its rooms produce.
 
 Shared by the per-room procedure (agent.acquisition), its recording (agent.learn_log), resume
 (agent.resume) and the multi-room run (agent.learning), so none of them imports another.
@@ -6,21 +7,32 @@ Shared by the per-room procedure (agent.acquisition), its recording (agent.learn
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
+from ctxsearch.agent.frontiers import FRONTIER_RULES
 from ctxsearch.agent.interfaces import Perception
-from ctxsearch.agent.perception_modes import Sensing, make_perception
+from ctxsearch.agent.mapping import MAP_MODES, default_map_mode
+from ctxsearch.agent.perception_modes import (
+    DEFAULT_DETECTOR,
+    PERCEPTION_MODES,
+    Sensing,
+    make_perception,
+)
 from ctxsearch.agent.strategies import Choice, Strategy
-from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.detector import DetectorModel, default_or_named
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.drift import DayEvidence, Forgetting
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import MapMode, PerceptionMode
 from ctxsearch.knowledge.store import EvidenceStore
 
 ROOM_DONE = "done"
@@ -76,42 +88,197 @@ class ExamResult:
         return {(r, o.type) for r, o in self.related}
 
 
+def run_id(
+    strategy: str,
+    perception: str,
+    seed: int,
+    room_budget_s: float | None = None,
+    map_mode: str = "given",
+) -> str:
+    """The store's run key: runs with another strategy, perception, seed, room budget or map are
+    separate runs (no budget: the key has no budget part; the given map: no map part)."""
+    key = f"{strategy}/{perception}/seed={int(seed)}"
+    if map_mode != MapMode.GIVEN:
+        key = f"{key}/map={map_mode}"
+    return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
+
+
+
+@dataclass(frozen=True)
+class LearnConfig:
+    """What to learn from and how (``learn``).
+
+    ``kb_path`` is the evidence store, created or resumed; ``alpha`` defaults to the store's.
+    ``max_examinations`` stops the call after that many new examinations (run it again to go
+    on). ``room_budget_s`` limits the simulated seconds spent in each room (None: every room to
+    completion, Figure 2 as published; in a house it is the house's budget). ``spec`` and
+    ``time_model`` are the robot's. ``map_mode`` is the grid the robot plans on
+    (agent.mapping.MAP_MODES; None: ``built`` for the camera, ``given`` otherwise); the oracle
+    perception needs ``given``. ``frontier_rule`` picks frontier goals on a built map
+    (agent.frontiers).
+    ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
+    ``confirm``: camera mode counts an object as related once that many images of the room
+    detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
+    detections scored at least that confidence (0: any detection counts).
+    ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
+    ``reexamine`` (agent.run_state.REEXAMINE_POLICIES) and ``reexamine_rate``: whether a known
+    object is examined again on a later day; ``forgetting``: how old evidence counts for that
+    decision (knowledge.drift).
+    """
+
+    style: str
+    rooms: int
+    kb_path: str | Path
+    strategy: str = "hif"
+    perception: str = "camera"
+    alpha: float | None = None
+    seed: int = 0
+    record: str | Path | None = None
+    max_examinations: int | None = None
+    progress: bool = True
+    room_budget_s: float | None = None
+    spec: RobotSpec = field(default_factory=RobotSpec)
+    time_model: TimeModel = field(default_factory=TimeModel)
+    map_mode: str | None = None
+    frontier_rule: str = "info"
+    detector: str | None = None
+    confirm: int = 1
+    min_score: float = 0.0
+    days: int = 1
+    reexamine: str = "never"
+    reexamine_rate: float = DEFAULT_REEXAMINE_RATE
+    forgetting: Forgetting = field(default_factory=Forgetting)
+
+    @property
+    def map_used(self) -> str:
+        """The map mode the run uses (``map_mode`` or the perception's default)."""
+        return self.map_mode or default_map_mode(self.perception)
+
+    def detector_model(self, catalog: Catalog) -> DetectorModel | None:
+        """The camera mode's preset, loaded and checked (None in oracle mode)."""
+        if self.perception != PerceptionMode.CAMERA:
+            return None
+        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
+
+    def checked(self, own_perception: bool = False) -> LearnConfig:
+        """The configuration with the budget as a float; a one-line error for bad values
+        (``own_perception``: ``perception`` names the caller's own, any name goes)."""
+        if self.rooms < 0:
+            raise CtxsearchError(f"rooms must be >= 0, got {self.rooms}")
+        if self.max_examinations is not None and self.max_examinations < 0:
+            raise CtxsearchError(f"max_examinations must be >= 0, got {self.max_examinations}")
+        budget = self.room_budget_s
+        if budget is not None:
+            try:
+                budget = float(budget)
+            except (TypeError, ValueError):
+                raise CtxsearchError(
+                    f"room budget must be a number of seconds, got {budget!r}"
+                ) from None
+            if not (math.isfinite(budget) and budget > 0):
+                raise CtxsearchError(
+                    f"room budget must be a positive number of seconds, got {budget}"
+                )
+        if self.confirm < 1:
+            raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
+        if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
+            raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
+        if self.days < 1:
+            raise CtxsearchError(f"days must be >= 1, got {self.days}")
+        if self.reexamine not in REEXAMINE_POLICIES:
+            raise CtxsearchError(
+                f"unknown re-examination policy '{self.reexamine}' "
+                f"(known: {', '.join(REEXAMINE_POLICIES)})"
+            )
+        if not (math.isfinite(self.reexamine_rate) and self.reexamine_rate >= 0):
+            raise CtxsearchError(
+                f"re-examination rate must be a number >= 0, got {self.reexamine_rate}"
+            )
+        if not own_perception and self.perception not in PERCEPTION_MODES:
+            raise CtxsearchError(
+                f"unknown perception mode '{self.perception}' "
+                f"(known: {', '.join(PERCEPTION_MODES)})"
+            )
+        if self.map_used not in MAP_MODES:
+            raise CtxsearchError(
+                f"unknown map mode '{self.map_used}' (known: {', '.join(MAP_MODES)})"
+            )
+        if self.map_used == MapMode.BUILT and self.perception == PerceptionMode.ORACLE:
+            raise CtxsearchError("the oracle perception renders no depth: it needs --map given")
+        if self.frontier_rule not in FRONTIER_RULES:
+            raise CtxsearchError(
+                f"unknown frontier rule '{self.frontier_rule}' (known: {', '.join(FRONTIER_RULES)})"
+            )
+        return replace(self, room_budget_s=budget, map_mode=self.map_used)
+
+    def run_key(self, label: str) -> str:
+        """The store's run key (``run_id``, and the re-examination policy where it is not the
+        paper's) for the perception ``label``."""
+        rid = run_id(self.strategy, label, self.seed, self.room_budget_s, self.map_used)
+        if self.reexamine == "never":
+            return rid
+        return f"{rid}/reexamine={self.reexamine}:{self.reexamine_rate:g}/forget={self.forgetting.label}"
+
+    def limit_reached(self, examinations: int) -> bool:
+        """Whether ``examinations`` new examinations end the call."""
+        return self.max_examinations is not None and examinations >= self.max_examinations
+
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What a run was asked to do: its configuration as given (``config``, checked), and what
+    was resolved from it: the style's name, the store's run key, the perception's label, the map
+    and the camera mode's detector preset (None: perfect, or a perception of one's own)."""
+
+    config: LearnConfig
+    style: str
+    key: str
+    perception: str
+    map_mode: MapMode
+    detector: DetectorModel | None = None
+
+
 @dataclass
-class Run:
-    """Run-level state shared by the rooms: knowledge, store, strategy, robot, clock."""
+class RunServices:
+    """What a run works with: the catalog, the knowledge base and its store, the strategy, the
+    evidence by day, and the caller's hooks (``on_choice`` before each examination;
+    ``perceive``: the robot's perception of one's own, None: the mode the settings name)."""
 
     catalog: Catalog
     kb: KnowledgeBase
     store: EvidenceStore
     strategy: Strategy
-    perception: str  # the perception mode's name (agent.perception_modes, or the user's)
-    style: str
-    seed: int
-    run: str  # the store's run key
-    spec: RobotSpec = field(default_factory=RobotSpec)
-    time_model: TimeModel = field(default_factory=TimeModel)
-    clock_offset: float = 0.0  # the run clock when the current room started
-    examinations: int = 0  # made in this run so far (replayed ones included)
-    sim_new: float = 0.0  # simulated seconds of new (not replayed) work in this call
-    room_budget_s: float | None = None  # simulated seconds per room (None: each to completion)
-    on_choice: ChoiceCallback | None = None  # before each examination
-    perceive: PerceptionFactory | None = None  # None: the mode ``perception`` names
-    map_mode: str = "given"  # agent.mapping.MAP_MODES: the true layout's grid or the robot's own
-    frontier_rule: str = "info"  # agent.frontiers.FRONTIER_RULES (built maps only)
-    detector: DetectorModel | None = None  # camera mode's preset (None: perfect)
-    confirm: int = 1  # camera mode: images of a room that must detect an object to count it
-    min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
-    reexamine: str = "never"  # REEXAMINE_POLICIES
-    reexamine_rate: float = DEFAULT_REEXAMINE_RATE  # impact per second worth a re-examination
-    forgetting: Forgetting = field(default_factory=Forgetting)  # how old evidence counts
-    evidence: DayEvidence = field(default_factory=DayEvidence.empty)  # the run's, by day
-    days: int = 1  # days the run visits its rooms on (the change test's looks)
+    evidence: DayEvidence = field(default_factory=DayEvidence.empty)
+    on_choice: ChoiceCallback | None = None
+    perceive: PerceptionFactory | None = None
+
+
+@dataclass
+class RunCounters:
+    """What a run has done so far: the run clock when the current room started, the
+    examinations made (replayed ones included) and the simulated seconds of new work."""
+
+    clock_offset: float = 0.0
+    examinations: int = 0
+    sim_new: float = 0.0
+
+
+@dataclass
+class Run:
+    """Run-level state shared by the rooms: its settings, services and counters."""
+
+    settings: RunSettings
+    services: RunServices
+    counters: RunCounters = field(default_factory=RunCounters)
 
     def perception_in(self, layout: RoomLayout, rgb: bool) -> Perception:
         """The robot's perception (and body) in the room ``layout``."""
-        if self.perceive is not None:
-            return self.perceive(layout, self.catalog, self.spec, self.time_model, rgb)
-        mode = self.perception.split("+")[0]
-        return make_perception(mode, layout, self.catalog, self.spec, self.time_model, rgb=rgb,
-                               sensing=Sensing(self.detector, self.seed,
-                                               self.confirm, self.min_score))  # fmt: skip
+        st, c = self.settings, self.settings.config
+        if self.services.perceive is not None:
+            return self.services.perceive(layout, self.services.catalog, c.spec, c.time_model, rgb)
+        mode = st.perception.split("+")[0]
+        sensing = Sensing(st.detector, c.seed, c.confirm, c.min_score)
+        return make_perception(
+            mode, layout, self.services.catalog, c.spec, c.time_model, rgb=rgb, sensing=sensing
+        )

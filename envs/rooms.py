@@ -110,6 +110,48 @@ class RoomShell:
     doors: tuple[Door, ...]
 
 
+# =========================================================================== the shell's walls
+def draw_door(style: Style, width: float, depth: float, rng: np.random.Generator) -> Door:
+    """A door on a wall drawn uniformly, its width from the style, its centre anywhere it fits."""
+    wall = WALLS[int(rng.integers(4))]
+    door_w = float(rng.uniform(*style.door_width))
+    length = width if wall in ("north", "south") else depth
+    span = max(0.0, length / 2 - door_w / 2 - 0.3)
+    return Door(wall=wall, center=float(rng.uniform(-span, span)), width=door_w)
+
+
+def wall_inward(width: float, depth: float, wall: str) -> tuple[float, float, float, float]:
+    """(x, y of the wall's centre line point at along=0, inward unit normal nx, ny)."""
+    W, D = width / 2, depth / 2
+    return {
+        "north": (0.0, D, 0.0, -1.0),
+        "south": (0.0, -D, 0.0, 1.0),
+        "east": (W, 0.0, -1.0, 0.0),
+        "west": (-W, 0.0, 1.0, 0.0),
+    }[wall]
+
+
+def wall_point(
+    width: float, depth: float, wall: str, along: float, inset: float
+) -> tuple[float, float]:
+    """The point ``along`` the wall (x for north/south walls, y for east/west) ``inset`` m in."""
+    x0, y0, nx, ny = wall_inward(width, depth, wall)
+    if wall in ("north", "south"):
+        return along, y0 + ny * inset
+    return x0 + nx * inset, along
+
+
+def door_zone(width: float, depth: float, door: Door) -> Box:
+    """The box in front of a door that furniture keeps clear of (``DOOR_KEEP`` deep)."""
+    cx, cy = wall_point(width, depth, door.wall, door.center, DOOR_KEEP / 2)
+    half_along = door.width / 2 + 0.15
+    if door.wall in ("north", "south"):
+        half = (half_along, DOOR_KEEP / 2, 5.0)
+    else:
+        half = (DOOR_KEEP / 2, half_along, 5.0)
+    return Box(np.array([cx, cy, 0.0]), 0.0, np.array(half))
+
+
 class _Builder:
     """Mutable state while one room is being generated."""
 
@@ -127,7 +169,7 @@ class _Builder:
             self.width = float(rng.uniform(*style.width))
             self.depth = float(rng.uniform(*style.depth))
             self.height = float(rng.uniform(*style.height))
-            self.door = self._draw_door()
+            self.door = draw_door(style, self.width, self.depth, rng)
             self.doors: tuple[Door, ...] = (self.door,)
         else:
             self.width, self.depth, self.height = shell.width, shell.depth, shell.height
@@ -157,50 +199,12 @@ class _Builder:
         self.obstacles: list[_Obstacle] = []
         self.entry_cells = []
         for door in self.doors:
-            ex, ey = self._door_entry(door)
+            ex, ey = wall_point(self.width, self.depth, door.wall, door.center, 0.6)
             self.entry_cells.append(
                 (int(np.argmin(np.abs(xs - ex))), int(np.argmin(np.abs(ys - ey))))
             )
         self.entry_cell = self.entry_cells[0]
-        self.door_boxes = [self._door_zone(door) for door in self.doors]
-
-    # -- room shell -------------------------------------------------------------------------
-    def _draw_door(self) -> Door:
-        rng = self.rng
-        wall = WALLS[int(rng.integers(4))]
-        width = float(rng.uniform(*self.style.door_width))
-        length = self.width if wall in ("north", "south") else self.depth
-        span = max(0.0, length / 2 - width / 2 - 0.3)
-        return Door(wall=wall, center=float(rng.uniform(-span, span)), width=width)
-
-    def _inward(self, wall: str) -> tuple[float, float, float, float]:
-        """(x, y of the wall's centre line point at along=0, inward unit normal nx, ny)."""
-        W, D = self.width / 2, self.depth / 2
-        return {
-            "north": (0.0, D, 0.0, -1.0),
-            "south": (0.0, -D, 0.0, 1.0),
-            "east": (W, 0.0, -1.0, 0.0),
-            "west": (-W, 0.0, 1.0, 0.0),
-        }[wall]
-
-    def _wall_point(self, wall: str, along: float, inset: float) -> tuple[float, float]:
-        x0, y0, nx, ny = self._inward(wall)
-        # "along" runs along x for north/south walls and along y for east/west walls.
-        if wall in ("north", "south"):
-            return along, y0 + ny * inset
-        return x0 + nx * inset, along
-
-    def _door_entry(self, door: Door) -> tuple[float, float]:
-        return self._wall_point(door.wall, door.center, 0.6)
-
-    def _door_zone(self, door: Door) -> Box:
-        cx, cy = self._wall_point(door.wall, door.center, DOOR_KEEP / 2)
-        half_along = door.width / 2 + 0.15
-        if door.wall in ("north", "south"):
-            half = (half_along, DOOR_KEEP / 2, 5.0)
-        else:
-            half = (DOOR_KEEP / 2, half_along, 5.0)
-        return Box(np.array([cx, cy, 0.0]), 0.0, np.array(half))
+        self.door_boxes = [door_zone(self.width, self.depth, door) for door in self.doors]
 
     # -- bookkeeping --------------------------------------------------------------------------
     def next_id(self) -> int:
@@ -344,8 +348,8 @@ class _Builder:
             length = self.width if wall in ("north", "south") else self.depth
             span = max(0.0, length / 2 - sy / 2 - WALL_GAP)
             along = float(rng.uniform(-span, span))
-            x, y = self._wall_point(wall, along, sx / 2 + WALL_GAP)
-            _, _, nx, ny = self._inward(wall)
+            x, y = wall_point(self.width, self.depth, wall, along, sx / 2 + WALL_GAP)
+            _, _, nx, ny = wall_inward(self.width, self.depth, wall)
             yaw = math.atan2(ny, nx)
         else:
             r = math.hypot(sx, sy) / 2

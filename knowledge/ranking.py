@@ -24,6 +24,7 @@ from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import Box, ObjectInstance, relation_volume
+from ctxsearch.knowledge.options import Rank
 from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 
 RANK_MODES = ("low", "p0", "high")
@@ -84,14 +85,14 @@ class KBProbabilities(ProbabilitySource):
         key = (relation, type_name)
         v = self._cache.get(key)
         if v is None:
-            if self.rank == "p0":
+            if self.rank == Rank.P0:
                 rel = self.kb.catalog.relation(relation)
                 v = float(
                     intervals.p0(self.kb.y(relation, type_name), self.kb.n(rel.ref), self.kb.alpha)
                 )
             else:
                 lo, hi = self.kb.interval(relation, type_name)
-                v = lo if self.rank == "low" else hi
+                v = lo if self.rank == Rank.LOW else hi
             self._cache[key] = v
         return v
 
@@ -167,10 +168,10 @@ class BackoffProbabilities(KBProbabilities):
         v = self._cache.get(key)
         if v is None:
             e = self.backoff.estimate(ref, relation, type_name)
-            if self.rank == "p0":
+            if self.rank == Rank.P0:
                 v = float(intervals.p0(e.y_eff, e.n_eff, self.kb.alpha))
             else:
-                v = e.low if self.rank == "low" else e.high
+                v = e.low if self.rank == Rank.LOW else e.high
             self._cache[key] = v
         return v
 

@@ -5,16 +5,17 @@ from __future__ import annotations
 
 import argparse
 
+from ctxsearch.agent.search.registry import Role, with_role
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import MapMode
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.cmd_search import add_budget_argument
 from ctxsearch.scripts.sweep import add_sweep_arguments
 
-# Copies of scripts.experiments.scenarios.DEFAULT_SCENARIOS' policies, so that building the
-# parser does not import the search stack; tests/test_bench_curve.py checks they agree.
+# Each scenario's baseline, context and asymptote policies, from the registry (light: no MuJoCo).
 SCENARIO_POLICIES = {
-    "built": "frontier,indirect,oracle-prior-indirect",
-    "given": "map-only,location,oracle-prior",
+    m: ",".join(with_role(m, r) for r in (Role.BASELINE, Role.CONTEXT, Role.ASYMPTOTE))
+    for m in MapMode
 }
 
 

@@ -5,36 +5,27 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ctxsearch.agent.search.registry import (
+    DEFAULT_BUDGET_S,
+    POLICIES,
+    Role,
+    default_policies,
+    with_role,
+)
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Rank, values
+from ctxsearch.knowledge.ranking import DEFAULT_ESTIMATE, DEFAULT_MIN_EVIDENCE, DEFAULT_RANK
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.sweep import add_sweep_arguments
 
-# Copies of agent.search.POLICIES' names, agent.search.DEFAULT_BUDGET_S and agent.search_space's
-# RANK_MODES / DEFAULT_RANK, so building the parser (``ctxsearch --help``, ``kb show``) does not
-# import the search stack and scipy.ndimage; tests/test_cli_search.py checks they agree.
-POLICY_NAMES = (
-    "exhaustive",
-    "location",
-    "indirect",
-    "oracle-prior",
-    "oracle-prior-indirect",
-    "oracle",
-    "frontier",
-    "map-only",
-)
-MAP_MODES = ("given", "built")  # agent.mapping.MAP_MODES
-# agent.search.DEFAULT_POLICIES
-DEFAULT_POLICIES = {
-    "built": "frontier,indirect,oracle-prior-indirect,oracle",
-    "given": "map-only,location,oracle-prior,oracle,exhaustive",
-}
-DEFAULT_POLICY = {"built": "indirect", "given": "location"}  # `search --policy`
-DEFAULT_BUDGET_S = 300.0
-RANK_MODES = ("low", "p0", "high")
-DEFAULT_RANK = "low"
-ESTIMATES = ("flat", "backoff")  # knowledge.ranking.ESTIMATES
-DEFAULT_ESTIMATE = "flat"
-DEFAULT_MIN_EVIDENCE = 10
+# The policies' facts and the modes come from light modules (no MuJoCo, no scipy), so building
+# the parser (``ctxsearch --help``, ``kb show``) stays fast.
+POLICY_NAMES = tuple(POLICIES)
+MAP_MODES = values(MapMode)
+DEFAULT_POLICIES = {m: ",".join(default_policies(m)) for m in MapMode}
+DEFAULT_POLICY = {m: with_role(m, Role.CONTEXT) for m in MapMode}  # `search --policy`
+RANK_MODES = values(Rank)
+ESTIMATES = values(Estimate)
 
 
 def add_budget_argument(p: argparse.ArgumentParser) -> None:
@@ -144,8 +135,8 @@ def map_of(args: argparse.Namespace) -> str:
     """The map scenario: ``--map``, else the style's default (episodes.default_map)."""
     if args.map is not None:
         return args.map
+    from ctxsearch.agent.search.runner import default_map
     from ctxsearch.envs.houses import resolve_style
-    from ctxsearch.scripts.experiments.episodes import default_map
 
     return default_map(resolve_style(args.style))
 
@@ -171,11 +162,12 @@ def _config_fields(args: argparse.Namespace) -> dict:
 def _forgetting_knowledge(args: argparse.Namespace):
     """The store at --kb read with --forget on its last day (knowledge.drift), and the room seeds
     it learned in (held out of the search)."""
+    from ctxsearch.agent.search.priors import learned_seeds
     from ctxsearch.knowledge.catalog import load_catalog
     from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
     from ctxsearch.knowledge.store import EvidenceStore
 
-    if args.interval != "wilson":
+    if args.interval != IntervalMethod.WILSON:
         raise CtxsearchError(
             f"--forget {args.forget} does not combine with --interval {args.interval}"
         )
@@ -186,15 +178,15 @@ def _forgetting_knowledge(args: argparse.Namespace):
         kb = ForgetKnowledgeBase(
             store.catalog, store.alpha, ev, ev.last_day, argtypes.forgetting(args)
         )
-        seeds = {int(seed) for _run, _style, seed, _status in store.rooms()}
+        seeds = learned_seeds(store)
     return kb, seeds
 
 
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
+    from ctxsearch.agent.search.runner import SearchConfig, search_once
     from ctxsearch.knowledge.catalog import load_catalog
-    from ctxsearch.scripts.experiments.episodes import SearchConfig, search_once
 
     fields = _config_fields(args)
     policy = args.policy or DEFAULT_POLICY[fields["map"]]
@@ -276,7 +268,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
-    from ctxsearch.agent.search import parse_policies
+    from ctxsearch.agent.search.registry import parse_policies
     from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
     from ctxsearch.scripts.sweep import SweepOptions
 

@@ -114,7 +114,7 @@ def test_curve_files_and_ratios(curve_dir):
     for e in doc["curve"]:
         for sc in ("built", "given"):
             r = e["scenarios"][sc]["context_to_baseline"]
-            assert r["episodes"] == 3 and r["wins"] + r["losses"] <= 3
+            assert r["n"] == 3 and r["wins"] + r["losses"] + r["ties"] == 3
             assert r["ci"][0] <= r["median"] <= r["ci"][1]
     # the asymptote ran once: the same at every k
     assert (
@@ -131,8 +131,8 @@ def test_curve_files_and_ratios(curve_dir):
 
 def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_store):
     """What lets the curve run the baseline and the asymptote only once."""
+    from ctxsearch.agent.search.draw import remembered_draws
     from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
-    from ctxsearch.scripts.experiments.episodes import remembered_draws
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
     base = SearchBenchConfig(style="office", policies=("exhaustive", "location"), kb=kb,
@@ -157,7 +157,7 @@ def test_transfer_table_is_learned_in_by_searched_in(transfer_dir):
     for m in ("wilson", "clustered"):
         grid = doc["paired_ratio"]["given"][m]
         assert list(grid) == styles and all(list(grid[x]) == styles for x in styles)
-        assert all(grid[x][y]["episodes"] == 2 for x in styles for y in styles)
+        assert all(grid[x][y]["n"] == 2 for x in styles for y in styles)
         cost = doc["mismatched_to_in_domain"]["given"][m]
         assert list(cost["office"]) == ["biology_lab"] and list(cost["biology_lab"]) == ["office"]
         notice = doc["noticing"][m]

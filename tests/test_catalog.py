@@ -8,7 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog, parse_catalog, relation_suffix
+from ctxsearch.knowledge.catalog import (
+    DEFAULT_CATALOG,
+    load_catalog,
+    parse_catalog,
+    relation_suffix,
+)
 from ctxsearch.knowledge.errors import CatalogError, CtxsearchError
 
 GOOD = """\

@@ -192,22 +192,16 @@ def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
             assert float(row["time_to_find_s"]) <= float(row["budget_s"]) == 30.0
 
 
-def test_parser_constants_match_the_search_stack():
-    from ctxsearch.agent import search, search_space
+def test_the_parser_reads_the_policy_registry_and_the_modes():
+    """The CLI's policy names, defaults and modes are the registry's and the enums' (read, not
+    copied), and each default runs in its scenario."""
+    from ctxsearch.agent.search.registry import POLICIES, check_scenario
+    from ctxsearch.knowledge.options import MapMode
     from ctxsearch.scripts import cmd_search
 
-    assert tuple(search.POLICIES) == cmd_search.POLICY_NAMES
-    assert cmd_search.DEFAULT_BUDGET_S == search.DEFAULT_BUDGET_S
-    assert tuple(search_space.RANK_MODES) == cmd_search.RANK_MODES
-    assert cmd_search.DEFAULT_RANK == search_space.DEFAULT_RANK
-    assert tuple(search_space.ESTIMATES) == cmd_search.ESTIMATES
-    assert cmd_search.DEFAULT_ESTIMATE == search_space.DEFAULT_ESTIMATE
-    assert cmd_search.DEFAULT_MIN_EVIDENCE == search_space.DEFAULT_MIN_EVIDENCE
-    from ctxsearch.agent.mapping import MAP_MODES
-
-    assert set(cmd_search.MAP_MODES) == set(MAP_MODES)
-    assert {k: tuple(v.split(",")) for k, v in cmd_search.DEFAULT_POLICIES.items()} == dict(
-        search.DEFAULT_POLICIES
-    )
-    for scenario, name in cmd_search.DEFAULT_POLICY.items():
-        assert scenario in search.POLICY_MAPS[name]
+    assert tuple(POLICIES) == cmd_search.POLICY_NAMES
+    assert set(cmd_search.MAP_MODES) == {"built", "given"}
+    for scenario in MapMode:
+        check_scenario(cmd_search.DEFAULT_POLICIES[scenario].split(","), scenario)
+        assert scenario in POLICIES[cmd_search.DEFAULT_POLICY[scenario]].maps
+    assert cmd_search.DEFAULT_POLICIES["built"].startswith("frontier,indirect")

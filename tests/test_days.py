@@ -255,7 +255,9 @@ def test_detect_flags_a_crafted_change_and_a_stable_entry_at_its_rate():
     assert np.mean([bool(a) for a in changed]) >= 0.9
     assert all(a[0] >= 10 for a in changed if a)  # never before the change
     ev = _crafted(rng, 0.3, 0.9)
-    kb = ForgetKnowledgeBase(__import__("ctxsearch.knowledge.catalog").catalog.load_catalog(), 0.1, ev, 19, f)
+    kb = ForgetKnowledgeBase(
+        __import__("ctxsearch.knowledge.catalog").knowledge.catalog.load_catalog(), 0.1, ev, 19, f
+    )
     y, n = kb.counts("Desk", key)
     assert n < 8 * 20 and y / n > 0.7  # only the evidence since the change
 

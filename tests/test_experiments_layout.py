@@ -52,7 +52,7 @@ def test_no_benchmark_or_demo_below_scripts_and_no_code_in_results():
     assert not [p.name for p in below if p.stem.startswith("bench") or p.stem == "demo"]
     assert not list((ROOT / "results").rglob("*.py"))
     names = {p.stem for p in (ROOT / "scripts" / "experiments").glob("*.py")}
-    assert {"bench_kb", "bench_sim", "bench_learning", "bench_search", "episodes", "demo"} <= names
+    assert {"bench_kb", "bench_sim", "bench_learning", "bench_search", "demo"} <= names
 
 
 @pytest.mark.parametrize(

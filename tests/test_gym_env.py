@@ -13,7 +13,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import ctxsearch.agent.gym_env as G
-from ctxsearch.agent import search as S
+from ctxsearch.agent.search import episode as S
+from ctxsearch.agent.search import oracle as O
+from ctxsearch.agent.search.draw import DrawSpec, make_episodes
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.robot_spec import TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
@@ -42,12 +44,10 @@ def test_registered_on_import_and_passes_gymnasiums_checker():
 
 
 def test_reset_draws_the_benchmarks_episodes(catalog):
-    from ctxsearch.scripts.experiments.episodes import make_episodes
-
     style = resolve_style("office", catalog)
     env = make()
     for seed, index in ((0, 0), (7, 0), (3, 1)):
-        want = make_episodes(style, index + 1, seed, catalog)[index]
+        want = make_episodes(DrawSpec.make(style, index + 1, seed, catalog), catalog)[index]
         _, info = env.reset(seed=seed, options={"index": index})
         ep = env.unwrapped.episode
         assert (ep.room_seed, ep.target, ep.start) == (want.room_seed, want.target, want.start)
@@ -56,7 +56,7 @@ def test_reset_draws_the_benchmarks_episodes(catalog):
         assert (pose.x, pose.y) == pytest.approx((want.start.x, want.start.y), abs=1e-3)
     env.close()
     learned = {S.held_out_seed(0, 0), S.held_out_seed(0, 2)}  # rooms a store learned in
-    want = make_episodes(style, 2, 0, catalog, exclude_seeds=learned)
+    want = make_episodes(DrawSpec.make(style, 2, 0, catalog, exclude_seeds=learned), catalog)
     got = [G.draw_episode(style, 0, catalog, index=i, exclude_seeds=learned)[0] for i in range(2)]
     assert got == want and not learned & {e.room_seed for e in got}
 
@@ -114,14 +114,18 @@ def test_terminates_on_a_true_target_and_truncates_at_the_budget():
     _, _, terminated, _, _ = env.step(G.ACTIONS.index("look"))
     assert not terminated
     # Put the robot where the oracle would look from (head included), then look.
-    eye = S.OracleEye(base.world, base.layout, base.catalog, None, base.episode.target)
-    view = S.oracle_view(
+    eye = O.OracleEye(base.world, base.layout, base.catalog, None, base.episode.target)
+    view = O.oracle_view(
         eye, base.grid, base.world.pose(), base.world.sim_time, base.world.time_model
     )
     base.world.reset_pose(view.gaze.pose)
-    _, _, terminated, truncated, info = env.step(G.ACTIONS.index("look"))
-    assert terminated and not truncated
+    t0 = base.elapsed
+    _, reward, terminated, truncated, info = env.step(G.ACTIONS.index("look"))
+    assert terminated and not truncated and info["success"]
     assert info["found_id"] in {o.id for o in base.layout.objects if o.type == base.episode.target}
+    # the benchmark's success: the image that showed the target and the one that confirmed it
+    assert -reward == pytest.approx(2 * base.time_model.image_cost)
+    assert base.elapsed - t0 == pytest.approx(2 * base.time_model.image_cost)
     env.close()
 
     env = make(budget_s=2.0)

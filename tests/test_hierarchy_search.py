@@ -10,7 +10,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.strategies import STRATEGIES, BackoffHIF, HighestImpactFirst, make_strategy
 from ctxsearch.knowledge import ranking
 from ctxsearch.knowledge.base import KnowledgeBase

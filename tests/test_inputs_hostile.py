@@ -176,7 +176,7 @@ def test_a_ground_truth_file_that_is_not_json_is_refused(tmp_path, raw, match):
 
 
 def test_search_reads_a_valid_truth_file_and_refuses_an_empty_one(tmp_path, truth_doc):
-    from ctxsearch.agent.search import truth_probabilities
+    from ctxsearch.agent.search.priors import truth_probabilities
 
     catalog = load_catalog()
     p = tmp_path / "truth.json"

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from ctxsearch.envs.detector import Detection, box_distance, detect, detect_ids, min_pixels_at, ray_scale
+from ctxsearch.envs.detector import (
+    Detection,
+    box_distance,
+    detect,
+    detect_ids,
+    min_pixels_at,
+    ray_scale,
+)
 from ctxsearch.knowledge.geometry import ObjectInstance
 
 DESK = ObjectInstance("Desk", 3, (2.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))

@@ -212,7 +212,7 @@ def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog
 
 @pytest.mark.render
 def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_store):
-    from ctxsearch.scripts.experiments.episodes import SearchConfig, search_once
+    from ctxsearch.agent.search.runner import SearchConfig, search_once
     from tests.rrd_files import read_rrd
 
     kb = desk_cup_store(tmp_path / "kb.sqlite")

@@ -8,16 +8,23 @@ import math
 import numpy as np
 import pytest
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent import search_space as ss
 from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.search import episode as S
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.context import SearchContext
+from ctxsearch.agent.search.draw import DrawSpec, make_episodes
+from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.measures import bootstrap_ci
+from ctxsearch.agent.search.policies import make_policy
+from ctxsearch.agent.search.registry import POLICIES, parse_policies
+from ctxsearch.agent.search.runner import EpisodeRoom, EpisodeSet, run_episodes
 from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import Box, ObjectInstance
-from ctxsearch.scripts.experiments.bench_search import aggregate, bootstrap_ci
-from ctxsearch.scripts.experiments.episodes import make_episodes, run_episodes
+from ctxsearch.knowledge.options import MapMode
+from ctxsearch.scripts.experiments.bench_search import aggregate
 
 # A hand-made room: a desk against the north wall with a cup on it, a shelf against the west wall.
 DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
@@ -232,33 +239,41 @@ def test_episodes_are_deterministic_and_skip_excluded_rooms(catalog):
     from ctxsearch.envs.styles import load_style
 
     style = load_style("office", catalog)
-    a = make_episodes(style, 2, 7, catalog, 60.0)
-    assert a == make_episodes(style, 2, 7, catalog, 60.0)
+    a = make_episodes(DrawSpec.make(style, 2, 7, catalog, 60.0), catalog)
+    assert a == make_episodes(DrawSpec.make(style, 2, 7, catalog, 60.0), catalog)
     assert all(not catalog.type(e.target).is_furniture for e in a)
-    b = make_episodes(style, 2, 7, catalog, 60.0, exclude_seeds={a[0].room_seed})
+    b = make_episodes(DrawSpec.make(style, 2, 7, catalog, 60.0, {a[0].room_seed}), catalog)
     assert a[0].room_seed not in {e.room_seed for e in b}
-    c = make_episodes(style, 1, 7, catalog, 60.0, target="Pen")
+    c = make_episodes(DrawSpec.make(style, 1, 7, catalog, 60.0, target="Pen"), catalog)
     assert all(e.target == "Pen" for e in c)
 
 
 def test_unknown_policy_and_rank_are_one_line_errors():
     with pytest.raises(CtxsearchError, match="unknown search policy 'psychic'"):
-        S.make_policy("psychic")
+        make_policy("psychic", MapMode.GIVEN)
     with pytest.raises(CtxsearchError, match="unknown rank"):
-        S.parse_policies("location@middle")
-    assert S.parse_policies("exhaustive, location@low") == ["exhaustive", "location@low"]
+        parse_policies("location@middle")
+    assert parse_policies("exhaustive, location@low") == ["exhaustive", "location@low"]
 
 
 # =========================================================================== policies (rendered)
-def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, world=None):
+def _episode_room(layout: RoomLayout, catalog, world, mode=MapMode.GIVEN) -> EpisodeRoom:
+    """The hand-made room in scenario ``mode`` (perfect detector), as the episode runner builds
+    it."""
+    maps = RoomMaps.for_mode(mode, layout, catalog, world.spec)
+    return EpisodeRoom(layout, catalog, world, maps, RoomMaps.given(layout, catalog, world.spec))
+
+
+def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, world=None, mode=None):
     from ctxsearch.envs.world import World
 
     ep = S.Episode(0, "test", 0, "Cup", START, budget)
     own = world is None
     world = world or World(layout, catalog)
     try:
-        ctx = S.SearchContext(ep, layout, catalog, world, probs=probs, policy=policy)
-        return S.make_policy(policy).run(ctx), ctx
+        er = _episode_room(layout, catalog, world, mode or POLICIES[policy].maps[-1])
+        pol, ctx = er.prepare(ep, policy, probs)
+        return er.judged(pol.run(ctx)), ctx
     finally:
         if own:
             world.close()
@@ -271,7 +286,7 @@ def test_every_policy_finds_a_cup_in_plain_sight(catalog):
     layout = room(DESK, SHELF, CUP)
     probs = ss.TableProbabilities({("ON-TOP-OF-DESK", "Cup"): 0.8, ("ON-SHELF", "Cup"): 0.2})
     with World(layout, catalog) as world:
-        for name in S.POLICIES:
+        for name in POLICIES:
             res, _ = _run(name, layout, catalog, probs, world=world)
             assert res.success, (name, res.log)
             assert res.found_id == CUP.id
@@ -326,29 +341,29 @@ def test_paired_benchmark_gives_every_policy_the_same_episodes(catalog, monkeypa
     from ctxsearch.envs.styles import load_style
 
     style = load_style("office", catalog)
-    eps = make_episodes(style, 2, 11, catalog, budget_s=6.0)
+    eps = make_episodes(DrawSpec.make(style, 2, 11, catalog, budget_s=6.0), catalog)
     seen: list[tuple] = []
-    orig = S.SearchContext.__init__
+    orig = SearchContext.__init__
 
-    def spy(self, episode, layout, cat, body, **kw):
-        orig(self, episode, layout, cat, body, **kw)
+    def spy(self, episode, cat, body, perception, maps, **kw):
+        orig(self, episode, cat, body, perception, maps, **kw)
         p = body.pose()
         seen.append(
             (
                 kw.get("policy"),
                 episode.index,
-                layout.seed,
+                episode.room_seed,
                 episode.target,
                 (episode.start.x, episode.start.y),
                 (round(p.x, 4), round(p.y, 4), round(p.yaw, 4)),
                 len(self.known),
                 self.seen.seen_fraction(99.0),
-                tuple(sorted(o.id for o in layout.objects)),
+                tuple(sorted(o.id for o in maps.furniture)),
                 round(self.elapsed, 6),
             )
         )
 
-    monkeypatch.setattr(S.SearchContext, "__init__", spy)
+    monkeypatch.setattr(SearchContext, "__init__", spy)
     kb = KnowledgeBase(catalog)
     kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
     policies = ["exhaustive", "location", "oracle"]
@@ -356,7 +371,7 @@ def test_paired_benchmark_gives_every_policy_the_same_episodes(catalog, monkeypa
     def probs_for(base, rank):
         return ss.KBProbabilities(kb, rank or "p0") if base == "location" else None
 
-    results = run_episodes(eps, policies, catalog, style, probs_for)
+    results = run_episodes(eps, catalog, EpisodeSet(style, tuple(policies), probs_for))
     assert [len(results[p]) for p in policies] == [2, 2, 2]
     for i, ep in enumerate(eps):
         rows = [r for r in seen if r[1] == i]
@@ -400,10 +415,9 @@ def test_search_recording_shows_candidates_path_and_camera_views(catalog, tmp_pa
     ep = S.Episode(0, "test", 0, "Cup", RobotPose(-1.5, -1.2, 0.0), 120.0)
     with World(layout, catalog) as world, Recorder(path) as rec:
         rec.log_room(layout, catalog)
-        ctx = S.SearchContext(
-            ep, layout, catalog, world, probs=probs, recorder=rec, policy="location"
-        )
-        res = S.make_policy("location").run(ctx)
+        er = _episode_room(layout, catalog, world)
+        pol, ctx = er.prepare(ep, "location", probs, rec)
+        res = er.judged(pol.run(ctx))
     assert res.success
     entities = {c.entity_path for c in rr.chunk.RrdReader(path).stream()}
     expected = {
@@ -432,17 +446,18 @@ def test_a_detection_of_the_target_ends_the_search_only_once_a_second_image_conf
     fake = Detection(-7, "Cup", fake_pose, 0, 2.0, (0, 0, 0, 0), 0.3)
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Cup", START, 120.0)
-        ctx = S.SearchContext(ep, layout, catalog, world, policy="exhaustive")
-        real = ctx.detector
+        er = _episode_room(layout, catalog, world)
+        pol, ctx = er.prepare(ep, "exhaustive", None)
+        real = ctx.perception.detector
         calls = []
 
-        def detector(frame):
+        def detector(frame, t):
             calls.append(ctx.elapsed)
-            dets = [d for d in real(frame) if d.type != "Cup"] if len(calls) == 1 else real(frame)
-            return [fake, *dets] if len(calls) == 1 else dets
+            dets = real(frame, t)
+            return [fake, *[d for d in dets if d.type != "Cup"]] if len(calls) == 1 else dets
 
-        ctx.detector = detector
-        res = S.make_policy("exhaustive").run(ctx)
+        ctx.perception.detector = detector
+        res = er.judged(pol.run(ctx))
     assert res.unconfirmed == 1 and len(calls) >= 4
     assert res.success and res.found_id == CUP.id
     assert -7 not in ctx.known

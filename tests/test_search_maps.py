@@ -12,13 +12,18 @@ import sys
 import numpy as np
 import pytest
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent import search_explore as sx
-from ctxsearch.agent import search_space as ss
+from ctxsearch.agent.search import episode as S
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.frontier import Explorer
+from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.registry import check_scenario, default_policies
+from ctxsearch.agent.search.runner import EpisodeRoom
 from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import MapMode
 from ctxsearch.scripts.experiments.bench_indirect import NONE_PREDICTED, indirect_analysis
 
 DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.74))
@@ -42,21 +47,26 @@ def room(*objects: ObjectInstance) -> RoomLayout:
     )
 
 
+def _room(layout, catalog, world, scenario="built") -> EpisodeRoom:
+    """The hand-made room in ``scenario`` (perfect detector), as the episode runner builds it."""
+    maps = RoomMaps.for_mode(MapMode(scenario), layout, catalog, world.spec)
+    return EpisodeRoom(layout, catalog, world, maps, RoomMaps.given(layout, catalog, world.spec))
+
+
 def _run(policy, layout, catalog, world, target="Cup", probs=None, scenario="built", budget=200.0):
     ep = S.Episode(0, "test", 0, target, START, budget)
-    maker = S.RoomMaps.built if scenario == "built" else S.RoomMaps.given
-    maps = maker(layout, catalog, world.spec)
-    ctx = S.SearchContext(ep, layout, catalog, world, maps=maps, probs=probs, policy=policy)
-    return S.make_policy(policy).run(ctx), ctx
+    er = _room(layout, catalog, world, scenario)
+    pol, ctx = er.prepare(ep, policy, probs)
+    return er.judged(pol.run(ctx)), ctx
 
 
 # =========================================================================== pure parts
 def test_built_scenario_knows_no_furniture_and_no_free_cell(catalog):
     layout = room(DESK, SHELF, CUP)
-    maps = S.RoomMaps.built(layout, catalog, RobotSpec())
+    maps = RoomMaps.built(layout, catalog, RobotSpec())
     assert maps.map == "built" and maps.furniture == ()
     assert not maps.grid.free.any()
-    given = S.RoomMaps.given(layout, catalog, RobotSpec())
+    given = RoomMaps.given(layout, catalog, RobotSpec())
     assert given.map == "given" and {o.id for o in given.furniture} == {DESK.id, SHELF.id}
     # The built seen map's lattice does not know where the furniture's solid parts are.
     assert len(maps.seen) > len(given.seen)
@@ -84,14 +94,14 @@ def test_efficiency_model_predicts_a_gain_only_for_a_related_easier_type(catalog
 
 def test_policy_scenario_mismatch_is_a_one_line_error():
     with pytest.raises(CtxsearchError, match="policy 'location' needs --map given"):
-        S.check_scenario(["frontier", "location@low"], "built")
+        check_scenario(["frontier", "location@low"], "built")
     with pytest.raises(CtxsearchError, match="policy 'frontier' needs --map built"):
-        S.check_scenario(["frontier"], "given")
+        check_scenario(["frontier"], "given")
     with pytest.raises(CtxsearchError, match="unknown map"):
-        S.check_scenario(["oracle"], "drawn")
-    S.check_scenario(["indirect", "oracle"], "given")  # both scenarios
-    for scenario, names in S.DEFAULT_POLICIES.items():
-        S.check_scenario(names, scenario)
+        check_scenario(["oracle"], "drawn")
+    check_scenario(["indirect", "oracle"], "given")  # both scenarios
+    for scenario in MapMode:
+        check_scenario(default_policies(scenario), scenario)
 
 
 def test_cli_policy_scenario_mismatch_exits_2_with_one_line(tmp_path):
@@ -129,9 +139,7 @@ def test_frontier_finds_a_cup_out_of_view_and_its_map_starts_unknown(catalog):
     layout = room(DESK, SHELF, CUP)
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Cup", START, 200.0)
-        ctx = S.SearchContext(
-            ep, layout, catalog, world, maps=S.RoomMaps.built(layout, catalog, world.spec)
-        )
+        _, ctx = _room(layout, catalog, world).prepare(ep, "frontier", None)
         assert ctx.built is not None and ctx.built.unknown.mean() > 0.95
         assert ctx.known == {} and ctx.furniture_map() == []
         res, ctx = _run("frontier", layout, catalog, world)
@@ -197,19 +205,19 @@ def _looked_around(catalog):
     layout = room(DESK, SHELF, CUP, PEN)
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Pen", START, 200.0)
-        maps = S.RoomMaps.built(layout, catalog, world.spec)
-        ctx = S.SearchContext(ep, layout, catalog, world, maps=maps)
-        ctx.look_around()
-        yield ctx
+        _, ctx = _room(layout, catalog, world).prepare(ep, "frontier", None)
+        ex = Explorer(ctx)
+        ex.look_around()
+        yield ctx, ex
 
 
 @pytest.mark.render
 def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
     """``ViewpointScorer.best`` traces few candidates (bounds, gains cached between calls) and
     picks what tracing every candidate picks, also after the todo points shrank."""
-    with _looked_around(catalog) as ctx:
-        scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
-        todo = ctx.todo(rng)
+    with _looked_around(catalog) as (ctx, ex):
+        scorer, here, rng = ex.scorer(), ctx.body.pose().xy, ctx.target_range
+        todo = ex.todo(rng)
         for step in range(3):
             got = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, key="k")
             want = _brute_best(scorer, ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
@@ -224,9 +232,9 @@ def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
 def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(catalog):
     """With weights (where the target is likely) the lazy choice is still the exhaustive one, and
     weight put around one place draws the viewpoint there (uniform weights choose as no weights)."""
-    with _looked_around(catalog) as ctx:
-        scorer, here, rng = ctx.scorer(), ctx.body.pose().xy, ctx.target_range
-        todo = ctx.todo(rng)
+    with _looked_around(catalog) as (ctx, ex):
+        scorer, here, rng = ex.scorer(), ctx.body.pose().xy, ctx.target_range
+        todo = ex.todo(rng)
         plain = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
         flat = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=np.ones(len(todo)))
         assert plain is not None and flat is not None

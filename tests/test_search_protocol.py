@@ -10,13 +10,18 @@ import math
 import numpy as np
 import pytest
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent.episode_draw import draw_world
 from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.search import draw as D
+from ctxsearch.agent.search import draw_store
+from ctxsearch.agent.search import episode as S
+from ctxsearch.agent.search import oracle as O
+from ctxsearch.agent.search.draw import DrawSpec, draw_world
+from ctxsearch.agent.search.runner import EpisodeSet, run_episode
 from ctxsearch.envs.detector import SimDetector, load_detector
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.robot_spec import RobotPose
 from ctxsearch.envs.styles import load_style
 from ctxsearch.envs.world import World
-from ctxsearch.scripts.experiments import episodes as E
 from ctxsearch.scripts.experiments.bench_search import (
     SearchBenchConfig,
     aggregate,
@@ -24,6 +29,17 @@ from ctxsearch.scripts.experiments.bench_search import (
     detect_group,
     paired_ratio,
 )
+
+
+def draw(style, n, seed, catalog, budget, *, detector=None, cache=None):
+    """The episode draw of these arguments (serial)."""
+    spec = DrawSpec.make(style, n, seed, catalog, budget, detector=detector)
+    return D.draw_episodes(spec, catalog, cache=cache)
+
+
+def run_ep(ep, policies, catalog, style, detector):
+    """Every policy of ``policies`` on ``ep`` (no probabilities), on the given map."""
+    return run_episode(ep, catalog, EpisodeSet(style, tuple(policies), lambda b, r: None, detector))
 
 
 def res(policy: str, t: float, found: bool = True, budget: float = 100.0) -> S.SearchResult:
@@ -35,7 +51,7 @@ def test_paired_ratio_counts_wins_and_losses_per_episode():
     t = np.array([10.0, 20.0, 30.0, 40.0, 50.0])
     base = np.array([20.0, 20.0, 15.0, 80.0, 100.0])
     p = paired_ratio(t, base)
-    assert (p.wins, p.losses, p.n) == (3, 1, 5)  # 10<20, 40<80, 50<100; 30>15; 20=20 a tie
+    assert (p.wins, p.losses, p.ties, p.n) == (3, 1, 1, 5)  # 10<20, 40<80, 50<100; 30>15; 20=20
     assert p.median == pytest.approx(0.5)
     assert p.ci[0] <= p.median <= p.ci[1]
 
@@ -78,16 +94,16 @@ def office(catalog):
 
 @pytest.fixture(scope="module")
 def drawn(office, catalog):
-    return E.draw_episodes(office, 2, 5, catalog, 60.0)
+    return draw(office, 2, 5, catalog, 60.0)
 
 
 def test_episodes_are_reproducible_and_count_what_they_leave_out(drawn, office, catalog):
-    again = E.draw_episodes(office, 2, 5, catalog, 60.0)
+    again = draw(office, 2, 5, catalog, 60.0)
     assert again.episodes == drawn.episodes
     assert again.excluded() == drawn.excluded() and again.start_redraws == drawn.start_redraws
     assert [e.index for e in drawn.episodes] == [0, 1]
     assert drawn.start_redraws + drawn.visible_at_start > 0  # most office starts see the target
-    other = E.draw_episodes(office, 1, 6, catalog, 60.0)
+    other = draw(office, 1, 6, catalog, 60.0)
     assert other.episodes[0] not in drawn.episodes
 
 
@@ -97,7 +113,7 @@ def test_the_target_is_never_visible_from_the_start(drawn, catalog):
     and a ring of headings at three tilts (turning in place), read by the perfect detector."""
     perfect = load_detector("perfect")
     for ep in drawn.episodes:
-        layout = E.generate_layout(load_style(ep.style, catalog), ep.room_seed, catalog)
+        layout = generate_layout(load_style(ep.style, catalog), ep.room_seed, catalog)
         with World(layout, catalog) as world:
             sim = SimDetector(perfect, layout, catalog, layout.seed)
             spec = world.spec
@@ -110,7 +126,7 @@ def test_the_target_is_never_visible_from_the_start(drawn, catalog):
                 d = np.asarray(o.position) - np.array([ep.start.x, ep.start.y, spec.camera_height])
                 views.append((math.atan2(d[1], d[0]), math.atan2(d[2], math.hypot(d[0], d[1]))))
             for heading, tilt in views:
-                world.reset_pose(S.RobotPose(ep.start.x, ep.start.y, heading, 0.0, tilt))
+                world.reset_pose(RobotPose(ep.start.x, ep.start.y, heading, 0.0, tilt))
                 dets = sim(world.capture(depth=True), world.sim_time)
                 assert not [d for d in dets if d.type == ep.target], (ep, heading, tilt)
 
@@ -118,18 +134,18 @@ def test_the_target_is_never_visible_from_the_start(drawn, catalog):
 def test_an_infeasible_world_is_dropped_and_counted(office, catalog, monkeypatch):
     # A budget no view can meet: the target is not visible from the start, and every other
     # view needs a drive or a head move longer than 0.3 s.
-    w = draw_world(office, 5, catalog, 0.3, frozenset(), None, None, 0)
+    w = draw_world(DrawSpec.make(office, 1, 5, catalog, 0.3), catalog, 0)
     assert w.episode is None and w.dropped in ("infeasible", "visible_at_start")
     # The count: the first world's oracle finds nothing, the others are as they are.
-    real = S.oracle_view
+    real = O.oracle_view
     calls = {"n": 0}
 
     def first_fails(*a, **kw):
         calls["n"] += 1
         return None if calls["n"] == 1 else real(*a, **kw)
 
-    monkeypatch.setattr(S, "oracle_view", first_fails)
-    d = E.draw_episodes(office, 1, 5, catalog, 60.0)
+    monkeypatch.setattr(D, "oracle_view", first_fails)
+    d = draw(office, 1, 5, catalog, 60.0)
     assert d.infeasible == 1 and len(d.episodes) == 1
 
 
@@ -189,11 +205,10 @@ def test_the_oracle_plans_on_the_episodes_clock(office, catalog):
     from dataclasses import replace
 
     real = load_detector("realistic", catalog)
-    eps = E.draw_episodes(office, 2, 5, catalog, 60.0, detector=real).episodes
-    none = lambda b, r: None  # noqa: E731
+    eps = draw(office, 2, 5, catalog, 60.0, detector=real).episodes
     for ep in (replace(e, first_view=None) for e in eps):
-        alone = E.run_episode(ep, ["oracle"], catalog, office, none, None, real)[0]
-        after = E.run_episode(ep, ["map-only", "oracle"], catalog, office, none, None, real)
+        alone = run_ep(ep, ["oracle"], catalog, office, real)[0]
+        after = run_ep(ep, ["map-only", "oracle"], catalog, office, real)
         assert alone.success and alone.unconfirmed == 0, alone.log
         assert after[1].gazes == alone.gazes, after[1].log
         assert after[1].sim_time == pytest.approx(alone.sim_time, abs=1e-6)
@@ -209,10 +224,10 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
     from ctxsearch.envs.floorplan import generate_layout
 
     real = load_detector("realistic", catalog)
-    ep = E.draw_episodes(office, 1, 5, catalog, 60.0, detector=real).episodes[0]
+    ep = draw(office, 1, 5, catalog, 60.0, detector=real).episodes[0]
     layout = generate_layout(office, ep.room_seed, catalog)
     with World(layout, catalog) as w:
-        eye = S.OracleEye(w, layout, catalog, real, ep.target)
+        eye = O.OracleEye(w, layout, catalog, real, ep.target)
         ic = w.time_model.image_cost
         # a view that shows the target well: the aimed view of the grid's cell that does best
         o = eye.instances[0]
@@ -221,7 +236,7 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
         rows, cols = grid.lattice_cells(10)
         views = []
         for xy in np.column_stack([xs[cols], ys[rows]]):
-            g = S._exact_gaze(grid, ep.start, xy, np.asarray(o.position), w.spec, w.time_model)
+            g = O._exact_gaze(grid, ep.start, xy, np.asarray(o.position), w.spec, w.time_model)
             if g is not None:
                 views.append((eye.probability(eye.frame_at(g.pose)), g.pose))
         p, pose = max(views, key=lambda v: v[0])
@@ -244,7 +259,7 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
             assert eye.first_success(frame, t0, t - 1e-3, 40) is None
             assert eye.first_success(frame, t0, 1e9, len(steps) - 1) is None
         assert len(found) >= 5 and min(found) == 1 and max(found) > 1, found
-    res = E.run_episode(ep, ["oracle"], catalog, office, lambda b, r: None, None, real)[0]
+    res = run_ep(ep, ["oracle"], catalog, office, real)[0]
     assert res.success
     assert res.sim_time <= ep.first_view.seconds + ic + 1e-6
 
@@ -264,9 +279,7 @@ def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
     """``--draw-cache``: the second command reads the first's draw (episodes, counts and the
     oracle's first plans, to the last bit) instead of drawing; a file of any other bytes is a
     miss, drawn again and replaced."""
-    from ctxsearch.scripts.experiments import draw_store
-
-    first = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+    first = draw(office, 2, 5, catalog, 60.0, cache=tmp_path)
     files = list(tmp_path.glob("*.json"))
     assert len(files) == 1
     assert first.episodes == drawn.episodes
@@ -276,8 +289,8 @@ def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
         raise AssertionError("drew again")
 
     with monkeypatch.context() as m:
-        m.setattr(E, "run_units", no_draw)
-        kept = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+        m.setattr(D, "draw_world", no_draw)
+        kept = draw(office, 2, 5, catalog, 60.0, cache=tmp_path)
     assert kept.episodes == first.episodes
     assert [e.start for e in kept.episodes] == [e.start for e in first.episodes]
     assert [_view_state(e.first_view) for e in kept.episodes] == [
@@ -285,9 +298,11 @@ def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
     ]
     assert (kept.excluded(), kept.start_redraws) == (first.excluded(), first.start_redraws)
     # Other arguments are another key.
-    assert draw_store.draw_key((1,)) != draw_store.draw_key((2,))
+    assert draw_store.draw_key(DrawSpec.make(office, 2, 5, catalog, 60.0)) != draw_store.draw_key(
+        DrawSpec.make(office, 2, 6, catalog, 60.0)
+    )
     for junk in (b"\xff\xfe[", b'{"format": 1, "episodes": [{"index": "x"}]}'):
         files[0].write_bytes(junk)
-        again = E.draw_episodes(office, 2, 5, catalog, 60.0, cache=tmp_path)
+        again = draw(office, 2, 5, catalog, 60.0, cache=tmp_path)
         assert again.episodes == first.episodes
-        assert draw_store.load(tmp_path, files[0].stem, E.EpisodeDraw) is not None
+        assert draw_store.load(tmp_path, files[0].stem) is not None

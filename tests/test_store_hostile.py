@@ -14,7 +14,13 @@ from pathlib import Path
 import pytest
 
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
-from ctxsearch.knowledge.store import EXAM_KEY, SCHEMA_VERSION, EvidenceStore, inspect_store, merge_stores
+from ctxsearch.knowledge.store import (
+    EXAM_KEY,
+    SCHEMA_VERSION,
+    EvidenceStore,
+    inspect_store,
+    merge_stores,
+)
 from ctxsearch.scripts.cli import main
 from tests.old_stores import as_version
 

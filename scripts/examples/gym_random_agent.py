@@ -23,8 +23,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is first imported
 
 import gymnasium
 
-from ctxsearch.agent import search as S
 from ctxsearch.agent.gym_env import ENV_ID, ObjectSearchEnv
+from ctxsearch.agent.search.episode import SearchResult
+from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.runner import EpisodeRoom, run_policy
 from ctxsearch.knowledge.errors import CtxsearchError
 
 
@@ -38,18 +40,19 @@ def random_agent(env: gymnasium.Env, seed: int, steps: int) -> dict:
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
         seconds -= reward
         if terminated or truncated:
-            found = terminated
+            found = bool(info["success"])
             break
     return {"target": info["target"], "steps": n, "sim_s": seconds, "found": found}
 
 
-def exhaustive_on_env(env: gymnasium.Env, seed: int) -> S.SearchResult:
-    """The ``exhaustive`` policy on the episode ``env.reset(seed=seed)`` draws, on the env's body."""
+def exhaustive_on_env(env: gymnasium.Env, seed: int) -> SearchResult:
+    """The ``exhaustive`` policy on the episode ``env.reset(seed=seed)`` draws, on the env's body
+    (judged as the benchmark judges it)."""
     env.reset(seed=seed)
     base: ObjectSearchEnv = env.unwrapped
-    maps = S.RoomMaps.given(base.layout, base.catalog, base.robot_spec, base.detector_model)
-    ctx = S.SearchContext(base.episode, base.layout, base.catalog, base.world, maps=maps)
-    return S.make_policy("exhaustive").run(ctx)
+    maps = RoomMaps.given(base.layout, base.catalog, base.robot_spec, base.detector_model)
+    room = EpisodeRoom(base.layout, base.catalog, base.world, maps)
+    return run_policy(base.episode, "exhaustive", room, None)
 
 
 def _size(text: str) -> tuple[int, int]:

@@ -28,13 +28,13 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.search.draw import remembered_draws
+from ctxsearch.agent.search.priors import store_seeds
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
-from ctxsearch.scripts.experiments.episodes import remembered_draws
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -130,14 +130,6 @@ def learn_snapshots(
     return out
 
 
-def learned_seeds(path: Path | None) -> set[int]:
-    """The room seeds the store at ``path`` learned in (none for no store)."""
-    if path is None:
-        return set()
-    with EvidenceStore.open(path, load_catalog(), read_only=True) as st:
-        return {seed for _run, _style, seed, _status in st.rooms()}
-
-
 def bench_curve(
     config: CurveConfig,
     out: Path | str,
@@ -167,7 +159,7 @@ def bench_curve(
                 if progress is not None:
                     progress(f"k={k}: {sc.name} searched ({exams} examinations)")
             points.append(point)
-    _check_pairing(points, learned_seeds(snaps[-1][2]))
+    _check_pairing(points, store_seeds(snaps[-1][2], load_catalog()))
     doc = curve_doc(config, points)
     table = format_table(doc)
     res = CurveResult(doc, table)

@@ -58,9 +58,12 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent import search_space as ss
 from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.draw import DrawSpec, make_episodes
+from ctxsearch.agent.search.episode import DEFAULT_BUDGET_S, SearchResult
+from ctxsearch.agent.search.measures import bootstrap_ci
+from ctxsearch.agent.search.runner import RoomRuns, SearchConfig, load_priors, search_room
 from ctxsearch.agent.strategies import BackoffHIF, Choice
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.styles import Style, parse_style
@@ -71,8 +74,7 @@ from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, Catalog, load_catalog, 
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 from ctxsearch.knowledge.store import EvidenceStore
-from ctxsearch.scripts.experiments.bench_search import aggregate, bootstrap_ci
-from ctxsearch.scripts.experiments.episodes import SearchConfig, load_priors, make_episodes, search_room
+from ctxsearch.scripts.experiments.bench_search import aggregate
 from ctxsearch.scripts.experiments.tables import write_csv
 
 NEW_TYPE = "Workbench"
@@ -97,7 +99,7 @@ class HierarchyBenchConfig:
     ks: tuple[int, ...] = KS
     draws: int = 5  # random subsets of a held type's examinations per k
     seed: int = 0
-    budget_s: float = S.DEFAULT_BUDGET_S
+    budget_s: float = DEFAULT_BUDGET_S
     rank: str = ss.DEFAULT_RANK
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
 
@@ -307,12 +309,13 @@ def paired_search(
         "flat": ss.KBProbabilities(priors.kb, config.rank, rooms=rooms),
         "backoff": priors.for_policy(SEARCH_POLICY, None),
     }
-    eps = make_episodes(
+    spec = DrawSpec.make(
         variant, config.episodes, config.seed, catalog, config.budget_s, priors.learned
     )
-    results: dict[str, list[S.SearchResult]] = {m: [] for m in probs}
+    eps = make_episodes(spec, catalog)
+    results: dict[str, list[SearchResult]] = {m: [] for m in probs}
     for ep in eps:
-        runs = [(SEARCH_POLICY, p, None) for p in probs.values()]
+        runs = RoomRuns(tuple((SEARCH_POLICY, p, None) for p in probs.values()))
         for m, res in zip(probs, search_room(ep, variant, catalog, runs), strict=True):
             res.policy = f"{SEARCH_POLICY} ({m})"
             results[m].append(res)

@@ -17,28 +17,19 @@ gain for the best candidate (> 1) or not.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from ctxsearch.agent import search as S
+from ctxsearch.agent.search.episode import Episode, SearchResult
+from ctxsearch.agent.search.measures import bootstrap_ci
 
 NONE_PREDICTED = "(none chosen; model predicts no gain)"
 NONE_UNUSED = "(none chosen; model predicts a gain)"
 
 
-def _bootstrap(v: np.ndarray, seed: int, samples: int = 2000) -> tuple[float, float]:
-    """Percentile bootstrap 95% interval of the median (seeded; nan if empty)."""
-    if len(v) == 0:
-        return (math.nan, math.nan)
-    rng = np.random.default_rng(seed)
-    med = np.median(v[rng.integers(0, len(v), size=(samples, len(v)))], axis=1)
-    return (float(np.quantile(med, 0.025)), float(np.quantile(med, 0.975)))
-
-
-def group_of(r: S.SearchResult) -> str:
+def group_of(r: SearchResult) -> str:
     """The analysis group of an indirect result: its intermediate type, or why none."""
     if r.intermediate is not None:
         return r.intermediate
@@ -46,8 +37,8 @@ def group_of(r: S.SearchResult) -> str:
 
 
 def indirect_analysis(
-    episodes: Sequence[S.Episode],
-    results: dict[str, list[S.SearchResult]],
+    episodes: Sequence[Episode],
+    results: dict[str, list[SearchResult]],
     policy: str = "indirect",
     baseline: str = "frontier",
     seed: int = 0,
@@ -69,7 +60,7 @@ def indirect_analysis(
         sel = [row for row in rows if name == "all" or row["group"] == name]
         ratio = np.array([row["ratio"] for row in sel], float)
         gains = [row["predicted_gain"] for row in sel if row["predicted_gain"] is not None]
-        lo, hi = _bootstrap(ratio, seed)
+        lo, hi = bootstrap_ci(ratio, np.median, seed=seed)
         groups[name] = {
             "episodes": len(sel),
             "predicted_gain": round(float(np.median(gains)), 4) if gains else None,

@@ -34,6 +34,7 @@ import numpy as np
 from ctxsearch.envs.truth import ground_truth
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.options import IntervalMethod
 from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
 from ctxsearch.scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
 from ctxsearch.scripts.experiments.tables import write_csv
@@ -201,7 +202,7 @@ def _seed_rows(
         key = {"style": row["style"], "detector": row["detector"], "seed": seed,
                "rooms": row["rooms"], "examinations": k}  # fmt: skip
         cells = {
-            f"{name}_{ck}": float(tr.at_exam(k, wk if name == "wilson" else ck))
+            f"{name}_{ck}": float(tr.at_exam(k, wk if name == IntervalMethod.WILSON else ck))
             for ck, wk in CELLS
             for name in ("clustered", "wilson")
         }

@@ -53,6 +53,7 @@ from ctxsearch.envs.detector import default_or_named
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.truth import sample_counts, truth_document
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.options import IntervalMethod, PerceptionMode
 from ctxsearch.scripts.experiments.learning_report import decision_stats, fmt, markdown, plot
 from ctxsearch.scripts.experiments.learning_trace import (
     EXAM_MARKS,
@@ -89,7 +90,9 @@ def bench_learning(
     DIR/learning.csv (one row per examination of every run, ``exam_rows``); the (strategy, seed)
     runs are the sweep's units (serial, or Ray tasks with ``sweep.workers``)."""
     catalog = load_catalog()
-    if config.perception == "camera":  # a bad preset: the one-line error before any run
+    if (
+        config.perception == PerceptionMode.CAMERA
+    ):  # a bad preset: the one-line error before any run
         default_or_named(config.detector, catalog, DEFAULT_DETECTOR)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -104,7 +107,7 @@ def bench_learning(
         f"perception{c.budget_note}, detector {c.detector_name}, {c.interval} intervals"
     )
     table = markdown(title, traces, data["truth_samples"], c.alpha, c.room_budget_s)
-    if c.interval == "clustered":
+    if c.interval == IntervalMethod.CLUSTERED:
         table += _wilson_beside(traces)
     files = [out / "learning.json", out / "learning.md", out / "learning.png"]
     files[0].write_text(json.dumps(data, indent=1) + "\n")
@@ -226,7 +229,7 @@ def _data(config: LearningBenchConfig, truth: dict, traces: dict[str, list[Trace
                 **(
                     {m: median_curve(ts, m) for m in WILSON_METRICS}
                     | {"effective_same_hif": _share([x for t in ts for x in t.effective_same])}
-                    if config.interval == "clustered"
+                    if config.interval == IntervalMethod.CLUSTERED
                     else {}
                 ),
                 "wall_s": [t.wall_s for t in ts],

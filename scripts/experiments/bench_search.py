@@ -58,46 +58,30 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ctxsearch.agent import search as S
-from ctxsearch.agent import search_space as ss
-from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.draw import DrawSpec, WorldDraw, draw_episodes
+from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult
+from ctxsearch.agent.search.measures import (
+    BOOTSTRAP_SAMPLES,
+    PairedRatio,
+    bootstrap_ci,
+    oracle_violations,
+    paired_ratio,
+    r4,
+    spl,
+)
+from ctxsearch.agent.search.registry import split_name
+from ctxsearch.agent.search.runner import EpisodeSet, SearchConfig, load_priors, run_episode
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Estimate
 from ctxsearch.scripts.experiments.bench_indirect import indirect_analysis, write_indirect
-from ctxsearch.scripts.experiments.episodes import (
-    EpisodeDraw,
-    Priors,
-    SearchConfig,
-    draw_episodes,
-    load_priors,
-    run_episode,
-    split_name,
-)
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units
 
-BOOTSTRAP_SAMPLES = 2000
 EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode either way)
-
-
-def bootstrap_ci(
-    values: Sequence[float],
-    stat: Callable[[np.ndarray], float] = np.median,
-    samples: int = BOOTSTRAP_SAMPLES,
-    seed: int = 0,
-    level: float = 0.95,
-) -> tuple[float, float]:
-    """Percentile bootstrap interval of ``stat`` over ``values`` (seeded; (nan, nan) if empty)."""
-    v = np.asarray(values, float)
-    if len(v) == 0:
-        return (math.nan, math.nan)
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, len(v), size=(samples, len(v)))
-    stats = np.apply_along_axis(stat, 1, v[idx])
-    a = (1 - level) / 2
-    return (float(np.quantile(stats, a)), float(np.quantile(stats, 1 - a)))
 
 
 # The baselines every policy's paired ratio is taken to, when they ran: the no-context policies
@@ -106,37 +90,6 @@ def bootstrap_ci(
 # probabilities.
 BASELINES = ("frontier", "map-only", "exhaustive", "oracle-prior", "oracle-prior-indirect")
 ORACLE = "oracle"
-TIE_S = 1e-6  # seconds: closer than this counts as a tie (no win, no loss, no violation)
-
-
-@dataclass(frozen=True)
-class PairedRatio:
-    """The per-episode ratio of a policy's time to find to a baseline's, over paired episodes:
-    its median with a bootstrap interval, and the episodes it was faster (wins) and slower
-    (losses) in."""
-
-    median: float
-    ci: tuple[float, float]
-    wins: int
-    losses: int
-    n: int
-
-    def to_json(self) -> dict:
-        """The entry of search.json's ``paired_ratio``."""
-        return {
-            "median": _r(self.median),
-            "ci": [_r(self.ci[0]), _r(self.ci[1])],
-            "wins": self.wins,
-            "losses": self.losses,
-            "n": self.n,
-        }
-
-
-def _r(x):
-    """A JSON number rounded to 4 decimals (None for None, nan, inf)."""
-    return (
-        None if x is None or (isinstance(x, float) and not math.isfinite(x)) else round(float(x), 4)
-    )
 
 
 @dataclass
@@ -162,59 +115,22 @@ class PolicyStats:
     def to_json(self) -> dict:
         """The JSON entry of search.json."""
         return {
-            "success_rate": _r(self.success_rate),
-            "spl": _r(self.spl),
+            "success_rate": r4(self.success_rate),
+            "spl": r4(self.spl),
             "paired_ratio": {b: p.to_json() for b, p in self.paired.items()},
-            "median_s": _r(self.median_s),
-            "median_ci": [_r(self.median_ci[0]), _r(self.median_ci[1])],
-            "mean_s": _r(self.mean_s),
-            "mean_ci": [_r(self.mean_ci[0]), _r(self.mean_ci[1])],
-            "gazes": _r(self.gazes),
-            "path_m": _r(self.path_m),
-            "ratio_to_exhaustive": _r(self.ratio_to_exhaustive),
-            "ratio_to_oracle": _r(self.ratio_to_oracle),
+            "median_s": r4(self.median_s),
+            "median_ci": [r4(self.median_ci[0]), r4(self.median_ci[1])],
+            "mean_s": r4(self.mean_s),
+            "mean_ci": [r4(self.mean_ci[0]), r4(self.mean_ci[1])],
+            "gazes": r4(self.gazes),
+            "path_m": r4(self.path_m),
+            "ratio_to_exhaustive": r4(self.ratio_to_exhaustive),
+            "ratio_to_oracle": r4(self.ratio_to_oracle),
             "oracle_violations": self.oracle_violations,
         }
 
 
-def paired_ratio(t: np.ndarray, t_base: np.ndarray, seed: int = 0) -> PairedRatio:
-    """The paired ratio of times ``t`` to ``t_base`` (aligned episodes; see ``PairedRatio``)."""
-    t, t_base = np.asarray(t, float), np.asarray(t_base, float)
-    ratio = t / np.maximum(t_base, TIE_S)
-    n = len(ratio)
-    return PairedRatio(
-        float(np.median(ratio)) if n else math.nan,
-        bootstrap_ci(ratio, np.median, seed=seed),
-        int(np.sum(t < t_base - TIE_S)),
-        int(np.sum(t > t_base + TIE_S)),
-        n,
-    )
-
-
-def spl(results: Sequence[S.SearchResult], oracle: Sequence[S.SearchResult]) -> float:
-    """The time-weighted success: the mean over episodes of S * t_oracle / max(t, t_oracle), S
-    success within the budget, t the simulated seconds to find, t_oracle the oracle's time to
-    find on the same episode (the budget where it failed)."""
-    if not results:
-        return math.nan
-    vals = []
-    for r, o in zip(results, oracle, strict=True):
-        t_o = o.time_to_find
-        vals.append(t_o / max(r.sim_time, t_o, TIE_S) if r.success else 0.0)
-    return float(np.mean(vals))
-
-
-def oracle_violations(results: Sequence[S.SearchResult], oracle: Sequence[S.SearchResult]) -> int:
-    """Episodes in which ``results`` found the target sooner than the oracle (or found it when
-    the oracle did not): a bound that is not one. Must be 0."""
-    return sum(
-        1
-        for r, o in zip(results, oracle, strict=True)
-        if r.success and (not o.success or r.sim_time < o.sim_time - TIE_S)
-    )
-
-
-def aggregate(results: dict[str, list[S.SearchResult]], seed: int = 0) -> dict[str, PolicyStats]:
+def aggregate(results: dict[str, list[SearchResult]], seed: int = 0) -> dict[str, PolicyStats]:
     """Per-policy statistics (see the module docstring); episodes must be aligned across policies."""
     out: dict[str, PolicyStats] = {}
     for name, rs in results.items():
@@ -260,9 +176,9 @@ def detect_group(catalog: Catalog, type_name: str) -> str:
 
 
 def breakdown(
-    eps: Sequence[S.Episode],
-    results: dict[str, list[S.SearchResult]],
-    key: Callable[[S.Episode], str],
+    eps: Sequence[Episode],
+    results: dict[str, list[SearchResult]],
+    key: Callable[[Episode], str],
 ) -> dict[str, dict]:
     """Per value of ``key`` (the target type, its group): episodes, and per policy the success
     rate and the median time to find (failures at the budget)."""
@@ -273,8 +189,8 @@ def breakdown(
             "n": len(idx),
             "policies": {
                 name: {
-                    "success_rate": _r(float(np.mean([rs[i].success for i in idx]))),
-                    "median_s": _r(float(np.median([rs[i].time_to_find for i in idx]))),
+                    "success_rate": r4(float(np.mean([rs[i].success for i in idx]))),
+                    "median_s": r4(float(np.median([rs[i].time_to_find for i in idx]))),
                 }
                 for name, rs in results.items()
             },
@@ -286,8 +202,8 @@ def breakdown(
 class BenchResult:
     """What ``bench_search`` produced."""
 
-    episodes: list[S.Episode]
-    results: dict[str, list[S.SearchResult]]
+    episodes: list[Episode]
+    results: dict[str, list[SearchResult]]
     stats: dict[str, PolicyStats]
     table: str
     files: list[Path] = field(default_factory=list)
@@ -335,7 +251,7 @@ def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
 
 
 def plot_cdf(
-    results: dict[str, list[S.SearchResult]], budget_s: float, path: Path, title: str
+    results: dict[str, list[SearchResult]], budget_s: float, path: Path, title: str
 ) -> None:
     """search.png: the share of episodes found within t simulated seconds, per policy."""
     fig = Figure(figsize=(7, 4.5), dpi=120)
@@ -393,19 +309,16 @@ def bench_search(
     priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb)
     detector = config.detector_model(catalog)
     sweep = sweep or SweepOptions()
-    draw = draw_episodes(
-        style,
-        config.episodes,
-        config.seed,
-        catalog,
-        config.budget_s,
-        exclude_seeds=priors.learned,
+    spec = DrawSpec.make(
+        style, config.episodes, config.seed, catalog, config.budget_s, priors.learned,
         detector=detector,
-        sweep=sweep,
-        cache=config.draw_cache,
+    )  # fmt: skip
+    draw = draw_episodes(
+        spec, catalog, workers=sweep.workers, runner=sweep_worlds(sweep), cache=config.draw_cache
     )
     eps = draw.episodes
-    results = _run_batches(eps, names, style, priors, sweep, bar, (detector, config.map))
+    what = EpisodeSet(style, tuple(names), priors.for_policy, detector, config.map)
+    results = _run_batches(eps, what, sweep, bar)
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -423,51 +336,45 @@ def bench_search(
     return res
 
 
+def sweep_worlds(sweep: SweepOptions):
+    """An episode draw's world runner (agent.search.draw.WorldRunner) on ``sweep``'s workers
+    (serial, or Ray tasks)."""
+
+    def run(check: Callable[[int], WorldDraw], indices: list[int], desc: str) -> list[WorldDraw]:
+        return run_units(
+            check, indices, workers=sweep.workers, ray_address=sweep.ray_address, desc=desc,
+            progress=False,
+        )  # fmt: skip
+
+    return run
+
+
 def _run_batches(
-    eps: list[S.Episode],
-    names: list[str],
-    style,
-    priors: Priors,
-    sweep: SweepOptions,
-    bar: bool,
-    sensing: tuple[DetectorModel | None, str],
-) -> dict[str, list[S.SearchResult]]:
-    """Every policy on every episode, ``EPISODES_PER_UNIT`` episodes per sweep unit, with
-    ``sensing``: the detector preset and the map scenario."""
+    eps: list[Episode], what: EpisodeSet, sweep: SweepOptions, bar: bool
+) -> dict[str, list[SearchResult]]:
+    """Every policy of ``what`` on every episode, ``EPISODES_PER_UNIT`` episodes per sweep
+    unit."""
     batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
     done = run_units(
-        functools.partial(_batch_unit, tuple(names), style, priors, sensing),
+        functools.partial(_batch_unit, what),
         batches,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
-        desc=f"bench search {style.name}",
+        desc=f"bench search {what.style.name}",
         progress=bar,
     )
-    results: dict[str, list[S.SearchResult]] = {n: [] for n in names}
+    results: dict[str, list[SearchResult]] = {n: [] for n in what.policies}
     for batch in done:
         for per_policy in batch:
-            for n, r in zip(names, per_policy, strict=True):
+            for n, r in zip(what.policies, per_policy, strict=True):
                 results[n].append(r)
     return results
 
 
-def _batch_unit(
-    names: tuple[str, ...],
-    style,
-    priors: Priors,
-    sensing: tuple[DetectorModel | None, str],
-    batch: list[S.Episode],
-) -> list[list[S.SearchResult]]:
-    """One sweep unit: every policy on each episode of ``batch`` (``sensing``: the detector
-    preset and the map scenario)."""
+def _batch_unit(what: EpisodeSet, batch: list[Episode]) -> list[list[SearchResult]]:
+    """One sweep unit: every policy of ``what`` on each episode of ``batch``."""
     catalog = load_catalog()
-    detector, map_mode = sensing
-    return [
-        run_episode(
-            ep, names, catalog, style, priors.for_policy, detector=detector, map_mode=map_mode
-        )
-        for ep in batch
-    ]
+    return [run_episode(ep, catalog, what) for ep in batch]
 
 
 # episodes.csv: one row per episode and policy.
@@ -492,8 +399,8 @@ EPISODE_COLUMNS = (
 
 
 def episode_rows(
-    eps: Sequence[S.Episode],
-    results: dict[str, list[S.SearchResult]],
+    eps: Sequence[Episode],
+    results: dict[str, list[SearchResult]],
     catalog: Catalog | None = None,
 ):
     """The rows of episodes.csv (``EPISODE_COLUMNS``), episode by episode, policy by policy."""
@@ -522,7 +429,7 @@ def episode_rows(
             }
 
 
-def _episode_json(ep: S.Episode, i: int, results: dict[str, list[S.SearchResult]]) -> dict:
+def _episode_json(ep: Episode, i: int, results: dict[str, list[SearchResult]]) -> dict:
     """Episode ``ep`` (the i-th) and every policy's outcome on it, for search.json."""
     return {
         **ep.to_json(),
@@ -576,7 +483,7 @@ def _write_files(
     }
     for k, entry in doc["by_target"].items():
         entry["group"] = detect_group(catalog, k)
-    if config.estimate != "flat":  # flat (the default) documents stay as they were
+    if config.estimate != Estimate.FLAT:  # flat (the default) documents stay as they were
         doc["estimate"] = {"name": config.estimate, "min_evidence": config.min_evidence}
     files = [out / "search.json", out / "search.md", out / "search.png"]
     files[0].write_text(json.dumps(doc, indent=1) + "\n")
@@ -591,7 +498,7 @@ def _write_files(
         f"`{config.rank}`"
         + (
             f" (backoff for types with < {config.min_evidence} examinations)"
-            if config.estimate == "backoff"
+            if config.estimate == Estimate.BACKOFF
             else ""
         )
         + f", detector `{doc['detector']}`, map `{doc['map']}`, "

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.search.draw import remembered_draws
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import load_catalog
@@ -41,7 +42,6 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_curve import snapshot
 from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
-from ctxsearch.scripts.experiments.episodes import remembered_draws
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -128,7 +128,7 @@ def check_config(config: TransferConfig) -> None:
 def learn_stores(
     config: TransferConfig, stores: Path, sweep: SweepOptions, bar: bool
 ) -> dict[str, dict]:
-    """Learn the knowledge and the probe of every style (sweep units); {style: {"kb", "probe",
+    """Learn the knowledge and the probe of every style (sweep units); {style: {"store", "probe",
     "examinations", "probe_examinations"}}."""
     seed = config.search.seed
     units = [(s, config.rooms, seed) for s in config.styles]
@@ -145,13 +145,13 @@ def learn_stores(
     stores.mkdir(parents=True, exist_ok=True)
     out: dict[str, dict] = {s: {"probe": None, "probe_examinations": 0} for s in config.styles}
     for (style, _rooms, s), r in zip(units, done, strict=True):
-        kind = "kb" if s == seed else "probe"
+        kind = "store" if s == seed else "probe"
         path = stores / (
-            f"{_slug(style)}.sqlite" if kind == "kb" else f"{_slug(style)}.probe.sqlite"
+            f"{_slug(style)}.sqlite" if kind == "store" else f"{_slug(style)}.probe.sqlite"
         )
         path.write_bytes(r["store"])
         out[style][kind] = path
-        out[style]["examinations" if kind == "kb" else "probe_examinations"] = r["examinations"]
+        out[style]["examinations" if kind == "store" else "probe_examinations"] = r["examinations"]
     return out
 
 
@@ -198,7 +198,7 @@ def noticing(config: TransferConfig, stores: dict[str, dict]) -> dict:
     for m in config.intervals:
         out[m] = {}
         for x in config.styles:
-            kb = _read(stores[x]["kb"], m)
+            kb = _read(stores[x]["store"], m)
             out[m][x] = {
                 y: mismatch(kb, _read(stores[y]["probe"], "wilson"), _read(stores[y]["probe"], m))
                 for y in config.styles
@@ -226,7 +226,7 @@ def search_cells(
             cell = None
             for m in config.intervals:
                 for x in [y, *others]:
-                    base = replace(config.search, style=y, kb=stores[x]["kb"], interval=m)
+                    base = replace(config.search, style=y, kb=stores[x]["store"], interval=m)
                     first = cell is None
                     pols = (sc.baseline, sc.context) if first else (sc.context,)
                     where = out / "search" / f"{_slug(x)}_to_{_slug(y)}" / sc.name / m

@@ -28,17 +28,19 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ctxsearch.agent import search_space as ss
 from ctxsearch.agent.learning import LearnConfig, learn, room_seed, run_id
 from ctxsearch.agent.mapping import default_map_mode
 from ctxsearch.agent.perception_modes import perception_label
-from ctxsearch.agent.search import SearchResult, check_target, open_knowledge
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.episode import SearchResult, check_target
+from ctxsearch.agent.search.priors import open_knowledge
+from ctxsearch.agent.search.runner import OneSearch, SearchConfig, search_once
 from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import PerceptionMode
 from ctxsearch.knowledge.store import EvidenceStore
-from ctxsearch.scripts.experiments.episodes import OneSearch, SearchConfig, search_once
 
 DEMO_STYLE = "office"
 DEMO_TARGET = "Cup"
@@ -269,7 +271,7 @@ def _report_learning(config: DemoConfig, learned: _Learned, kb: KnowledgeBase) -
     )[:8]
     why = (
         "rendered segmentation and the detector (the robot only knows what it saw)"
-        if perception == "camera"
+        if perception == PerceptionMode.CAMERA
         else "relations read from the layout (no rendering; faster, for large runs)"
     )
     return [

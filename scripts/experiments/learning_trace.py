@@ -20,6 +20,7 @@ from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import IntervalMethod, PerceptionMode
 
 METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage_informative", "coverage")
 # Under --interval clustered, the paper's Wilson figures beside the clustered ones.
@@ -96,7 +97,7 @@ class TruthTracker:
             i = self.key.get(pair)
             if i is not None:
                 self.y[i] += 1
-        if self.interval == "clustered":
+        if self.interval == IntervalMethod.CLUSTERED:
             per = self.n_room.setdefault(ref_type, {})
             per[room] = per.get(room, 0) + 1
             ys = self.y_room.setdefault(ref_type, {})
@@ -125,7 +126,7 @@ class TruthTracker:
         lo, hi = intervals.interval(self.y, self.n, self.alpha)
         c = intervals.p0(self.y, self.n, self.alpha)
         wilson = interval_metrics(lo, hi, c, self.p, self.n)
-        if self.interval != "clustered":
+        if self.interval != IntervalMethod.CLUSTERED:
             return wilson
         cl = self.clustered()
         f = np.array(
@@ -229,7 +230,7 @@ class LearningBenchConfig:
     @property
     def detector_name(self) -> str:
         """The detector the results were made with ('none' for the oracle perception)."""
-        if self.perception != "camera":
+        if self.perception != PerceptionMode.CAMERA:
             return "none"
         from ctxsearch.envs.detector import load_detector
 
@@ -277,7 +278,7 @@ class _Hooks:
             intervals.impact(0, n_min, kb.alpha)
         )
         self.trace.decisions.append((c == hif, c == exp, c == few, better_known, quirk))
-        if self.tracker.interval == "clustered":
+        if self.tracker.interval == IntervalMethod.CLUSTERED:
             kb.use_clustered(self.tracker.clustered())
             try:
                 scores = [kb.type_score_effective(t) for t in types]

@@ -8,7 +8,7 @@ probabilities). ``scenario_config`` turns a scenario into a ``bench search`` con
 The headline statistic is the **paired** ratio: per episode, the context policy's simulated
 seconds to find over the baseline's (a failure counted at the budget), summarised by its median
 over episodes with a seeded percentile bootstrap 95% interval, and the episodes the context
-policy won (ratio < 1) and lost (ratio > 1).
+policy won, lost and tied (agent.search.measures: within ``TIE_S`` seconds is a tie).
 """
 
 from __future__ import annotations
@@ -19,18 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ctxsearch.agent import search as S
+from ctxsearch.agent.search import measures
+from ctxsearch.agent.search.episode import Episode
+from ctxsearch.agent.search.registry import Role, parse_policies, with_role
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.scripts.experiments.bench_search import (
-    BenchResult,
-    SearchBenchConfig,
-    bench_search,
-    bootstrap_ci,
-)
+from ctxsearch.knowledge.options import MapMode
+from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig, bench_search
 from ctxsearch.scripts.sweep import SweepOptions
 
-SCENARIO_NAMES = ("built", "given")
+SCENARIO_NAMES = tuple(m.value for m in (MapMode.BUILT, MapMode.GIVEN))
 
 
 @dataclass(frozen=True)
@@ -57,12 +55,14 @@ class Scenario:
         }
 
 
-# The scenarios of issue 12: the built map against frontier exploration, the given map against
-# the map alone.
-DEFAULT_SCENARIOS = {
-    "built": Scenario("built", "frontier", "indirect", "oracle-prior-indirect"),
-    "given": Scenario("given", "map-only", "location", "oracle-prior"),
-}
+def registry_scenario(mode: MapMode) -> Scenario:
+    """Scenario ``mode`` with the policies the registry gives its roles."""
+    roles = (Role.BASELINE, Role.CONTEXT, Role.ASYMPTOTE)
+    return Scenario(mode.value, *(with_role(mode, r) for r in roles))
+
+
+# The built map against frontier exploration, the given map against the map alone.
+DEFAULT_SCENARIOS = {name: registry_scenario(MapMode(name)) for name in SCENARIO_NAMES}
 
 
 def scenario_config(
@@ -88,7 +88,7 @@ def parse_scenarios(names: str, overrides: dict[str, str | None]) -> tuple[Scena
         sc = DEFAULT_SCENARIOS[name]
         if text is not None:
             try:
-                names3 = S.parse_policies(text)
+                names3 = parse_policies(text)
             except CtxsearchError as exc:
                 raise CtxsearchError(f"--{name}-policies: {exc}") from None
             if len(names3) != 3:
@@ -107,7 +107,7 @@ def check_policies(scenarios: Iterable[Scenario]) -> None:
     """A one-line error naming the first unknown policy of ``scenarios`` (before any learning)."""
     for sc in scenarios:
         try:
-            S.parse_policies(",".join(sc.policies))
+            parse_policies(",".join(sc.policies))
         except CtxsearchError as exc:
             raise CtxsearchError(
                 f"scenario '{sc.name}': {exc} (choose others with --{sc.name}-policies)"
@@ -130,32 +130,18 @@ def times(res: BenchResult, policy: str) -> np.ndarray:
     return np.array([r.time_to_find for r in res.results[policy]], float)
 
 
-# The paired ratio of one policy to a baseline. bench_search.aggregate computes the same
-# statistics (issue 12: ``paired_ratio: {baseline: {median, ci, wins, losses}}``) once wt12a's
-# version is merged; this helper is then replaced by reading it from there.
 def paired_ratio(t: Sequence[float], t_baseline: Sequence[float], seed: int = 0) -> dict:
-    """Median over episodes of t / t_baseline, its seeded bootstrap 95% interval, the episodes
-    won (ratio < 1), lost (> 1) and their number."""
-    a, b = np.asarray(t, float), np.asarray(t_baseline, float)
-    if a.shape != b.shape:
-        raise ValueError(f"unpaired times: {a.shape} vs {b.shape}")
-    ratio = a / np.maximum(b, 1e-6)
-    lo, hi = bootstrap_ci(ratio, np.median, seed=seed)
-    return {
-        "median": round(float(np.median(ratio)), 4) if len(ratio) else None,
-        "ci": [round(lo, 4), round(hi, 4)] if len(ratio) else [None, None],
-        "wins": int(np.sum(ratio < 1 - 1e-9)),
-        "losses": int(np.sum(ratio > 1 + 1e-9)),
-        "episodes": len(ratio),
-    }
+    """The paired ratio of ``t`` to ``t_baseline`` as JSON (agent.search.measures.paired_ratio:
+    median, bootstrap interval, wins, losses, ties, n)."""
+    return measures.paired_ratio(t, t_baseline, seed=seed).to_json()
 
 
-def episode_key(ep: S.Episode) -> tuple:
+def episode_key(ep: Episode) -> tuple:
     """What makes two episodes the same: room, target, start pose and budget."""
     return (ep.style, ep.room_seed, ep.target, ep.start.x, ep.start.y, ep.start.yaw, ep.budget_s)
 
 
-def same_episodes(a: Sequence[S.Episode], b: Sequence[S.Episode], what: str) -> None:
+def same_episodes(a: Sequence[Episode], b: Sequence[Episode], what: str) -> None:
     """An error unless ``a`` and ``b`` are the same episodes (the pairing would be broken)."""
     if [episode_key(e) for e in a] != [episode_key(e) for e in b]:
         raise CtxsearchError(f"{what}: the episodes differ, the comparison would not be paired")

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ctxsearch.agent import search_space as ss
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.search import space as ss
 from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume

@@ -1,14 +1,14 @@
 """Episode draws kept on disk between commands (``bench search --draw-cache DIR``).
 
-An episode draw (``episodes.draw_episodes``) is deterministic in its arguments and costs about
+An episode draw (``agent.search.draw.draw_episodes``) is deterministic in its arguments and costs about
 2.5 s per world checked, mostly the oracle's feasibility plan: 200 house episodes take about 5
 minutes to draw. ``make bench`` searches the same 200 episodes in both map scenarios, in two
 commands; with ``--draw-cache DIR`` the second reads the first's draw instead of drawing it
 again (the same episodes, counts and oracle first plans, so the same results).
 
-A file ``DIR/<key>.json`` holds one draw. Its key is a SHA-256 over the draw's arguments (the
-style as loaded, the number of episodes, the seed, the catalog's fingerprint, the budget, the
-excluded room seeds, the target, the detector preset) and over the source of the packages the
+A file ``DIR/<key>.json`` holds one draw. Its key is a SHA-256 over the draw's spec
+(``draw.DrawSpec``: the style as loaded, the number of episodes, the seed, the catalog's
+fingerprint, the budget, the excluded room seeds, the target, the detector preset) and over the source of the packages the
 draw runs (``agent``, ``envs``, ``knowledge``): a changed argument or a changed line of code is
 another key, never a stale draw. A file that cannot be read back as a draw (any bytes: a
 truncated write, an edit by hand) is a miss: the draw is made again and the file replaced
@@ -25,11 +25,12 @@ import math
 import os
 import sys
 import tempfile
+from collections.abc import Hashable
 from pathlib import Path
 
 import numpy as np
 
-from ctxsearch.agent import search as S
+from ctxsearch.agent.search.episode import Episode, EpisodeDraw, OracleView
 from ctxsearch.agent.viewplan import Gaze
 from ctxsearch.envs.robot_spec import RobotPose
 
@@ -49,11 +50,11 @@ def code_digest() -> str:
     return h.hexdigest()
 
 
-def draw_key(args: tuple) -> str:
-    """The file name stem of the draw made with ``args`` (``draw_episodes``' memo key)."""
+def draw_key(spec: Hashable) -> str:
+    """The file name stem of the draw made with ``spec`` (a ``draw.DrawSpec``)."""
     h = hashlib.sha256()
     h.update(f"format {FORMAT}\n{code_digest()}\n".encode())
-    h.update(repr(args).encode())
+    h.update(repr(spec).encode())
     return h.hexdigest()[:32]
 
 
@@ -61,7 +62,7 @@ def _pose(p: RobotPose) -> list[float]:
     return [p.x, p.y, p.yaw, p.pan, p.tilt]
 
 
-def _view_json(v: S.OracleView | None) -> dict | None:
+def _view_json(v: OracleView | None) -> dict | None:
     if v is None:
         return None
     g = v.gaze
@@ -87,7 +88,7 @@ def _finite(x) -> float:
     return v
 
 
-def _view(d: dict | None) -> S.OracleView | None:
+def _view(d: dict | None) -> OracleView | None:
     if d is None:
         return None
     g = d["gaze"]
@@ -101,11 +102,11 @@ def _view(d: dict | None) -> S.OracleView | None:
     )
     k = d["key"]
     key = (float(k[0]), float(k[1]), int(k[2]), int(k[3]))
-    return S.OracleView(_finite(d["seconds"]), gaze, int(d["instance_id"]), int(d["renders"]), key)
+    return OracleView(_finite(d["seconds"]), gaze, int(d["instance_id"]), int(d["renders"]), key)
 
 
-def to_json(draw) -> dict:
-    """A JSON-serialisable dict of an ``episodes.EpisodeDraw``."""
+def to_json(draw: EpisodeDraw) -> dict:
+    """A JSON-serialisable dict of an ``EpisodeDraw``."""
     return {
         "format": FORMAT,
         "visible_at_start": draw.visible_at_start,
@@ -122,13 +123,13 @@ def to_json(draw) -> dict:
     }
 
 
-def from_json(doc: dict, draw_type):
-    """The ``draw_type`` (``episodes.EpisodeDraw``) ``to_json`` wrote; ValueError, KeyError or
-    TypeError on anything else."""
+def from_json(doc: dict) -> EpisodeDraw:
+    """The ``EpisodeDraw`` ``to_json`` wrote; ValueError, KeyError or TypeError on anything
+    else."""
     if doc.get("format") != FORMAT:
         raise ValueError("another format")
     eps = [
-        S.Episode(
+        Episode(
             int(e["index"]),
             str(e["style"]),
             int(e["room_seed"]),
@@ -139,21 +140,21 @@ def from_json(doc: dict, draw_type):
         )
         for e in doc["episodes"]
     ]
-    return draw_type(
+    return EpisodeDraw(
         eps, int(doc["visible_at_start"]), int(doc["infeasible"]), int(doc["start_redraws"])
     )
 
 
-def load(directory: Path, key: str, draw_type):
+def load(directory: Path, key: str) -> EpisodeDraw | None:
     """The draw stored under ``key`` in ``directory``, or None (no file, or not a draw)."""
     path = Path(directory) / f"{key}.json"
     try:
-        return from_json(json.loads(path.read_bytes()), draw_type)
+        return from_json(json.loads(path.read_bytes()))
     except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError):
         return None
 
 
-def save(directory: Path, key: str, draw) -> None:
+def save(directory: Path, key: str, draw: EpisodeDraw) -> None:
     """Store ``draw`` under ``key`` in ``directory`` (created if needed), atomically; a
     directory that cannot keep it (read-only, full) is a warning on stderr: the draw is made,
     the cache costs only time."""

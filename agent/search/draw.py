@@ -1,0 +1,229 @@
+"""The episode draw: paired search episodes in held-out worlds, as the benchmarks, ``ctxsearch
+search``, the demo and the Gymnasium task use them.
+
+World i of a draw (room seed ``held_out_seed(seed, i)``, skipped if the store learned in it, it
+has no small object, or no instance of a requested target) gets a target drawn uniformly among its
+small types and a start drawn uniformly among the free cells (``random_start``), both from the
+world's own stream. The start is redrawn while the target is visible from it (``OracleEye``: the
+head aimed at each instance from the start, turning in place, and the detector in use would report
+a true instance with probability >= ``VISIBLE_MIN_P``; the perfect detector: it does), at most
+``MAX_START_TRIES`` starts, then the world is dropped. A world whose target no view of the oracle's
+planner detects within the budget (``oracle_view`` from the start, the detector's draws as at the
+world's first second) is dropped as infeasible. Worlds are taken in index order until the number
+of episodes asked; the counts cover the worlds up to the last one taken. The draw reads the true
+layout, as the oracle does.
+
+A draw is named by one typed spec (``DrawSpec``): its arguments, its in-memory memo key
+(``remembered_draws``) and its disk cache key (agent.search.draw_store).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.search import draw_store
+from ctxsearch.agent.search.episode import (
+    DEFAULT_BUDGET_S,
+    Episode,
+    EpisodeDraw,
+    held_out_seed,
+    random_start,
+    small_types_present,
+)
+from ctxsearch.agent.search.oracle import VISIBLE_MIN_P, OracleEye, oracle_view
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import WorldStyle
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.world import World
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+
+MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
+EPISODE_TAG = 0xE915  # the episode stream of world i: (seed, i, EPISODE_TAG)
+
+# Runs a draw's worlds: (check one world, world indices, description) -> the worlds' draws, in
+# order. Serial by default; the benchmarks pass their sweep (serial or Ray).
+WorldRunner = Callable[[Callable[[int], "WorldDraw"], list[int], str], list["WorldDraw"]]
+
+
+@dataclass(frozen=True)
+class DrawSpec:
+    """What a draw is asked for: ``episodes`` episodes of ``style`` for benchmark seed ``seed``
+    with the catalog of ``fingerprint``, each of budget ``budget_s``, never in the rooms of
+    ``exclude_seeds`` (sorted), looking for ``target`` (None: a small type drawn per world), the
+    checks reading images with ``detector`` (None: perfect). Hashable: the memo and cache key."""
+
+    style: WorldStyle
+    episodes: int
+    seed: int
+    fingerprint: str
+    budget_s: float = DEFAULT_BUDGET_S
+    exclude_seeds: tuple[int, ...] = ()
+    target: str | None = None
+    detector: DetectorModel | None = None
+
+    @classmethod
+    def make(
+        cls,
+        style: WorldStyle,
+        episodes: int,
+        seed: int,
+        catalog: Catalog,
+        budget_s: float = DEFAULT_BUDGET_S,
+        exclude_seeds: Iterable[int] = (),
+        target: str | None = None,
+        detector: DetectorModel | None = None,
+    ) -> DrawSpec:
+        """The spec with ``catalog``'s fingerprint and the excluded seeds sorted."""
+        return cls(
+            style, int(episodes), int(seed), catalog.fingerprint, float(budget_s),
+            tuple(sorted(int(s) for s in exclude_seeds)), target, detector,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class WorldDraw:
+    """One world's draw: its episode (index to be set), or why it was dropped (None: it holds
+    nothing to search for, or the store learned in it), and how many starts were redrawn."""
+
+    episode: Episode | None
+    dropped: str | None = None
+    redraws: int = 0
+
+
+def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
+    """World ``i``'s episode (module docstring): a start from which the target is not visible
+    and from which the oracle's planner detects it within the budget."""
+    room_seed = held_out_seed(spec.seed, i)
+    rng = np.random.default_rng([int(spec.seed), i, EPISODE_TAG])
+    if room_seed in spec.exclude_seeds:
+        return WorldDraw(None)
+    layout = generate_layout(spec.style, room_seed, catalog)
+    tgt = episode_target(layout, catalog, spec.target, rng)
+    if tgt is None:
+        return WorldDraw(None)
+    robot = RobotSpec()
+    grid = OccupancyGrid.from_layout(layout, robot)
+    redraws = 0
+    with World(layout, catalog, spec=robot) as world:
+        eye = OracleEye(world, layout, catalog, spec.detector, tgt)
+        for _ in range(MAX_START_TRIES):
+            start = random_start(layout, grid, rng)
+            if eye.start_visibility(start) < VISIBLE_MIN_P:
+                break
+            redraws += 1
+        else:
+            return WorldDraw(None, "visible_at_start", redraws)
+        world.reset_pose(start)
+        # planned at the episode's second 0, as the Oracle policy would plan it
+        view = oracle_view(eye, grid, start, 0.0, world.time_model, deadline_s=spec.budget_s)
+    if view is None:
+        return WorldDraw(None, "infeasible", redraws)
+    ep = Episode(-1, spec.style.name, room_seed, tgt, start, spec.budget_s, first_view=view)
+    return WorldDraw(ep, None, redraws)
+
+
+def episode_target(
+    layout: RoomLayout, catalog: Catalog, target: str | None, rng: np.random.Generator
+) -> str | None:
+    """The episode's target in ``layout``: ``target`` if the room holds one, else a small type
+    drawn from ``rng``; None: the room does not serve."""
+    if target is not None:
+        return target if target in {o.type for o in layout.objects} else None
+    small = small_types_present(layout, catalog)
+    return small[int(rng.integers(len(small)))] if small else None
+
+
+def serial_worlds(check: Callable[[int], WorldDraw], indices: list[int], desc: str):
+    """A ``WorldRunner`` that checks the worlds one after the other here."""
+    return [check(i) for i in indices]
+
+
+def draw_episodes(
+    spec: DrawSpec,
+    catalog: Catalog,
+    *,
+    workers: int = 1,
+    runner: WorldRunner = serial_worlds,
+    cache: Path | None = None,
+) -> EpisodeDraw:
+    """The draw of ``spec`` with the counts of what was left out (module docstring). ``runner``
+    checks a round of worlds (``workers``: how many it runs at once, which sizes the rounds; the
+    same episodes and counts for any number); ``cache``: a directory where the draw is kept and
+    read back by later commands with the same spec and code (agent.search.draw_store). Inside
+    ``remembered_draws`` a draw of the same spec is not made again."""
+    if _drawn is not None and spec in _drawn:
+        return replace(_drawn[spec], episodes=list(_drawn[spec].episodes))
+    stored = draw_store.draw_key(spec) if cache is not None else None
+    draw = draw_store.load(cache, stored) if stored is not None else None
+    if draw is None:
+        draw = _draw_worlds(spec, catalog, workers, runner)
+        if stored is not None:
+            draw_store.save(cache, stored, draw)
+    if _drawn is not None:
+        _drawn[spec] = replace(draw, episodes=list(draw.episodes))
+    return draw
+
+
+def make_episodes(spec: DrawSpec, catalog: Catalog) -> list[Episode]:
+    """The episodes of ``spec``'s draw, checked here one world after the other."""
+    return draw_episodes(spec, catalog).episodes
+
+
+def _draw_worlds(
+    spec: DrawSpec, catalog: Catalog, workers: int, runner: WorldRunner
+) -> EpisodeDraw:
+    """The worlds of a draw checked in rounds."""
+    n = spec.episodes
+    draw = EpisodeDraw([])
+    limit = 50 * n + 100
+    check = functools.partial(draw_world, spec, catalog)
+    i = 0
+    while len(draw.episodes) < n:
+        if i >= limit:
+            what = f"a {spec.target}" if spec.target else "a small object"
+            raise CtxsearchError(
+                f"no held-out room of style '{spec.style.name}' holds {what} that can be searched "
+                f"for (tried {limit} rooms)"
+            )
+        # A round: as many worlds as episodes still needed (at least two per worker).
+        m = min(limit - i, max(n - len(draw.episodes), 2 * workers))
+        rounds = runner(check, list(range(i, i + m)), f"episodes {spec.style.name}")
+        i += m
+        for world in rounds:
+            if len(draw.episodes) >= n:
+                break
+            draw.start_redraws += world.redraws
+            if world.dropped == "visible_at_start":
+                draw.visible_at_start += 1
+            elif world.dropped == "infeasible":
+                draw.infeasible += 1
+            elif world.episode is not None:
+                draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
+    return draw
+
+
+_drawn: dict[DrawSpec, EpisodeDraw] | None = None  # inside remembered_draws: the draws so far
+
+
+@contextlib.contextmanager
+def remembered_draws() -> Iterator[None]:
+    """Within it, ``draw_episodes`` called again with the same spec returns the draw it made
+    (deterministic in it) instead of drawing anew: the curve searches the same episodes at every
+    k, the transfer benchmark with every store."""
+    global _drawn
+    outer = _drawn
+    _drawn = {} if outer is None else outer
+    try:
+        yield
+    finally:
+        _drawn = outer

@@ -1,0 +1,185 @@
+"""What a search is and how it went: the episode (a world, a start pose, a target, a budget), one
+image's record, and the result of one policy on one episode. Pure data; the measures read from
+results (success, time to find, spl, paired ratios) are ``agent.search.measures``'.
+
+Held-out worlds. Search worlds are never worlds the robot learned in: ``ctxsearch learn`` derives
+its room seeds from (seed, index) with ``agent.learning.room_seed``; search episodes use
+``held_out_seed(seed, i)``, the same hash of (seed, i) with a distinct tag, and the episode draw
+skips any seed the store lists among its learned rooms.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
+from ctxsearch.agent.search import measures
+from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
+from ctxsearch.agent.viewplan import Gaze
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+
+HELD_OUT_TAG = 0x5EA4C4  # distinguishes search rooms from learning rooms in the seed hash
+
+
+def held_out_seed(seed: int, index: int) -> int:
+    """The room seed of search episode ``index`` for benchmark seed ``seed`` (31-bit, spread out,
+    never produced for the same (seed, index) by ``agent.learning.room_seed``)."""
+    return int(
+        np.random.SeedSequence([int(seed), int(index), HELD_OUT_TAG]).generate_state(1)[0]
+        & 0x7FFFFFFF
+    )
+
+
+@dataclass(frozen=True)
+class OracleView:
+    """The oracle's choice: the gaze, the seconds it costs from the pose it was planned from, the
+    instance it detects, and how many views were rendered to find it."""
+
+    seconds: float
+    gaze: Gaze
+    instance_id: int
+    renders: int
+    key: tuple  # (base x, base y, instance id, view): for not trying it twice
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One search task: the room, where the robot starts, what it looks for, how long it may."""
+
+    index: int
+    style: str
+    room_seed: int
+    target: str
+    start: RobotPose
+    budget_s: float = DEFAULT_BUDGET_S
+    # The oracle's first plan (``oracle_view`` from ``start`` at second 0), as the episode draw
+    # computed it to check the episode is feasible: the Oracle policy starts from it instead of
+    # planning the same view again. Not part of the episode's identity.
+    first_view: OracleView | None = field(default=None, compare=False, repr=False)
+
+    def to_json(self) -> dict:
+        """A JSON-serialisable dict."""
+        s = self.start
+        return {
+            "index": self.index,
+            "style": self.style,
+            "room_seed": self.room_seed,
+            "target": self.target,
+            "start": [s.x, s.y, s.yaw],
+            "budget_s": self.budget_s,
+        }
+
+
+@dataclass(frozen=True)
+class GazeRecord:
+    """One image of a search: when (seconds since the start, after the image), from where, why,
+    and what the detector reported (type, instance id)."""
+
+    t: float
+    pose: RobotPose
+    purpose: str
+    detections: tuple[tuple[str, int], ...]
+
+
+@dataclass
+class SearchResult:
+    """How an episode went for one policy. ``sim_time`` is the simulated seconds until the
+    search ended on a confirmed detection of the target (``found_id``; or until the policy
+    stopped); ``found`` is the judgement of whoever knows the truth (``measures.judge``: the
+    episode runner), False until judged; ``success`` requires it within the budget."""
+
+    policy: str
+    episode: int
+    target: str
+    found: bool
+    found_id: int | None
+    sim_time: float
+    gazes: int
+    path_m: float
+    budget_s: float
+    trace: list[GazeRecord] = field(default_factory=list)
+    log: list[str] = field(default_factory=list)
+    # indirect search on the built map: the intermediate type it used first (searched for, or
+    # whose relation volume it looked into; None: none), and Wixson & Ballard's predicted gain
+    # C_direct / C_via for it (else for the best candidate type)
+    intermediate: str | None = None
+    predicted_gain: float | None = None
+    unconfirmed: int = 0  # detections of the target a second image did not confirm
+
+    @property
+    def success(self) -> bool:
+        """Found within the budget (``measures.success``)."""
+        return measures.success(self.found, self.sim_time, self.budget_s)
+
+    @property
+    def time_to_find(self) -> float:
+        """Seconds to find; a failure counts as the budget (``measures.time_to_find``)."""
+        return measures.time_to_find(self.found, self.sim_time, self.budget_s)
+
+    def summary(self) -> str:
+        """One line for the terminal."""
+        what = (
+            f"found {self.target} #{self.found_id}"
+            if self.success
+            else f"did not find {self.target}"
+        )
+        return (
+            f"{self.policy}: {what} in {self.sim_time:.1f} simulated s "
+            f"({self.gazes} gazes, {self.path_m:.1f} m driven; budget {self.budget_s:.0f} s)"
+        )
+
+
+@dataclass
+class EpisodeDraw:
+    """The episodes drawn and what was left out: worlds dropped because the target was visible
+    from every start tried (``visible_at_start``) or no pose detects it within the budget
+    (``infeasible``), and starts redrawn because the target was visible from them."""
+
+    episodes: list[Episode]
+    visible_at_start: int = 0
+    infeasible: int = 0
+    start_redraws: int = 0
+
+    def excluded(self) -> dict[str, int]:
+        """search.json's ``excluded``: worlds dropped, by reason."""
+        return {"visible_at_start": self.visible_at_start, "infeasible": self.infeasible}
+
+
+def random_start(layout: RoomLayout, grid: OccupancyGrid, rng: np.random.Generator) -> RobotPose:
+    """A start pose: a uniformly drawn free cell of the largest free region, random heading."""
+    region = grid.largest_region()
+    if region is None:
+        raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
+    rows, cols = np.nonzero(region)
+    k = int(rng.integers(len(rows)))
+    xy = grid.to_xy(int(rows[k]), int(cols[k]))
+    return RobotPose(float(xy[0]), float(xy[1]), float(rng.uniform(-math.pi, math.pi)))
+
+
+def small_types_present(layout: RoomLayout, catalog: Catalog) -> list[str]:
+    """The small-object (kind=object) types with an instance in the room, in catalog order."""
+    present = {o.type for o in layout.objects}
+    return [t.name for t in catalog.types if t.name in present and not t.is_furniture]
+
+
+def nearest_free_start(grid: OccupancyGrid, pose: RobotPose) -> RobotPose:
+    """``pose`` moved to the nearest free cell (a start pose must be drivable)."""
+    p = nearest_free(grid, pose.xy)
+    if p is None:
+        raise CtxsearchError("the room has no free space for the robot")
+    return RobotPose(float(p[0]), float(p[1]), pose.yaw, pose.pan, pose.tilt)
+
+
+def check_target(catalog: Catalog, target: str) -> None:
+    """A one-line error unless ``target`` is a type of the catalog."""
+    if target not in catalog:
+        small = [t.name for t in catalog.types if not t.is_furniture]
+        raise CtxsearchError(
+            f"unknown target type '{target}' (small-object types: {', '.join(small)})"
+        )

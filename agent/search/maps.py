@@ -1,0 +1,119 @@
+"""What the robot is given of a world before it searches it: the two map scenarios.
+
+- ``built`` (``RoomMaps.built``, the default in houses): the robot knows nothing at the start:
+  no furniture, no free cell. Each policy's context builds its own agent.mapping ``BuiltMap``
+  from its depth images (the same map and rules as learning's ``--map built``: it plans only
+  through cells seen to be floor with nothing within the clearance), objects are known only once
+  detected, and the seen map's lattice covers the footprint without knowing the furniture.
+- ``given`` (``RoomMaps.given``): the furniture poses and the true layout's grid are known (a
+  home robot's map from an earlier visit).
+
+These constructors and the episode runner's sensor are where the true layout becomes what the
+robot is given; the behaviours read only ``RoomMaps``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ctxsearch.agent.mapping import BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.envs.detector import DetectorModel
+from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import MapMode
+
+
+@dataclass(frozen=True)
+class RoomMaps:
+    """What the robot is given of a room before it searches it, built once and shared by the
+    policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy),
+    the furniture poses the location constraint may assume, the detector preset its images
+    are read with (None: perfect), and the scenario (``map``: ``given`` or ``built``; in
+    ``built`` each policy's SearchContext builds its own agent.mapping ``BuiltMap`` from its
+    depth images, starting from nothing but its pose)."""
+
+    grid: OccupancyGrid
+    seen: ss.SeenMap
+    furniture: tuple[ObjectInstance, ...] = ()
+    detector: DetectorModel | None = None
+    map: MapMode = MapMode.GIVEN
+    # What the efficiency model of indirect search assumes of the world before seeing it: its
+    # footprint (m^2) and room count (a house style says how many rooms it has).
+    size: sx.WorldSize = sx.WorldSize(0.0, 1)
+    # The footprint's extent (x0, y0, x1, y1) and height: the allocation of a built map
+    bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    top: float = 3.0
+
+    def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
+        """An empty map of the robot's own over the footprint (``built``), None on a given map."""
+        if self.map is not MapMode.BUILT:
+            return None
+        return BuiltMap(self.bounds, spec, start, top=self.top)
+
+    @classmethod
+    def built(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
+        """The ``built`` map scenario: the robot knows nothing at the start, no furniture, no
+        free cell (``grid`` is all unknown); only the footprint's extent (the map's allocation,
+        as in learning's built map) and height bound the seen map's lattice. Objects become
+        known when detected; the robot plans on what its depth images mapped."""
+        hw, hd = layout.width / 2, layout.depth / 2
+        empty = BuiltMap((-hw, -hd, hw, hd), spec, RobotPose(0.0, 0.0, 0.0))
+        empty.floor[:] = False
+        grid = OccupancyGrid(
+            free=np.zeros_like(empty.floor), x0=empty.x0, y0=empty.y0,
+            resolution=empty.resolution, clearance=spec.clearance,
+        )  # fmt: skip
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        seen = ss.SeenMap.for_footprint(layout)
+        return cls(grid, seen, (), detector, MapMode.BUILT, size, _bounds(layout), layout.height)
+
+    @classmethod
+    def given(
+        cls,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
+        """The ``given`` map scenario: the maps of the true layout (walls, furniture poses).
+        The furniture poses are read from the true layout here and nowhere else in the
+        behaviour."""
+        furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
+        grid = OccupancyGrid.from_layout(layout, spec)
+        size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
+        seen = ss.SeenMap.for_room(layout, catalog)
+        return cls(
+            grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height
+        )
+
+    @classmethod
+    def for_mode(
+        cls,
+        mode: MapMode,
+        layout: RoomLayout,
+        catalog: Catalog,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+    ) -> RoomMaps:
+        """The maps of scenario ``mode``."""
+        make = cls.built if mode is MapMode.BUILT else cls.given
+        return make(layout, catalog, spec, detector)
+
+
+def _bounds(layout: RoomLayout) -> tuple[float, float, float, float]:
+    """A layout's footprint extent (x0, y0, x1, y1), centred on the origin."""
+    hw, hd = layout.width / 2, layout.depth / 2
+    return (-hw, -hd, hw, hd)

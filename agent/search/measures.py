@@ -1,0 +1,148 @@
+"""Every measure of a search, defined once: success, time to find, the time-weighted success
+(spl), the paired ratio to a baseline with its tie rule, and the oracle's violations. The
+benchmarks, the CLI, the demo and the Gymnasium task read them from here.
+
+- **Success**: the search ended on a *confirmed* detection (a second image from the same pose
+  detected the target again near the first one's position: ``agent.search.context``) of a true
+  instance of the target, within the budget. A confirmed look-alike or false positive ends the
+  search as a failure. Who knows the truth judges (``judge``): the episode runner, the
+  Gymnasium task; the robot's behaviour never does.
+- **Time to find**: the simulated seconds to the confirmed detection; a failure counts as the
+  budget.
+- **Ties**: two times closer than ``TIE_S`` seconds are equal: no win, no loss, no violation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+TIE_S = 1e-6  # seconds: closer than this counts as a tie (no win, no loss, no violation)
+BOOTSTRAP_SAMPLES = 2000
+
+
+class Outcome(Protocol):
+    """What the measures read of a search's result (``episode.SearchResult``)."""
+
+    sim_time: float
+
+    @property
+    def success(self) -> bool:
+        """Found within the budget (``success``)."""
+        ...
+
+    @property
+    def time_to_find(self) -> float:
+        """Seconds to find, the budget for a failure (``time_to_find``)."""
+        ...
+
+
+def judge(found_id: int | None, true_ids: Iterable[int]) -> bool:
+    """Whether a search that ended on the confirmed detection of ``found_id`` (None: it did not
+    end on one) found the target: the instance is one of the target's ``true_ids``."""
+    return found_id is not None and found_id in set(true_ids)
+
+
+def success(found: bool, sim_time: float, budget_s: float) -> bool:
+    """Found (``judge``) within the budget."""
+    return bool(found) and sim_time <= budget_s + 1e-9
+
+
+def time_to_find(found: bool, sim_time: float, budget_s: float) -> float:
+    """Seconds to find; a failure counts as the budget."""
+    return float(sim_time) if success(found, sim_time, budget_s) else float(budget_s)
+
+
+def bootstrap_ci(
+    values: Sequence[float],
+    stat: Callable[[np.ndarray], float] = np.median,
+    samples: int = BOOTSTRAP_SAMPLES,
+    seed: int = 0,
+    level: float = 0.95,
+) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``stat`` over ``values`` (seeded; (nan, nan) if empty)."""
+    v = np.asarray(values, float)
+    if len(v) == 0:
+        return (math.nan, math.nan)
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, len(v), size=(samples, len(v)))
+    stats = np.apply_along_axis(stat, 1, v[idx])
+    a = (1 - level) / 2
+    return (float(np.quantile(stats, a)), float(np.quantile(stats, 1 - a)))
+
+
+def r4(x):
+    """A JSON number rounded to 4 decimals (None for None, nan, inf)."""
+    return (
+        None if x is None or (isinstance(x, float) and not math.isfinite(x)) else round(float(x), 4)
+    )
+
+
+@dataclass(frozen=True)
+class PairedRatio:
+    """The per-episode ratio of a policy's time to find to a baseline's over paired episodes:
+    its median with a bootstrap interval, and the episodes it was faster in (wins), slower in
+    (losses) and within ``TIE_S`` of the baseline (ties)."""
+
+    median: float
+    ci: tuple[float, float]
+    wins: int
+    losses: int
+    ties: int
+    n: int
+
+    def to_json(self) -> dict:
+        """The entry of search.json's ``paired_ratio`` (and the curve's, the transfer's)."""
+        return {
+            "median": r4(self.median),
+            "ci": [r4(self.ci[0]), r4(self.ci[1])],
+            "wins": self.wins,
+            "losses": self.losses,
+            "ties": self.ties,
+            "n": self.n,
+        }
+
+
+def paired_ratio(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> PairedRatio:
+    """The paired ratio of times ``t`` to ``t_base`` (aligned episodes; see ``PairedRatio``)."""
+    t, t_base = np.asarray(t, float), np.asarray(t_base, float)
+    if t.shape != t_base.shape:
+        raise ValueError(f"unpaired times: {t.shape} vs {t_base.shape}")
+    ratio = t / np.maximum(t_base, TIE_S)
+    n = len(ratio)
+    wins, losses = int(np.sum(t < t_base - TIE_S)), int(np.sum(t > t_base + TIE_S))
+    return PairedRatio(
+        float(np.median(ratio)) if n else math.nan,
+        bootstrap_ci(ratio, np.median, seed=seed),
+        wins,
+        losses,
+        n - wins - losses,
+        n,
+    )
+
+
+def spl(results: Sequence[Outcome], oracle: Sequence[Outcome]) -> float:
+    """The time-weighted success: the mean over episodes of S * t_oracle / max(t, t_oracle), S
+    success within the budget, t the simulated seconds to find, t_oracle the oracle's time to
+    find on the same episode (the budget where it failed)."""
+    if not results:
+        return math.nan
+    vals = []
+    for r, o in zip(results, oracle, strict=True):
+        t_o = o.time_to_find
+        vals.append(t_o / max(r.sim_time, t_o, TIE_S) if r.success else 0.0)
+    return float(np.mean(vals))
+
+
+def oracle_violations(results: Sequence[Outcome], oracle: Sequence[Outcome]) -> int:
+    """Episodes in which ``results`` found the target sooner than the oracle (or found it when
+    the oracle did not): a bound that is not one. Must be 0."""
+    return sum(
+        1
+        for r, o in zip(results, oracle, strict=True)
+        if r.success and (not o.success or r.sim_time < o.sim_time - TIE_S)
+    )

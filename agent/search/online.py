@@ -1,0 +1,221 @@
+"""The online decision on the built map: at each step the best expected probability of finding the
+target per expected second among (a) looking into a relation volume of an object detected so far,
+(b) sweeping for an intermediate type I that Wixson & Ballard's efficiency model says pays
+(agent.search.viewpoints.predicted_plan), valued as P(a new I is seen there) q_I and given up
+after the model's expected seconds to find one, and (c) the frontier step (agent.search.frontier).
+
+All three are valued in one currency: the probability that T is at each point of the seen map
+given that it was not seen yet (``space.target_density``: the known objects' relation volumes
+spread their P(rel(T)) over their points, the unexplored rest gets the surveyed part's mean
+density), so the frontier step is drawn towards likely places and no option counts an overlap
+twice. With no knowledge source (``frontier``) every point weighs alike.
+
+The options' seconds come from different estimates (a sweep's drive and images, a volume's
+planned gazes, the efficiency model's look), which err differently: each kind's expected seconds
+are scaled by the ratio of the seconds its actions took so far in this episode to the seconds
+they were expected to take (``CALIBRATION_PRIOR_S`` of prior weight at ratio 1). The robot
+corrects its own estimates; nothing is fitted offline.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ctxsearch.agent.search import regions as rg
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.context import SearchContext
+from ctxsearch.agent.search.coverage import FURNITURE_TILTS
+from ctxsearch.agent.search.frontier import Explorer
+
+# The calibration of each option kind's expected seconds starts at 1 (estimates taken as they
+# are) and holds this many expected seconds of weight: after that much of a kind was done, its
+# measured ratio weighs as much as the prior.
+CALIBRATION_PRIOR_S = 30.0
+
+
+@dataclass(frozen=True)
+class ViaOption:
+    """An intermediate type worth searching for (Wixson & Ballard's model says it pays): its
+    q = P(T related to one found), expected instances per world, the height it is found up to,
+    the seconds to look into its best relation volume, and the model's predicted gain; and the
+    model's expected seconds to find one (half a coverage at its range): the online search stops
+    looking for it once it has spent that long on it (the model's expectation) without
+    finding one: a world that held the expected instances would most likely have shown one."""
+
+    type: str
+    q: float
+    instances: float
+    zmax: float
+    look_s: float
+    gain: float
+    find_s: float = math.inf
+
+
+@dataclass(frozen=True)
+class Option:
+    """One thing the online search may do next: its probability of finding the target per
+    expected second, a label for the log, the action, its kind (calibrated apart: ``region``,
+    ``explore``, ``via``) and its expected seconds."""
+
+    rate: float
+    label: str
+    act: Callable[[], None]
+    kind: str
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Belief:
+    """Where the target may be: the candidate regions not looked into yet, the probability per
+    seen-map point given it was not seen yet (None: every point alike), and the density's total
+    over the points left (P(rel(T)) units)."""
+
+    regions: list[ss.Region]
+    weights: np.ndarray | None
+    mass: float
+
+
+class OnlineSearch:
+    """One episode's online decision for ``ctx`` with knowledge ``probs`` (None: no context, the
+    ``frontier`` policy) and intermediate types ``vias``."""
+
+    def __init__(
+        self,
+        ctx: SearchContext,
+        probs: ss.ProbabilitySource | None,
+        vias: Sequence[ViaOption] = (),
+    ):
+        self.ctx, self.probs, self.vias = ctx, probs, list(vias)
+        self.explorer = Explorer(ctx)
+        self.builder = ss.RegionBuilder(ctx.catalog, probs, ctx.seen, ctx.target) if probs else None
+        self.gains = {v.type: v.gain for v in self.vias}
+        self.via_spent: dict[str, float] = {}  # seconds spent looking for each intermediate type
+        # the total a whole world is expected to hold (P(rel(T)) units), or 1
+        prior = ss.expected_mass(ctx.catalog, probs, ctx.target) if probs else None
+        self.prior = prior or 1.0
+        self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
+
+    def run(self) -> None:
+        """Look around, then take the best option until none is left."""
+        ctx = self.ctx
+        self.explorer.look_around()
+        while True:
+            ctx.check()
+            belief = self.belief()
+            options = [
+                o for o in (self.region_option(belief), self.direct_option(belief.weights)) if o
+            ]
+            options += [o for o in (self.via_option(v, belief.mass) for v in self.vias) if o]
+            if not options:
+                return
+            best = max(options, key=lambda o: o.rate / self.scale(o.kind))
+            f = self.scale(best.kind)
+            ctx.note(f"{best.label} ({best.rate / f:.4f}/s, time x{f:.2f}; {len(options)} options)")
+            t0 = ctx.elapsed
+            best.act()
+            sums = self.took.setdefault(best.kind, [0.0, 0.0])
+            sums[0] += best.seconds
+            sums[1] += ctx.elapsed - t0
+
+    def scale(self, kind: str) -> float:
+        """The calibration of ``kind``'s expected seconds: measured over expected so far."""
+        exp_s, got_s = self.took.get(kind, (0.0, 0.0))
+        return (got_s + CALIBRATION_PRIOR_S) / (exp_s + CALIBRATION_PRIOR_S)
+
+    def belief(self) -> Belief:
+        """Where the target may be (``Belief``): the density normalised over the points left to
+        see; None without context or before a known object has a relation volume worth
+        anything; its total is then ``prior``."""
+        ctx = self.ctx
+        if self.builder is None:
+            return Belief([], None, 1.0)
+        every = self.builder.regions(list(ctx.known.values()))
+        skip = ctx.looked_into | ctx.waiting
+        regions = [r for r in every if r.key not in skip]
+        dens = ss.target_density(every, ~ctx.seen.unseen(sx.MAX_VIEW))
+        if dens is None:
+            return Belief(regions, None, self.prior)
+        mass = float(dens[self.explorer.todo(ctx.target_range)].sum())
+        if mass <= 0.0:
+            return Belief(regions, None, self.prior)
+        return Belief(regions, dens / mass, mass)
+
+    def direct_option(self, weights: np.ndarray | None = None) -> Option | None:
+        """Sweep the best frontier viewpoint for the target."""
+        ctx, ex = self.ctx, self.explorer
+        v = ex.viewpoint(ctx.target_range, sx.SWEEP_IMAGES, weights=weights)
+        if v is None:
+            return None
+        label = (
+            f"explore for {ctx.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
+            f"{v.gain} points, ~{v.seconds:.0f} s"
+        )
+        return Option(
+            v.rate, label, lambda: ex.explore_step(v, ctx.target_range), "explore", v.seconds
+        )
+
+    def via_option(self, via: ViaOption, mass: float = 1.0) -> Option | None:
+        """Sweep for intermediate type ``via`` where a new one is most likely seen per second."""
+        ctx, ex = self.ctx, self.explorer
+        found = ctx.found_of(via.type)
+        left = 1.0 - math.exp(-max(0.0, via.instances - found))
+        if left < 0.05 or self.via_spent.get(via.type, 0.0) >= via.find_s:
+            return None
+        rng = ctx.range_of(via.type)
+        v = ex.viewpoint(rng, sx.RING_IMAGES, via.zmax)
+        if v is None:
+            return None
+        m = left * min(1.0, v.share * max(1.0, via.instances - found))
+        seconds = v.seconds + m * via.look_s
+        rate = m * via.q / mass / seconds
+
+        def act() -> None:
+            if ctx.intermediate is None:
+                ctx.intermediate, ctx.predicted_gain = via.type, via.gain
+            t0 = ctx.elapsed
+            try:
+                ex.explore_step(
+                    v, rng, FURNITURE_TILTS, f"find {via.type}",
+                    until=lambda: ctx.found_of(via.type) > found,
+                )  # fmt: skip
+            finally:
+                self.via_spent[via.type] = self.via_spent.get(via.type, 0.0) + (ctx.elapsed - t0)
+
+        label = f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})"
+        return Option(rate, label, act, "via", v.seconds)
+
+    def region_option(self, belief: Belief) -> Option | None:
+        """Look into the best candidate region of the belief, re-costed with planned gazes."""
+        ctx = self.ctx
+        if not belief.regions:
+            return None
+        ranked = ss.score_regions(
+            belief.regions, ctx.seen, ctx.target_range, rg.cost_model(ctx), ctx.body.pose().xy,
+            belief.weights,
+        )  # fmt: skip
+        ranked = [r for r in ranked if r.score >= rg.MIN_REGION_SCORE]
+        if not ranked:
+            return None
+        rg.log_candidates(ctx, ranked)
+        # The cost model's estimate ranks; the best few are re-costed with their planned gazes
+        # (on a built map the drive around what is not mapped yet can be much longer).
+        planned = []
+        for r in ranked[: rg.REPLAN_REGIONS_BUILT]:
+            gz = rg.region_gazes(ctx, r)
+            if not gz:
+                ctx.waiting.add(r.key)
+                continue
+            cost = rg.planned_seconds(ctx, gz)
+            planned.append((r.score / max(cost, 1e-6), cost, r, gz))
+        if not planned:
+            return None
+        rate, cost, best, gazes = max(planned, key=lambda x: (x[0], -x[1]))
+        label = f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s"
+        return Option(
+            rate, label, lambda: rg.look_region(ctx, best, gazes, self.gains), "region", cost
+        )

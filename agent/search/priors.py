@@ -1,0 +1,175 @@
+"""Where each policy's probabilities come from (the registry's ``needs``): the learned knowledge
+store, read as intervals (``open_knowledge``) or pooled over the type hierarchy (backoff), or the
+ground truth estimated from the style (``truth_probabilities``, the oracle-prior policies only).
+The rooms a store learned in are never searched (``learned_seeds``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.registry import check_scenario, info, split_name
+from ctxsearch.envs.houses import WorldStyle
+from ctxsearch.envs.truth import ground_truth, load_truth
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Needs, Rank, parse
+from ctxsearch.knowledge.pooling import PooledCounts
+from ctxsearch.knowledge.store import EvidenceStore
+
+
+def learned_seeds(store: EvidenceStore) -> set[int]:
+    """Room seeds the store has evidence from (any run, any style: stricter than needed)."""
+    return {int(seed) for _run, _style, seed, _status in store.rooms()}
+
+
+def store_seeds(path: Path | str | None, catalog: Catalog) -> set[int]:
+    """``learned_seeds`` of the store at ``path`` (none for no store)."""
+    if path is None:
+        return set()
+    with EvidenceStore.open(Path(path), catalog, read_only=True) as store:
+        return learned_seeds(store)
+
+
+def open_knowledge(
+    path: Path | str,
+    catalog: Catalog,
+    alpha: float | None = None,
+    interval: IntervalMethod | str = IntervalMethod.WILSON,
+) -> tuple[KnowledgeBase, set[int]]:
+    """The knowledge base of the evidence store at ``path`` and the room seeds it learned in
+    (its intervals read with ``interval``).
+
+    One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
+    from the store), a store without examinations."""
+    p = Path(path)
+    if not p.is_file():
+        raise CtxsearchError(
+            f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
+        )
+    with EvidenceStore.open(p, catalog, alpha=alpha, read_only=True) as store:
+        kb = store.knowledge_base(interval=interval)
+        learned = learned_seeds(store)
+    if kb.total_examinations == 0:
+        raise CtxsearchError(
+            f"{p}: the knowledge store is empty (no examinations); run ctxsearch learn first"
+        )
+    return kb, learned
+
+
+def open_pooled(path: Path | str, catalog: Catalog) -> PooledCounts:
+    """The evidence of the store at ``path`` pooled over the catalog's hierarchy (for the backoff
+    estimate); the store's one-line errors as ``open_knowledge``."""
+    with EvidenceStore.open(Path(path), catalog, read_only=True) as store:
+        return PooledCounts.from_store(store)
+
+
+def truth_probabilities(
+    style: WorldStyle | str,
+    catalog: Catalog,
+    samples: int = 200,
+    seed: int = 0,
+    path: str | Path | None = None,
+) -> ss.TableProbabilities:
+    """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
+    at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
+    if path is not None:
+        doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
+        return ss.TableProbabilities.from_truth(doc)
+    return ss.TableProbabilities.from_truth(ground_truth(style, samples, seed, catalog))
+
+
+@dataclass(frozen=True)
+class PriorSettings:
+    """How the learned knowledge is read: the rank of policies named without one, the estimate
+    (flat or backoff with its ``min_evidence``) and the interval method; the ground truth's
+    file or sample count."""
+
+    rank: Rank = Rank(ss.DEFAULT_RANK)
+    estimate: Estimate = Estimate(ss.DEFAULT_ESTIMATE)
+    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
+    interval: IntervalMethod = IntervalMethod.WILSON
+    truth: Path | None = None  # ground-truth JSON of `ctxsearch truth`
+    truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Where each policy's probabilities come from: the learned knowledge or the ground truth."""
+
+    kb: KnowledgeBase | None
+    learned: frozenset[int]  # room seeds the knowledge was learned in (never searched)
+    rank: Rank  # the rank of policies named without one
+    truth: ss.ProbabilitySource | None
+    pooled: PooledCounts | None = None  # evidence over the hierarchy: the backoff estimate
+    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
+
+    def check(self, names: list[str] | tuple[str, ...]) -> None:
+        """A one-line error if a policy needs a knowledge store and none was given."""
+        for name in names:
+            base, _ = split_name(name)
+            if info(base).needs is Needs.KB and self.kb is None:
+                raise CtxsearchError(f"policy '{base}' needs a knowledge store (--kb)")
+
+    def for_policy(self, base: str, r: Rank | None) -> ss.ProbabilitySource | None:
+        """The probabilities policy ``base`` ranks by (rank ``r`` or the default), if any."""
+        needs = info(base).needs
+        if needs is Needs.KB:
+            rooms = len(self.learned) or None
+            if self.pooled is not None:
+                return ss.BackoffProbabilities(
+                    self.kb, self.pooled, r or self.rank, rooms, self.min_evidence
+                )
+            return ss.KBProbabilities(self.kb, r or self.rank, rooms=rooms)
+        if needs is Needs.TRUTH:
+            return self.truth
+        return None
+
+    def for_name(self, name: str) -> ss.ProbabilitySource | None:
+        """``for_policy`` of a name that may carry a rank (``location@p0``)."""
+        return self.for_policy(*split_name(name))
+
+
+@dataclass(frozen=True)
+class KnowledgeSource:
+    """The knowledge a search is given: a KnowledgeBase in memory, or the store at ``path``,
+    and room seeds never to search besides the store's."""
+
+    kb: KnowledgeBase | None = None
+    path: Path | str | None = None
+    exclude_seeds: frozenset[int] = frozenset()
+
+
+def make_priors(
+    policies: tuple[str, ...],
+    mode: MapMode,
+    style: WorldStyle,
+    catalog: Catalog,
+    settings: PriorSettings,
+    source: KnowledgeSource = KnowledgeSource(),
+) -> Priors:
+    """The priors of ``policies`` in scenario ``mode``: the knowledge of ``source`` (a store's
+    learning rooms join its ``exclude_seeds``), and the ground truth if an oracle-prior policy
+    runs. With the backoff estimate the evidence is also pooled over the hierarchy (from the
+    store's log, or from the knowledge base's counts)."""
+    estimate = parse(Estimate, settings.estimate)
+    check_scenario(policies, mode)
+    learned = set(source.exclude_seeds)
+    kb, pooled = source.kb, None
+    if kb is None and source.path is not None:
+        kb, seeds = open_knowledge(source.path, catalog, interval=settings.interval)
+        learned |= seeds
+        if estimate is Estimate.BACKOFF:
+            pooled = open_pooled(source.path, catalog)
+    elif kb is not None and estimate is Estimate.BACKOFF:
+        pooled = PooledCounts.from_knowledge_base(kb)
+    truth = None
+    if any(info(split_name(n)[0]).needs is Needs.TRUTH for n in policies):
+        truth = truth_probabilities(style, catalog, settings.truth_samples, path=settings.truth)
+    rank = parse(Rank, settings.rank)
+    priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence)
+    priors.check(policies)
+    return priors

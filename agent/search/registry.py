@@ -1,0 +1,128 @@
+"""The search policies and their facts, in one table: which map scenarios each runs in, what its
+probabilities come from, and its role in each scenario (the no-context baseline, the context
+policy, its asymptote with the true probabilities, the oracle's bound, a reference). The CLI reads
+it to build its parser without importing MuJoCo or scipy; the behaviours are in
+``agent.search.policies`` (and ``agent.search.oracle``).
+
+A policy name may carry a rank, ``location@low``: which value of the interval ranks its candidate
+regions (``split_name``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import MapMode, Needs, Rank, parse, values
+
+DEFAULT_BUDGET_S = 300.0  # simulated seconds an episode may take before it counts as failed
+
+
+class Role(StrEnum):
+    """A policy's part in a map scenario's comparison."""
+
+    BASELINE = "baseline"  # no context, the same machinery: the context policy's fair twin
+    CONTEXT = "context"  # the learned knowledge
+    ASYMPTOTE = "asymptote"  # the context policy with the true probabilities
+    BOUND = "bound"  # the oracle: a lower bound on time to find
+    REFERENCE = "reference"  # run by default for reference, compared with nothing
+
+
+@dataclass(frozen=True)
+class PolicyInfo:
+    """One search policy's facts."""
+
+    name: str
+    maps: tuple[MapMode, ...]  # the scenarios it runs in
+    roles: tuple[tuple[MapMode, Role], ...]  # its role in the scenarios it runs in by default
+    needs: Needs = Needs.NONE  # where its probabilities come from
+    reads_truth: bool = False  # plans on the true layout and the detector's draws (the oracle)
+    summary: str = ""
+
+    def role(self, mode: MapMode) -> Role | None:
+        """Its role in scenario ``mode`` (None: not run there by default)."""
+        return dict(self.roles).get(mode)
+
+
+_B, _G = MapMode.BUILT, MapMode.GIVEN
+# In this order: each scenario's default policies are the entries with a role there, in order.
+REGISTRY: tuple[PolicyInfo, ...] = (
+    PolicyInfo("frontier", (_B,), ((_B, Role.BASELINE),),
+               summary="no context: the frontier viewpoint with the most to see per second"),
+    PolicyInfo("map-only", (_G,), ((_G, Role.BASELINE),),
+               summary="no context: every relation volume of the known furniture, a short tour"),
+    PolicyInfo("location", (_G,), ((_G, Role.CONTEXT),), Needs.KB,
+               summary="location constraint: relation volumes by P(rel(T)) per second"),
+    PolicyInfo("indirect", (_B, _G), ((_B, Role.CONTEXT),), Needs.KB,
+               summary="detectability-driven: intermediate types, volumes and frontier"),
+    PolicyInfo("oracle-prior", (_G,), ((_G, Role.ASYMPTOTE),), Needs.TRUTH,
+               summary="location with the true probabilities"),
+    PolicyInfo("oracle-prior-indirect", (_B, _G), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
+               summary="indirect with the true probabilities"),
+    PolicyInfo("oracle", (_B, _G), ((_B, Role.BOUND), (_G, Role.BOUND)), reads_truth=True,
+               summary="knows the target and the detector's draws: the lower bound"),
+    PolicyInfo("exhaustive", (_G,), ((_G, Role.REFERENCE),),
+               summary="no context: coverage of the whole map"),
+)  # fmt: skip
+POLICIES: dict[str, PolicyInfo] = {p.name: p for p in REGISTRY}
+
+
+def info(name: str) -> PolicyInfo:
+    """A policy's facts by base name; a one-line error naming the known ones otherwise."""
+    p = POLICIES.get(name)
+    if p is None:
+        raise CtxsearchError(f"unknown search policy '{name}' (known: {', '.join(POLICIES)})")
+    return p
+
+
+def default_policies(mode: MapMode) -> tuple[str, ...]:
+    """The policies ``bench search`` runs in scenario ``mode`` when none are named."""
+    return tuple(p.name for p in REGISTRY if p.role(mode) is not None)
+
+
+def with_role(mode: MapMode, role: Role) -> str:
+    """The policy that plays ``role`` in scenario ``mode``."""
+    for p in REGISTRY:
+        if p.role(mode) is role:
+            return p.name
+    raise CtxsearchError(f"no policy is the {role} of the {mode} map")
+
+
+def split_name(name: str) -> tuple[str, Rank | None]:
+    """``location@low`` -> ("location", Rank.LOW); ``location`` -> ("location", None); one-line
+    errors for an unknown policy or rank."""
+    base, _, rank = name.partition("@")
+    info(base)
+    if not rank:
+        return base, None
+    if rank not in values(Rank):
+        raise CtxsearchError(
+            f"unknown rank '{rank}' in '{name}' (known: {', '.join(values(Rank))})"
+        )
+    return base, Rank(rank)
+
+
+def parse_policies(text: str) -> list[str]:
+    """A comma-separated list of policy names (each optionally ``name@rank``), checked."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise CtxsearchError("no search policy given")
+    for n in names:
+        split_name(n)
+    if len(set(names)) != len(names):
+        raise CtxsearchError(f"a policy is listed twice in '{text}'")
+    return names
+
+
+def check_scenario(names: Sequence[str], mode: MapMode | str) -> MapMode:
+    """Scenario ``mode`` parsed; one-line errors for an unknown scenario or a policy that does
+    not run in it."""
+    mode = parse(MapMode, mode, "map")
+    for n in names:
+        base, _ = split_name(n)
+        maps = info(base).maps
+        if mode not in maps:
+            raise CtxsearchError(f"policy '{base}' needs --map {maps[0]}")
+    return mode

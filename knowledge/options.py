@@ -1,0 +1,90 @@
+"""The modes the command line and the configuration files choose among, one enum each.
+
+They live at the bottom layer so that every layer (and the CLI, before it loads MuJoCo or
+scipy) reads the same members: ``knowledge`` reads intervals, ranks and estimates; ``agent`` the
+map and perception modes and what a search policy needs. A mode is parsed once, where it enters
+(``parse``: a one-line error naming the known values), and compared as a member afterwards.
+Members are ``StrEnum``: they print, format and serialise as their value, so files written
+before the enums read and write the same text.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import TypeVar
+
+from ctxsearch.knowledge.errors import CtxsearchError
+
+
+class MapMode(StrEnum):
+    """The map the robot plans on: the true layout's (``given``, furniture poses known) or its
+    own, built from its depth images (``built``)."""
+
+    GIVEN = "given"
+    BUILT = "built"
+
+
+class PerceptionMode(StrEnum):
+    """How the robot recognises objects: rendered images and a detector (``camera``), or the
+    true layout with line-of-sight tests (``oracle``)."""
+
+    CAMERA = "camera"
+    ORACLE = "oracle"
+
+
+class IntervalMethod(StrEnum):
+    """How counts become an interval: the paper's Wilson score interval, or Wilson on a
+    room-level effective sample size (``clustered``)."""
+
+    WILSON = "wilson"
+    CLUSTERED = "clustered"
+
+
+class Rank(StrEnum):
+    """Which value of an interval ranks the search's candidate regions."""
+
+    LOW = "low"
+    P0 = "p0"
+    HIGH = "high"
+
+
+class Estimate(StrEnum):
+    """Where P(rel(T)) comes from: each type's own evidence (``flat``, the paper's), or the
+    class's backoff estimate for rarely examined types (``backoff``)."""
+
+    FLAT = "flat"
+    BACKOFF = "backoff"
+
+
+class Needs(StrEnum):
+    """What a search policy's probabilities come from: nothing (no context), the learned
+    knowledge store (``kb``) or the ground truth (``truth``)."""
+
+    NONE = "none"
+    KB = "kb"
+    TRUTH = "truth"
+
+
+E = TypeVar("E", bound=StrEnum)
+
+
+def parse(kind: type[E], value: str | StrEnum, what: str | None = None) -> E:
+    """``value`` as a member of ``kind``; a one-line error naming the known values otherwise
+    (``what``: the name used in the message, default the enum's, e.g. 'map mode')."""
+    try:
+        return kind(value)
+    except ValueError:
+        name = what or _words(kind.__name__)
+        known = ", ".join(m.value for m in kind)
+        raise CtxsearchError(f"unknown {name} '{value}' (known: {known})") from None
+
+
+def values(kind: type[StrEnum]) -> tuple[str, ...]:
+    """The members' values, in declaration order (argparse ``choices``)."""
+    return tuple(m.value for m in kind)
+
+
+def _words(name: str) -> str:
+    """``MapMode`` -> 'map mode'."""
+    out = "".join(f" {c.lower()}" if c.isupper() else c for c in name).strip()
+    return out
