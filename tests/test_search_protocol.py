@@ -306,3 +306,72 @@ def test_a_kept_draw_reads_back_bit_for_bit_and_a_spoilt_one_is_drawn_again(
         again = draw(office, 2, 5, catalog, 60.0, cache=tmp_path)
         assert again.episodes == first.episodes
         assert draw_store.load(tmp_path, files[0].stem) is not None
+
+
+def _edited(doc: dict, how: str) -> dict:
+    """A kept draw's JSON changed as a hostile or stale file might be."""
+    doc = json.loads(json.dumps(doc))
+    eps = doc["episodes"]
+    if how == "learned room":
+        eps[0]["room_seed"] = eps[1]["room_seed"]  # not in index order; also the store's below
+    elif how == "budget":
+        for e in eps:
+            e["budget_s"] = 1e-9
+    elif how == "negative count":
+        doc["visible_at_start"] = -3
+    elif how == "one of two":
+        del eps[1]
+    elif how == "start far away":
+        eps[0]["start"] = [1e6, -1e6, 0.0, 0.0, 0.0]
+    elif how == "not held out":
+        eps[0]["room_seed"] = 12345
+    elif how == "another target":
+        eps[0]["target"] = "Desk"
+    return doc
+
+
+@pytest.mark.parametrize(
+    "how",
+    ["learned room", "budget", "negative count", "one of two", "start far away", "not held out",
+     "another target", "fifo", "deep", "zero"],
+)  # fmt: skip
+def test_a_kept_draw_that_is_not_the_one_asked_for_is_never_used(
+    how, drawn, office, catalog, tmp_path, monkeypatch
+):
+    """Issue 24: a draw file is checked like any input against what the command asked (held-out
+    worlds, starts in the free space, the budget and episode count, counts >= 0); a FIFO, a
+    deeply nested file or an endless one is refused without blocking. Each is a miss: drawn
+    again, never used."""
+    import os
+
+    spec = DrawSpec.make(office, 2, 5, catalog, 60.0)
+    key = draw_store.draw_key(spec)
+    path = tmp_path / f"{key}.json"
+    if how == "fifo":
+        os.mkfifo(path)
+    elif how == "deep":
+        path.write_text("[" * 100_000 + "]" * 100_000)
+    elif how == "zero":
+        path.symlink_to("/dev/zero")
+    else:
+        path.write_text(json.dumps(_edited(draw_store.to_json(drawn), how)))
+    assert draw_store.load(tmp_path, key) is None or not D.check_draw(
+        draw_store.load(tmp_path, key), spec, catalog
+    )
+    drew = []
+
+    def fresh(*a, **k):
+        drew.append(1)
+        return drawn
+
+    monkeypatch.setattr(D, "_draw_worlds", fresh)
+    got = D.draw_episodes(spec, catalog, cache=tmp_path)
+    assert drew == [1] and got.episodes == drawn.episodes
+    assert D.check_draw(draw_store.load(tmp_path, key), spec, catalog)  # the file replaced
+
+
+def test_the_kept_draw_of_the_same_spec_passes_its_check(drawn, office, catalog):
+    spec = DrawSpec.make(office, 2, 5, catalog, 60.0)
+    assert D.check_draw(draw_store.from_json(draw_store.to_json(drawn)), spec, catalog)
+    learned = DrawSpec.make(office, 2, 5, catalog, 60.0, {drawn.episodes[0].room_seed})
+    assert not D.check_draw(drawn, learned, catalog)  # a room the store learned in

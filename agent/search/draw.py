@@ -165,6 +165,8 @@ def draw_episodes(
         return replace(_drawn[spec], episodes=list(_drawn[spec].episodes))
     stored = draw_store.draw_key(spec) if cache is not None else None
     draw = draw_store.load(cache, stored) if stored is not None else None
+    if draw is not None and not check_draw(draw, spec, catalog):
+        draw = None  # not the draw asked for: a miss, made again and the file replaced
     if draw is None:
         draw = _draw_worlds(spec, catalog, workers, runner)
         if stored is not None:
@@ -172,6 +174,45 @@ def draw_episodes(
     if _drawn is not None:
         _drawn[spec] = replace(draw, episodes=list(draw.episodes))
     return draw
+
+
+def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
+    """Whether ``draw`` (read from a file) can be the draw of ``spec``: ``spec.episodes``
+    episodes indexed in order, of the style, budget and target asked, in held-out worlds taken in
+    index order (none a room the store learned in), each with a small target the world holds and
+    a start on a free cell of its grid, a first oracle view (if any) of a true instance within the
+    budget, and counts that are counts."""
+    counts = (draw.visible_at_start, draw.infeasible, draw.start_redraws)
+    if len(draw.episodes) != spec.episodes or min(counts) < 0:
+        return False
+    seeds = {held_out_seed(spec.seed, i): i for i in range(50 * spec.episodes + 100)}
+    last = -1
+    for k, ep in enumerate(draw.episodes):
+        world = seeds.get(ep.room_seed, -1)
+        asked = (ep.index, ep.style, ep.budget_s) == (k, spec.style.name, spec.budget_s)
+        if not asked or world <= last or ep.room_seed in spec.exclude_seeds:
+            return False
+        if spec.target is not None and ep.target != spec.target:
+            return False
+        last = world
+        if not _episode_fits(ep, spec, catalog):
+            return False
+    return True
+
+
+def _episode_fits(ep: Episode, spec: DrawSpec, catalog: Catalog) -> bool:
+    """The episode's world holds its target, the start is on a free cell, and its first oracle
+    view (if any) sees a true instance within the budget."""
+    layout = generate_layout(spec.style, ep.room_seed, catalog)
+    if ep.target not in small_types_present(layout, catalog):
+        return False
+    grid = OccupancyGrid.from_layout(layout, RobotSpec())
+    r, c = grid.to_cell(ep.start.xy)
+    if not (grid.in_grid(r, c) and grid.free[r, c]):
+        return False
+    v = ep.first_view
+    ids = {o.id for o in layout.of_type(ep.target)}
+    return v is None or (0.0 <= v.seconds <= spec.budget_s and v.instance_id in ids)
 
 
 def make_episodes(spec: DrawSpec, catalog: Catalog) -> list[Episode]:

@@ -11,7 +11,10 @@ A file ``DIR/<key>.json`` holds one draw. Its key is a SHA-256 over the draw's s
 fingerprint, the budget, the excluded room seeds, the target, the detector preset) and over the source of the packages the
 draw runs (``agent``, ``envs``, ``knowledge``): a changed argument or a changed line of code is
 another key, never a stale draw. A file that cannot be read back as a draw (any bytes: a
-truncated write, an edit by hand) is a miss: the draw is made again and the file replaced
+truncated write, an edit by hand; a FIFO, a device, a file nested too deep: knowledge.files
+reads it) or that is not the draw asked for (``draw.check_draw``: held-out worlds only, starts in
+the free space, the budget and the number of episodes asked, counts that are counts) is a miss:
+the draw is made again and the file replaced
 (written to a temporary file first, then renamed, so a reader never sees half a file).
 Floats are written with ``repr``: they read back to the same bits.
 """
@@ -33,8 +36,10 @@ import numpy as np
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, OracleView
 from ctxsearch.agent.viewplan import Gaze
 from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.knowledge.files import InputFileError, read_json
 
 FORMAT = 1
+MAX_DRAW_BYTES = 256 * 2**20  # a draw of 10,000 house episodes is about 30 MB
 _PACKAGES = ("agent", "envs", "knowledge")
 
 
@@ -146,11 +151,14 @@ def from_json(doc: dict) -> EpisodeDraw:
 
 
 def load(directory: Path, key: str) -> EpisodeDraw | None:
-    """The draw stored under ``key`` in ``directory``, or None (no file, or not a draw)."""
+    """The draw stored under ``key`` in ``directory``, or None (no file, or not a draw: anything
+    but a regular file, over ``MAX_DRAW_BYTES``, nested deeper than JSON's ``MAX_NESTING``, or not
+    what ``to_json`` writes). Whether it is the draw the command asked for is the caller's check
+    (agent.search.draw.check_draw)."""
     path = Path(directory) / f"{key}.json"
     try:
-        return from_json(json.loads(path.read_bytes()))
-    except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError):
+        return from_json(read_json(path, MAX_DRAW_BYTES))
+    except (InputFileError, ValueError, KeyError, TypeError, IndexError, AttributeError):
         return None
 
 
