@@ -79,7 +79,7 @@ from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
-from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.options import MapMode, Reexamine
 from ctxsearch.knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
@@ -100,7 +100,11 @@ class RoomLearner:
     ):
         self.run, self.log, self.layout, self.room_index = run, log, layout, room_index
         self.day = int(day)
-        self.catalog, self.kb, self.spec = run.services.catalog, run.services.kb, run.settings.config.spec
+        self.catalog, self.kb, self.spec = (
+            run.services.catalog,
+            run.services.kb,
+            run.settings.config.spec,
+        )
         self.prior = list(prior)  # stored examinations to replay
         self.given_grid = OccupancyGrid.from_layout(layout, self.spec)  # the true layout's
         self.start_pose = start_pose(layout, self.given_grid)
@@ -119,7 +123,9 @@ class RoomLearner:
         self.explorer: Explorer | FrontierExplorer = (
             Explorer(self, self.start_pose.xy)
             if self.built is None
-            else FrontierExplorer(self, self.built, run.settings.config.time_model, run.settings.config.frontier_rule)
+            else FrontierExplorer(
+                self, self.built, run.settings.config.time_model, run.settings.config.frontier_rule
+            )
         )
         self.examined: set[int] = set()  # line 1
         self.unexamined: dict[int, ObjectInstance] = {}  # line 2
@@ -136,7 +142,7 @@ class RoomLearner:
         if not known:
             return 0
         run = self.run
-        if run.settings.config.reexamine == "never":
+        if run.settings.config.reexamine == Reexamine.NEVER:
             self.examined.update(o.id for o in known)
             return 0
         kb = ForgetKnowledgeBase(self.catalog, self.kb.alpha, run.services.evidence, self.day,
@@ -160,7 +166,9 @@ class RoomLearner:
     def costs(self) -> GridCosts:
         """The strategies' cost model on the current grid."""
         if self._costs.grid is not self.grid:
-            self._costs = GridCosts(self.grid, self.run.settings.config.time_model, self._gaze_seconds)
+            self._costs = GridCosts(
+                self.grid, self.run.settings.config.time_model, self._gaze_seconds
+            )
         return self._costs
 
     def _mapped(self, frame: Frame | None) -> None:
@@ -300,7 +308,9 @@ class RoomLearner:
         t = self._gaze_s.get(obj.id)
         if t is None:
             gazes = self.plan_examination(obj, self.body.pose())
-            t = sum(g.cost for g in gazes[1:]) + (self.run.settings.config.time_model.image_cost if gazes else 0.0)
+            t = sum(g.cost for g in gazes[1:]) + (
+                self.run.settings.config.time_model.image_cost if gazes else 0.0
+            )
             self._gaze_s[obj.id] = t
         return t
 
@@ -338,7 +348,9 @@ class RoomLearner:
         reading the stored relations."""
         det, run = self.run.settings.detector, self.run
         errs = det is not None and not det.perfect
-        return run.services.perceive is None and (errs or run.settings.config.confirm > 1 or run.settings.config.min_score > 0)
+        return run.services.perceive is None and (
+            errs or run.settings.config.confirm > 1 or run.settings.config.min_score > 0
+        )
 
     def _reexamine(self, obj: ObjectInstance, stored: StoredExam, gazes: Sequence[Gaze]) -> Related:
         """A replayed examination made again with images, checked against the store."""

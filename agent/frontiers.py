@@ -44,9 +44,10 @@ from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, plan_path
 from ctxsearch.envs.robot_spec import TimeModel
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import FrontierRule, values
 
 NEAR_TILT = -1.0  # rad: the second look-around tilt (the floor near the robot)
-FRONTIER_RULES = ("nearest", "info")
+FRONTIER_RULES = values(FrontierRule)
 
 
 class FrontierExplorer:
@@ -116,7 +117,7 @@ class FrontierExplorer:
         ok = grid.free & np.isfinite(dist) & near_front
         if not ok.any():
             return None
-        if self.rule == "nearest":
+        if self.rule == FrontierRule.NEAREST:
             score = np.where(ok, -dist, -np.inf)
         else:
             k = 2 * int(round(self.info_radius / grid.resolution)) + 1

@@ -292,7 +292,9 @@ class _Rooms:
         summary.sim_s = run.counters.sim_new
         if stopped:
             return False
-        store.mark_room(run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day)
+        store.mark_room(
+            run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day
+        )
         run.counters.clock_offset = L.clock
         summary.rooms += int(day == 0)
         summary.rooms_done_now += 1

@@ -32,7 +32,7 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.drift import DayEvidence, Forgetting
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
-from ctxsearch.knowledge.options import MapMode, PerceptionMode
+from ctxsearch.knowledge.options import MapMode, PerceptionMode, Reexamine, values
 from ctxsearch.knowledge.store import EvidenceStore
 
 ROOM_DONE = "done"
@@ -40,7 +40,7 @@ ROOM_STARTED = "started"
 # Whether a known object (examined on an earlier day of the run) may be examined again: never
 # (the paper: EXAMINED is never emptied within a run) or when its type's impact under the
 # (possibly forgetting) counts is worth the seconds to examine it (agent.acquisition).
-REEXAMINE_POLICIES = ("never", "impact")
+REEXAMINE_POLICIES = values(Reexamine)
 # impact / second below which a known object is not examined again (``--reexamine-rate``): d_A
 # is mostly eq. 3's impact(0, n) of the entries never seen (0.058 at n = 20, 0.015 at n = 100),
 # an examination costs 5-20 s from the door, so under ``none`` a type stops being re-examined
@@ -101,7 +101,6 @@ def run_id(
     if map_mode != MapMode.GIVEN:
         key = f"{key}/map={map_mode}"
     return key if room_budget_s is None else f"{key}/budget={float(room_budget_s)!r}s"
-
 
 
 @dataclass(frozen=True)
@@ -215,14 +214,13 @@ class LearnConfig:
         """The store's run key (``run_id``, and the re-examination policy where it is not the
         paper's) for the perception ``label``."""
         rid = run_id(self.strategy, label, self.seed, self.room_budget_s, self.map_used)
-        if self.reexamine == "never":
+        if self.reexamine == Reexamine.NEVER:
             return rid
         return f"{rid}/reexamine={self.reexamine}:{self.reexamine_rate:g}/forget={self.forgetting.label}"
 
     def limit_reached(self, examinations: int) -> bool:
         """Whether ``examinations`` new examinations end the call."""
         return self.max_examinations is not None and examinations >= self.max_examinations
-
 
 
 @dataclass(frozen=True)

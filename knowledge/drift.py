@@ -38,8 +38,9 @@ import numpy as np
 
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.base import IntervalRow, KnowledgeBase
+from ctxsearch.knowledge.options import Forget, values
 
-FORGET_METHODS = ("none", "half-life", "detect")
+FORGET_METHODS = values(Forget)
 DEFAULT_HALF_LIFE = 7.0  # days
 DEFAULT_WINDOW = 3  # days compared against the older evidence
 DEFAULT_FALSE_ALARM = 0.05  # per entry and run
@@ -203,11 +204,11 @@ def forget_counts(
 ) -> tuple[float, float]:
     """The (y, n) that ``method`` makes of an entry's evidence up to ``today``."""
     s = series.until(today)
-    if method == "none":
+    if method == Forget.NONE:
         return float(s.hits.sum()), float(len(s.hits))
-    if method == "half-life":
+    if method == Forget.HALF_LIFE:
         return half_life_counts(s, today, half_life)
-    if method == "detect":
+    if method == Forget.DETECT:
         y, n = (detector or ChangeDetector()).counts(s, first_day, today)
         return float(y), float(n)
     raise ValueError(f"unknown forgetting method '{method}' (known: {', '.join(FORGET_METHODS)})")
@@ -239,9 +240,9 @@ class Forgetting:
     @property
     def label(self) -> str:
         """The method with its parameter (``half-life:7``, ``detect:0.05``, ``none``)."""
-        if self.method == "half-life":
+        if self.method == Forget.HALF_LIFE:
             return f"half-life:{self.half_life:g}"
-        if self.method == "detect":
+        if self.method == Forget.DETECT:
             return f"detect:{self.false_alarm:g}"
         return "none"
 
@@ -257,7 +258,7 @@ class Forgetting:
             today,
             self.method,
             half_life=self.half_life,
-            detector=self.detector(last_day) if self.method == "detect" else None,
+            detector=self.detector(last_day) if self.method == Forget.DETECT else None,
         )
 
 

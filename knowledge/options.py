@@ -56,6 +56,30 @@ class Estimate(StrEnum):
     BACKOFF = "backoff"
 
 
+class Forget(StrEnum):
+    """How old evidence counts (knowledge.drift): all alike (``none``), down-weighted by its age
+    (``half-life``), or dropped before a detected change (``detect``)."""
+
+    NONE = "none"
+    HALF_LIFE = "half-life"
+    DETECT = "detect"
+
+
+class Reexamine(StrEnum):
+    """Whether an object examined on an earlier day is examined again: never (the paper) or when
+    its type's impact per second is worth it."""
+
+    NEVER = "never"
+    IMPACT = "impact"
+
+
+class FrontierRule(StrEnum):
+    """How a frontier goal is picked on a built map (agent.frontiers)."""
+
+    NEAREST = "nearest"
+    INFO = "info"
+
+
 class Needs(StrEnum):
     """What a search policy's probabilities come from: nothing (no context), the learned
     knowledge store (``kb``) or the ground truth (``truth``)."""

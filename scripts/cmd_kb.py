@@ -13,6 +13,7 @@ from pathlib import Path
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
 from ctxsearch.knowledge.errors import CatalogError, CtxsearchError, StoreError
+from ctxsearch.knowledge.options import Forget, IntervalMethod
 from ctxsearch.knowledge.pooling import PooledCounts, interval_rows
 from ctxsearch.knowledge.store import EvidenceStore, merge_stores
 from ctxsearch.scripts import argtypes
@@ -265,11 +266,11 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
 
 def _forget_kb(args: argparse.Namespace, store: EvidenceStore):
     """The store read with ``--forget`` (None for ``none``, the paper's counts)."""
-    if args.forget == "none":
+    if args.forget == Forget.NONE:
         if args.day is not None:
             raise CtxsearchError("--day reads the intervals of a day: give it with --forget")
         return None
-    if args.interval != "wilson":
+    if args.interval != IntervalMethod.WILSON:
         raise CtxsearchError(
             f"--forget {args.forget} does not combine with --interval {args.interval}"
         )
@@ -327,12 +328,12 @@ def run_show(args: argparse.Namespace) -> int:
                 catalog.path, f"unknown type or class '{name}' (types: {known}; classes: {kinds})"
             )
     pooled = args.backoff or args.ref_type in classes or args.related in classes
-    if pooled and args.forget != "none":
+    if pooled and args.forget != Forget.NONE:
         raise CtxsearchError(
             f"--forget {args.forget} reads types' own evidence: it does not combine with classes "
             "or --backoff"
         )
-    if pooled and args.interval != "wilson":
+    if pooled and args.interval != IntervalMethod.WILSON:
         raise CtxsearchError(
             f"--interval {args.interval} reads types' own evidence: it does not combine with "
             "classes or --backoff"
@@ -366,10 +367,10 @@ def run_show(args: argparse.Namespace) -> int:
     out = [
         f"{info['path']}: {info['examinations']} examinations, alpha {kb.alpha:g}, "
         f"catalog {info['catalog_fingerprint']}"
-        + ("" if args.interval == "wilson" else f", {args.interval} intervals")
+        + ("" if args.interval == IntervalMethod.WILSON else f", {args.interval} intervals")
         + (
             ""
-            if args.forget == "none"
+            if args.forget == Forget.NONE
             else f", forgetting {argtypes.forgetting(args).label} on day {kb.today}"
         )
     ]

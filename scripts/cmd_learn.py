@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ctxsearch.agent.strategies import STRATEGIES, make_strategy
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Forget, IntervalMethod
 from ctxsearch.scripts import INTERRUPTED, argtypes
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
@@ -201,9 +202,9 @@ def run_learn(args: argparse.Namespace) -> int:
     )
     for line in s.lines():
         print(line)
-    if args.interval != "wilson":
+    if args.interval != IntervalMethod.WILSON:
         print(f"mean interval width ({args.interval}): {_mean_width(args.kb, args.interval):.4f}")
-    if args.forget != "none":
+    if args.forget != Forget.NONE:
         width = _forget_width(args.kb, s.run, argtypes.forgetting(args))
         print(f"mean interval width ({args.forget}, the run's evidence): {width:.4f}")
     for f in s.files:

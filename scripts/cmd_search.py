@@ -13,7 +13,7 @@ from ctxsearch.agent.search.registry import (
     with_role,
 )
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Rank, values
+from ctxsearch.knowledge.options import Estimate, Forget, IntervalMethod, MapMode, Rank, values
 from ctxsearch.knowledge.ranking import DEFAULT_ESTIMATE, DEFAULT_MIN_EVIDENCE, DEFAULT_RANK
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.sweep import add_sweep_arguments
@@ -191,7 +191,7 @@ def run_search(args: argparse.Namespace) -> int:
     fields = _config_fields(args)
     policy = args.policy or DEFAULT_POLICY[fields["map"]]
     config = SearchConfig(policies=(policy,), **fields)
-    if args.forget == "none":
+    if args.forget == Forget.NONE:
         one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
     else:
         kb, seeds = _forgetting_knowledge(args)

@@ -384,13 +384,14 @@ def test_learn_on_a_store_sqlite_cannot_write_is_a_one_line_error(
     """As learn on a read-only file sees it (root, running the tests, can write any file: the
     connection is opened read-only instead)."""
     import ctxsearch.knowledge.store as store_mod
+    import ctxsearch.knowledge.store_schema as schema_mod
 
     path = _store(tmp_path / "s.sqlite", catalog)
     before = digest(path)
     monkeypatch.setattr(
         store_mod,
         "_connect",
-        lambda p: sqlite3.connect(store_mod._ro_uri(p), uri=True, isolation_level=None),
+        lambda p: sqlite3.connect(schema_mod._ro_uri(p), uri=True, isolation_level=None),
     )
     argv = ["learn", "--style", "office", "--rooms", "1", "--kb", str(path)]
     assert main([*argv, "--perception", "oracle", "--no-progress"]) == 2

@@ -59,6 +59,7 @@ from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.drift import FORGET_METHODS, ForgetKnowledgeBase, Forgetting, evidence_of
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Forget
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units
@@ -221,7 +222,7 @@ def read_store(path: Path, run: str, f: Forgetting, keys, days: int, catalog: Ca
             y, n = kb.counts(k[0], (k[1], k[2]))
             lo, hi = intervals.interval(y, n, alpha)
             tr.rows[k].append((y, n, float(intervals.p0(y, n, alpha)), float(lo), float(hi)))
-    if f.method == "detect":
+    if f.method == Forget.DETECT:
         tr.alarms = {k: ev_alarms for k in keys
                      if (ev_alarms := ev.alarms(f, k[0], (k[1], k[2]), days - 1))}  # fmt: skip
     return tr
@@ -268,7 +269,7 @@ def measure(tr: Trace, truth: Truth, status: dict, days: int, f: Forgetting) -> 
         "abs_error_changed": float(np.mean(err["changed"])) if err["changed"] else None,
         "abs_error_unchanged": float(np.mean(err["unchanged"])) if err["unchanged"] else None,
     }
-    if f.method == "detect":
+    if f.method == Forget.DETECT:
         out["alarm_rate"] = (
             sum(1 for k in unchanged if tr.alarms.get(k)) / len(unchanged) if unchanged else 0.0
         )

@@ -1,0 +1,297 @@
+"""Reading the evidence log back (``EvidenceReads``, the read side of ``knowledge.store.EvidenceStore``):
+examinations, rooms and visits, counts per room, and the knowledge base; every value read is
+checked and a bad one is a one-line StoreError naming the store."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sqlite3
+from collections import defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from ctxsearch.knowledge.base import KnowledgeBase
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.clustered import (
+    INTERVAL_METHODS,
+    ClusteredIntervals,
+    RoomCounts,
+    room_counts_from_rows,
+)
+from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.options import IntervalMethod
+from ctxsearch.knowledge.store_schema import MAX_DAY, ROOM_STATUSES, _check_alpha, _one_line
+
+
+@dataclass(frozen=True)
+class Examination:
+    """One examination of the log with its observation rows (``EvidenceStore.examinations``)."""
+
+    id: int
+    run: str
+    style: str
+    room_seed: int
+    object_id: int
+    type: str  # the examined object's (reference) type
+    sim_time: float
+    strategy: str
+    related: tuple[tuple[str, str, int], ...]  # (relation, related type, related object id)
+    day: int = 0  # the day of the world's visit (0 in stores older than version 4)
+
+
+class EvidenceReads:
+    """The read queries of an open evidence store (mixed into ``EvidenceStore``, which holds
+    the connection ``conn``, the catalog, the store's ``alpha`` and its ``path``)."""
+
+    conn: sqlite3.Connection
+    catalog: Catalog
+    alpha: float
+    path: Path
+
+    def examinations(self, run: str | None = None) -> Iterator[Examination]:
+        """Every examination of the log (of one run, or all) in log order, each with its
+        observation rows in the order they were written. The observations of the selected
+        examinations are read first, the examinations then streamed; do not write to the store
+        while iterating. A row that does not fit the catalog or holds a bad value is a
+        StoreError naming the store."""
+        day = "day" if self.version >= 4 else "0"
+        exams = (
+            "SELECT id, run, style, room_seed, object_id, type, sim_time, strategy, "
+            f"{day} FROM examinations"
+        )
+        obs = "SELECT examination_id, relation, type, related_id FROM observations"
+        args: tuple = ()
+        if run is not None:
+            exams += " WHERE run = ?"
+            obs += " WHERE examination_id IN (SELECT id FROM examinations WHERE run = ?)"
+            args = (run,)
+        with self._reading():
+            related: dict[int, list[tuple[str, str, int]]] = defaultdict(list)
+            for eid, rel, t, rid in self.conn.execute(obs + " ORDER BY rowid", args):
+                related[self._integer(eid, "observation examination id")].append(
+                    (
+                        self._name(rel, "relation"),
+                        self._name(t, "observed type"),
+                        self._integer(rid, "related object id"),
+                    )
+                )
+            for i, r, st, seed, oid, t, sim, strategy, d in self.conn.execute(
+                exams + " ORDER BY id", args
+            ):
+                i = self._integer(i, "examination id")
+                where = f"examination {i}"
+                ref = self._name(t, f"{where}: type")
+                if ref not in self.catalog:
+                    raise self._bad(f"{where}: examined type {ref!r} is not in the catalog")
+                rows = tuple(related.pop(i, ()))
+                for rel, b, _rid in rows:
+                    if not self.catalog.has_relation(rel) or self.catalog.relation(rel).ref != ref:
+                        raise self._bad(
+                            f"{where}: {rel!r} is not a relation of {ref} in the catalog"
+                        )
+                    if b not in self.catalog:
+                        raise self._bad(f"{where}: observed type {b!r} is not in the catalog")
+                yield Examination(
+                    i,
+                    self._name(r, f"{where}: run"),
+                    self._name(st, f"{where}: style"),
+                    self._integer(seed, f"{where}: room seed"),
+                    self._integer(oid, f"{where}: object id"),
+                    ref,
+                    self._number(sim, f"{where}: sim_time"),
+                    self._name(strategy, f"{where}: strategy"),
+                    rows,
+                    self._day_stamp(d, f"{where}: day"),
+                )
+
+    def examined(self, run: str, style: str, room_seed: int, day: int | None = None) -> set[int]:
+        """Ids of the objects already examined in that room (on ``day``, or on any day)."""
+        where, args = ("", ()) if day is None else self._visit(day)
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ?"
+                + where,
+                (run, style, int(room_seed), *args),
+            )
+            return {self._integer(r[0], "object id") for r in cur}
+
+    def examined_before(self, run: str, style: str, room_seed: int, day: int) -> set[int]:
+        """Ids of the objects of that room examined in the run on a day before ``day``."""
+        if self.version < 4 or day <= 0:
+            return self.examined(run, style, room_seed) if day > 0 else set()
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT object_id FROM examinations WHERE run = ? AND style = ? AND room_seed = ? "
+                "AND day < ?",
+                (run, style, int(room_seed), int(day)),
+            )
+            return {self._integer(r[0], "object id") for r in cur}
+
+    def examinations_count(self, run: str | None = None) -> int:
+        """How many examinations the log holds (of one run, or in all)."""
+        with self._reading():
+            if run is None:
+                return int(self.conn.execute("SELECT COUNT(*) FROM examinations").fetchone()[0])
+            sql = "SELECT COUNT(*) FROM examinations WHERE run = ?"
+            return int(self.conn.execute(sql, (run,)).fetchone()[0])
+
+    def runs(self) -> list[str]:
+        """The names of the runs with an examination or a room, sorted."""
+        with self._reading():
+            cur = self.conn.execute(
+                "SELECT run FROM examinations UNION SELECT run FROM rooms ORDER BY 1"
+            )
+            return [self._name(r[0], "run") for r in cur]
+
+    def rooms(self, run: str | None = None) -> list[tuple[str, str, int, str]]:
+        """(run, style, seed, status) of every room entered (of one run, or all), sorted; a room
+        visited on several days is 'done' once every visit is."""
+        sql = "SELECT run, style, seed, MAX(status) FROM rooms"  # 'started' > 'done'
+        args: tuple = ()
+        if run is not None:
+            sql, args = sql + " WHERE run = ?", (run,)
+        out = []
+        with self._reading():
+            for a, b, c, d in self.conn.execute(sql + " GROUP BY 1, 2, 3 ORDER BY 1, 2, 3", args):
+                if d not in ROOM_STATUSES:
+                    raise self._bad(f"a room of run {a!r} has status {d!r}")
+                out.append(
+                    (self._name(a, "run"), self._name(b, "style"), self._integer(c, "seed"), d)
+                )
+        return out
+
+    def visits(self, run: str | None = None) -> list[tuple[str, str, int, int, str]]:
+        """(run, style, seed, day, status) of every visit of a room (of one run, or all),
+        sorted."""
+        day = "day" if self.version >= 4 else "0"
+        sql = f"SELECT run, style, seed, {day}, status FROM rooms"
+        args: tuple = ()
+        if run is not None:
+            sql, args = sql + " WHERE run = ?", (run,)
+        out = []
+        with self._reading():
+            for a, b, c, d, st in self.conn.execute(sql + " ORDER BY 1, 2, 3, 4", args):
+                if st not in ROOM_STATUSES:
+                    raise self._bad(f"a room of run {a!r} has status {st!r}")
+                out.append(
+                    (
+                        self._name(a, "run"),
+                        self._name(b, "style"),
+                        self._integer(c, "seed"),
+                        self._integer(d, "day"),
+                        st,
+                    )
+                )
+        return out
+
+    def room_counts(self, run: str | None = None) -> dict[str, RoomCounts]:
+        """Per reference type, its examinations and y counts per room (of one run, or all): the
+        input of the clustered interval (knowledge.clustered). A room is (style, room seed):
+        runs that visit the same room share its cluster. Read-only."""
+        where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
+        obs = (
+            "SELECT DISTINCT o.examination_id, e.type, e.style, e.room_seed, o.relation, o.type "
+            "FROM observations o JOIN examinations e ON e.id = o.examination_id"
+            + ("" if run is None else " WHERE e.run = ?")
+        )
+        with self._reading():
+            exam_rows = [
+                (self._name(t, "type"), (str(st), int(seed)))
+                for t, st, seed in self.conn.execute(
+                    f"SELECT type, style, room_seed FROM examinations{where} ORDER BY id", args
+                )
+            ]
+            obs_rows = [
+                (self._name(t, "type"), (str(st), int(seed)), str(rel), str(b))
+                for _eid, t, st, seed, rel, b in self.conn.execute(obs, args)
+            ]
+        for _ref, _room, rel, b in obs_rows:
+            if not self.catalog.has_relation(rel) or b not in self.catalog:
+                raise self._bad(f"observation ({rel!r}, {b!r}) is not in the catalog")
+        return room_counts_from_rows(exam_rows, obs_rows)
+
+    def knowledge_base(
+        self,
+        alpha: float | None = None,
+        *,
+        run: str | None = None,
+        interval: str = "wilson",
+    ) -> KnowledgeBase:
+        """The counts rebuilt from the log (of one run, or all), as a KnowledgeBase.
+
+        n_A = examinations of type A; y_{rel,B} = examinations with at least one observation row
+        (rel, B). ``alpha`` defaults to the store's. ``interval``: 'wilson' (the paper's) or
+        'clustered' (its intervals on the room-level effective counts of ``room_counts``; the
+        counts and HIF are the same).
+        """
+        if interval not in INTERVAL_METHODS:
+            raise CtxsearchError(
+                f"unknown interval method '{interval}' (known: {', '.join(INTERVAL_METHODS)})"
+            )
+        kb = KnowledgeBase(self.catalog, self.alpha if alpha is None else _check_alpha(alpha))
+        if interval == IntervalMethod.CLUSTERED:
+            kb.use_clustered(ClusteredIntervals(self.room_counts(run), kb.alpha))
+        where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
+        if run is None:
+            sql = "SELECT relation, type, COUNT(DISTINCT examination_id) FROM observations GROUP BY relation, type"
+        else:
+            sql = (
+                "SELECT o.relation, o.type, COUNT(DISTINCT o.examination_id) FROM observations o "
+                "JOIN examinations e ON e.id = o.examination_id WHERE e.run = ? GROUP BY o.relation, o.type"
+            )
+        with self._reading():
+            n = {
+                t: int(c)
+                for t, c in self.conn.execute(
+                    f"SELECT type, COUNT(*) FROM examinations{where} GROUP BY type", args
+                )
+            }
+            ys: dict[str, dict[tuple[str, str], int]] = defaultdict(dict)
+            for rel, t, c in self.conn.execute(sql, args):
+                if not self.catalog.has_relation(rel) or t not in self.catalog:
+                    raise self._bad(f"observation ({rel!r}, {t!r}) is not in the catalog")
+                ys[self.catalog.relation(rel).ref][(str(rel), str(t))] = int(c)
+        for t in set(n) | set(ys):
+            if t not in self.catalog:
+                raise self._bad(f"examined type {t!r} is not in the catalog")
+            try:
+                kb.add_counts(t, n.get(t, 0), ys.get(t, {}))
+            except CtxsearchError as exc:
+                raise self._bad(f"inconsistent log: {exc}") from None
+        return kb
+
+    # ---- internals ----------------------------------------------------------------------------
+    def _bad(self, what: str) -> StoreError:
+        return StoreError(f"{self.path}: damaged knowledge store: {what}")
+
+    def _integer(self, v: object, what: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self._bad(f"{what} {v!r} is not an integer")
+        return v
+
+    def _day_stamp(self, v: object, what: str) -> int:
+        d = self._integer(v, what)
+        if not 0 <= d <= MAX_DAY:
+            raise self._bad(f"{what} {d} is not a day in [0, {MAX_DAY}]")
+        return d
+
+    def _number(self, v: object, what: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self._bad(f"{what} {v!r} is not a finite number")
+        return float(v)
+
+    def _name(self, v: object, what: str) -> str:
+        if not isinstance(v, str) or not v or not v.isprintable():
+            raise self._bad(f"{what} {v!r} is not a name")
+        return v
+
+    @contextlib.contextmanager
+    def _reading(self):
+        try:
+            yield
+        except sqlite3.Error as exc:
+            raise StoreError(
+                f"{self.path}: cannot read knowledge store ({_one_line(exc)})"
+            ) from None
