@@ -8,7 +8,9 @@ With one worker and no cluster address nothing but a loop runs and Ray is never 
 ``--ray-address HOST:PORT``, or ``auto``); ``with session(options):`` keeps one connection for
 several sweeps. ``fn`` must be a module-level function and units and
 results plain data (numbers, strings, lists, dicts): they travel between processes. A unit that
-raises a CtxsearchError ends the sweep with that error (one line, as everywhere).
+raises a CtxsearchError ends the sweep with that error (one line, as everywhere). An address where
+no cluster answers is a one-line error too, bounded in time (``RAY_CONNECT_TIMEOUT_S``): nothing
+listening fails at once, no answer after 5 s, something that is not Ray after about 20 s.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import socket
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
@@ -27,6 +31,16 @@ U = TypeVar("U")
 R = TypeVar("R")
 # What a worker process needs to render off-screen like the driver.
 WORKER_ENV = ("MUJOCO_GL", "PYOPENGL_PLATFORM")
+# Connecting to a cluster (--ray-address) fails within a bounded time instead of waiting forever
+# (Ray alone retries for minutes): a HOST:PORT must accept a TCP connection within this many
+# seconds, and Ray's own GCS connection gets this long per attempt, one attempt (nothing
+# listening: at once; no answer: this long; something not Ray listening: about 4x this long).
+RAY_CONNECT_TIMEOUT_S = 5
+# Ray's settings (environment variables, read when it connects) for that, unless the user set them.
+_RAY_CONNECT_ENV = {
+    "RAY_py_gcs_connect_timeout_s": str(RAY_CONNECT_TIMEOUT_S),
+    "RAY_gcs_server_port_wait_time_s": "1",
+}
 
 
 @dataclass(frozen=True)
@@ -125,30 +139,99 @@ def own_session() -> bool:
 
 def _start_ray(workers: int, ray_address: str | None) -> bool:
     """Connect to Ray (a local one of ``workers`` CPUs, or the cluster at ``ray_address``) unless
-    already connected; True if this call connected."""
-    # Imported here, not at the top: Ray costs ~1.5 s to import and one-worker runs never need it.
-    import ray
+    already connected; True if this call connected. A cluster that cannot be reached is a
+    one-line CtxsearchError within a bounded time (``RAY_CONNECT_TIMEOUT_S``)."""
+    if ray_address:
+        check_reachable(ray_address)  # before Ray's import: nothing listening fails at once
+    # Ray reads its C++ settings when it is first imported: the connection limits go first.
+    with _env(_RAY_CONNECT_ENV if ray_address else {}):
+        # Imported here, not at the top: Ray costs ~1.5 s to import and one-worker runs never
+        # need it.
+        import ray
 
-    if ray.is_initialized():
-        return False
-    kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
-    try:
-        if ray_address:
-            env = {k: os.environ[k] for k in WORKER_ENV if k in os.environ}
-            ray.init(address=ray_address, runtime_env={"env_vars": env}, **kwargs)
-        else:
-            # No runtime_env for a local Ray: its workers inherit the driver's environment
-            # (WORKER_ENV included), and a job-level runtime_env would make Ray start new workers
-            # for the job instead of using the ones it prestarted (measured: the first task then
-            # waits 2.3-5.3 s instead of 0.4-0.8 s; the fixed cost of a sweep drops by ~4 s).
-            # Ray runs its workers at nice 15 by default: on a machine others use too they then
-            # get a fraction of the CPU the serial run gets (measured: 1.5x slower per unit at a
-            # load of 8 on 2 cores), so a local sweep's workers run at the driver's priority.
-            ray.init(num_cpus=workers, _system_config={"worker_niceness": 0}, **kwargs)
-    except (ConnectionError, RuntimeError, ValueError) as exc:
-        where = ray_address or "a local Ray"
-        raise CtxsearchError(f"cannot start {where}: {' '.join(str(exc).split())}") from None
+        if ray.is_initialized():
+            return False
+        kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
+        try:
+            if ray_address:
+                env = {k: os.environ[k] for k in WORKER_ENV if k in os.environ}
+                with _stderr_kept_unless_it_fails():
+                    ray.init(address=ray_address, runtime_env={"env_vars": env}, **kwargs)
+            else:
+                # No runtime_env for a local Ray: its workers inherit the driver's environment
+                # (WORKER_ENV included), and a job-level runtime_env would make Ray start new
+                # workers for the job instead of using the ones it prestarted (measured: the
+                # first task then waits 2.3-5.3 s instead of 0.4-0.8 s; the fixed cost of a sweep
+                # drops by ~4 s). Ray runs its workers at nice 15 by default: on a machine others
+                # use too they then get a fraction of the CPU the serial run gets (measured: 1.5x
+                # slower per unit at a load of 8 on 2 cores), so a local sweep's workers run at
+                # the driver's priority.
+                ray.init(num_cpus=workers, _system_config={"worker_niceness": 0}, **kwargs)
+        except (ConnectionError, RuntimeError, ValueError, OSError) as exc:
+            where = ray_address or "a local Ray"
+            raise CtxsearchError(f"cannot start {where}: {' '.join(str(exc).split())}") from None
     return True
+
+
+def check_reachable(ray_address: str) -> None:
+    """CtxsearchError (one line) unless ``ray_address`` is ``auto``, a ``ray://`` client address
+    (Ray checks those itself) or a HOST:PORT that accepts a TCP connection within
+    ``RAY_CONNECT_TIMEOUT_S`` seconds."""
+    if ray_address == "auto" or ray_address.startswith("ray://"):
+        return
+    host, sep, port = ray_address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise CtxsearchError(f"--ray-address: expected HOST:PORT or 'auto', got {ray_address!r}")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), RAY_CONNECT_TIMEOUT_S):
+            pass
+    except TimeoutError:
+        why = f"no answer within {RAY_CONNECT_TIMEOUT_S} s"
+    except OSError as exc:
+        why = exc.strerror or str(exc) or type(exc).__name__
+    else:
+        return
+    raise CtxsearchError(f"--ray-address {ray_address}: no Ray cluster there ({why})")
+
+
+@contextlib.contextmanager
+def _stderr_kept_unless_it_fails() -> Iterator[None]:
+    """What the block writes to file descriptor 2 (Ray's C++ core logs its retries there) is held
+    back and written out if the block succeeds; if it fails, the one-line error replaces it."""
+    import tempfile
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable stderr: nothing to keep apart
+        yield
+        return
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            yield
+        except BaseException:
+            os.dup2(saved, 2)
+            raise
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        held.seek(0)
+        text = held.read()
+    if text:
+        os.write(2, text)
+
+
+@contextlib.contextmanager
+def _env(values: dict[str, str]) -> Iterator[None]:
+    """``values`` in os.environ (where not already set) for the block's duration."""
+    added = {k: v for k, v in values.items() if k not in os.environ}
+    os.environ.update(added)
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
 
 
 @contextlib.contextmanager
@@ -169,10 +252,10 @@ def session(options: SweepOptions) -> Iterator[None]:
 
 
 def _run_on_ray(fn, units, workers, ray_address, desc, progress):
+    started = _start_ray(workers, ray_address)  # first: it imports Ray with its settings
     import ray
     from ray.exceptions import RayTaskError
 
-    started = _start_ray(workers, ray_address)
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(_apply)
         fn_ref = ray.put(fn)  # shipped to the workers once, not with every unit

@@ -136,3 +136,62 @@ def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_s
     assert _strip_timing(a) == _strip_timing(b)
     csv_a = (tmp_path / "serial" / "episodes.csv").read_text()
     assert csv_a == (tmp_path / "ray" / "episodes.csv").read_text()
+
+
+# ---- an unreachable cluster (issue 24) ------------------------------------------------------------
+def test_a_ray_address_where_nothing_listens_fails_at_once_with_one_line(capsys, tmp_path):
+    import time
+
+    from ctxsearch.scripts.cli import main
+
+    t = time.perf_counter()
+    with pytest.raises(CtxsearchError, match=r"--ray-address 127.0.0.1:1: no Ray cluster there"):
+        run_units(refuse_three, [1, 2], ray_address="127.0.0.1:1", progress=False)
+    out = str(tmp_path / "t.json")
+    argv = ["truth", "--style", "office", "--samples", "2", "--out", out]
+    assert main([*argv, "--ray-address", "127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no Ray cluster there (Connection refused)" in err, err
+    assert time.perf_counter() - t < 10 and not Path(out).exists()
+
+
+@pytest.mark.parametrize("address", ["nonsense", "host:", ":6379", "localhost:99999", "h:x"])
+def test_a_ray_address_that_is_not_host_port_is_a_one_line_error(address):
+    from ctxsearch.scripts.sweep import check_reachable
+
+    with pytest.raises(CtxsearchError, match="expected HOST:PORT or 'auto'"):
+        check_reachable(address)
+
+
+def test_a_ray_address_that_does_not_answer_fails_within_the_stated_timeout(monkeypatch):
+    import socket
+
+    from ctxsearch.scripts import sweep
+
+    seen = {}
+
+    def silent(address, timeout):
+        seen["timeout"] = timeout
+        raise TimeoutError("timed out")
+
+    monkeypatch.setattr(socket, "create_connection", silent)
+    with pytest.raises(CtxsearchError, match=r"no answer within 5 s"):
+        sweep.check_reachable("192.0.2.1:6379")
+    assert seen["timeout"] == sweep.RAY_CONNECT_TIMEOUT_S == 5
+
+
+def test_a_listening_address_passes_the_check_and_ray_gets_bounded_settings(monkeypatch):
+    import socket
+
+    from ctxsearch.scripts import sweep
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        sweep.check_reachable(f"127.0.0.1:{server.getsockname()[1]}")  # no error
+    timeout, wait = sweep._RAY_CONNECT_ENV  # Ray's own (lower-case) variable names
+    monkeypatch.delenv(timeout, raising=False)
+    monkeypatch.setenv(wait, "7")  # the user's own wins
+    with sweep._env(sweep._RAY_CONNECT_ENV):
+        assert os.environ[timeout] == "5" and os.environ[wait] == "7"
+    assert timeout not in os.environ and os.environ[wait] == "7"
