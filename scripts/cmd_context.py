@@ -91,7 +91,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "worlds for each k of --rooms (0: the empty store); for each copy and scenario, the "
         "context policy searches the same held-out episodes (outside every learned world) as "
         "the no-context baseline and the oracle-prior asymptote. Writes DIR/curve.json, "
-        "curve.md, curve.png (the paired ratio against k with its 95%% band) and curve.csv.",
+        "curve.md, curve.png (the paired ratio against k with its 95% band) and curve.csv.",
     )
     p.add_argument(
         "--style",

@@ -401,7 +401,11 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
         "evidence) are measured against the ground truth. Writes DIR/intervals.json, "
         "DIR/intervals.md and, per seed, DIR/intervals.csv and DIR/intervals_bias.csv.",
     )
-    p.add_argument("--styles", default="office,apartment", help="comma-separated styles")
+    p.add_argument(
+        "--styles",
+        default="office,apartment",
+        help="comma-separated styles (default: office,apartment)",
+    )
     p.add_argument("--rooms", default="10,30", help="comma-separated room marks (default: 10,30)")
     p.add_argument("--seeds", type=argtypes.positive_int, default=3, help="seeds (default: 3)")
     p.add_argument(
@@ -410,7 +414,10 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
         help="detector settings (default: perfect,realistic,realistic+confirm2,realistic+score0.5)",
     )
     p.add_argument(
-        "--truth-samples", type=argtypes.positive_int, default=200, help="ground-truth rooms"
+        "--truth-samples",
+        type=argtypes.positive_int,
+        default=200,
+        help="rooms sampled for the ground truth (default: 200)",
     )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     add_sweep_arguments(p)

@@ -158,3 +158,17 @@ def test_bad_numbers_and_types_are_refused(catalog, tmp_path):
         load_detector(f)
     with pytest.raises(DetectorError, match="no such detector preset"):
         load_detector("nonexistent")
+
+
+def test_special_files_as_detector_get_their_own_message(tmp_path, monkeypatch):
+    """A FIFO or a device given as --detector is named as what it is (and never read: a FIFO
+    would block), not called a missing preset; so is a FIFO given by a bare name."""
+    import os
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    monkeypatch.chdir(tmp_path)
+    for given, kind in [(fifo, "a FIFO"), ("pipe", "a FIFO"), ("/dev/null", "a character device")]:
+        with pytest.raises(DetectorError) as err:
+            load_detector(given)
+        assert f"is {kind}" in str(err.value) and "no such detector preset" not in str(err.value)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from pathlib import Path
 
 import gymnasium
 import numpy as np
@@ -178,6 +179,7 @@ def test_context_feature_ranks_the_learned_relation_volumes(catalog):
         ({"budget_s": -1.0}, "budget_s"),
         ({"top_k": 0}, "top_k"),
         ({"kb": "/nonexistent/kb.sqlite"}, "no such knowledge store"),
+        ({"kb": str(Path(__file__).parent)}, "is a directory, not a regular file"),
     ],
 )
 def test_bad_input_is_one_line_error(kwargs, needle):

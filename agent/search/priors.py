@@ -16,6 +16,7 @@ from ctxsearch.envs.truth import ground_truth, load_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Needs, Rank, parse
 from ctxsearch.knowledge.pooling import PooledCounts
 from ctxsearch.knowledge.store import EvidenceStore
@@ -46,7 +47,11 @@ def open_knowledge(
     One-line errors (CtxsearchError): no such file, not a store or another catalog's (StoreError
     from the store), a store without examinations."""
     p = Path(path)
-    if not p.is_file():
+    try:  # a directory, FIFO or device is named as such, not called missing
+        exists = regular_file_exists(p)
+    except InputFileError as exc:
+        raise CtxsearchError(f"{p}: {exc.problem} (a knowledge store is a file)") from None
+    if not exists:
         raise CtxsearchError(
             f"{p}: no such knowledge store (make one with: ctxsearch learn --kb {p} ...)"
         )
