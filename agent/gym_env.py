@@ -52,6 +52,7 @@ occupancy grid (agent.navigation) and the held-out rooms are the search's (agent
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -144,6 +145,39 @@ def _box(low, high, shape: tuple[int, ...] | None = None) -> spaces.Box:
     return spaces.Box(lo, hi, dtype=np.float32)
 
 
+MAX_BUDGET_S = 1e9  # simulated seconds, as the CLI's --budget-seconds
+MAX_TOP_K = 10_000  # context rows
+
+
+def _check_arguments(style, detector, kb, budget_s, top_k, render_mode) -> None:
+    """A one-line CtxsearchError for an argument of the wrong type or out of range (the files
+    they name are checked by their loaders): budget_s a finite number in (0, MAX_BUDGET_S], top_k
+    a whole number in [1, MAX_TOP_K] (not a bool), names strings or paths."""
+    for name, value, kinds in (
+        ("style", style, (str, Path)),
+        ("detector", detector, (str, Path, type(None))),
+        ("kb", kb, (str, Path, KnowledgeBase, type(None))),
+    ):
+        if not isinstance(value, kinds) or (isinstance(value, str) and not value):
+            raise CtxsearchError(f"{name} must be a name or a path, got {value!r}"[:300])
+    if (
+        isinstance(budget_s, bool)
+        or not isinstance(budget_s, numbers.Real)
+        or not (0 < float(budget_s) <= MAX_BUDGET_S)  # NaN and inf fail too
+    ):
+        raise CtxsearchError(
+            f"budget_s must be a number of seconds in (0, {MAX_BUDGET_S:g}], got {budget_s!r}"
+        )
+    if isinstance(top_k, bool) or not isinstance(top_k, numbers.Integral):
+        raise CtxsearchError(f"top_k must be a whole number, got {top_k!r}")
+    if not 1 <= int(top_k) <= MAX_TOP_K:
+        raise CtxsearchError(f"top_k must be in [1, {MAX_TOP_K}], got {top_k!r}")
+    if render_mode is not None and not (
+        isinstance(render_mode, str) and render_mode in ObjectSearchEnv.metadata["render_modes"]
+    ):
+        raise CtxsearchError(f"unknown render_mode {render_mode!r} (known: rgb_array)")
+
+
 class ObjectSearchEnv(gymnasium.Env):
     """Find an object of the target type in a held-out room (see the module docstring)."""
 
@@ -161,19 +195,14 @@ class ObjectSearchEnv(gymnasium.Env):
         top_k: int = DEFAULT_TOP_K,
         render_mode: str | None = None,
     ) -> None:
+        _check_arguments(style, detector, kb, budget_s, top_k, render_mode)
         self.catalog = load_catalog()
         self.style = resolve_style(style, self.catalog)
         self.detector_model: DetectorModel = default_or_named(
             detector, self.catalog, DEFAULT_DETECTOR
         )
         self.width, self.height = check_camera_size(width, height)
-        if not (isinstance(budget_s, int | float) and budget_s > 0):
-            raise CtxsearchError(f"budget_s must be a positive number of seconds, got {budget_s!r}")
-        if not (isinstance(top_k, int) and top_k > 0):
-            raise CtxsearchError(f"top_k must be a positive whole number, got {top_k!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise CtxsearchError(f"unknown render_mode '{render_mode}' (known: rgb_array)")
-        self.budget_s, self.top_k, self.render_mode = float(budget_s), top_k, render_mode
+        self.budget_s, self.top_k, self.render_mode = float(budget_s), int(top_k), render_mode
         self.kb, self.learned = self._knowledge(kb)
         self.robot_spec, self.time_model = RobotSpec(), TimeModel()
         self._types = [t.name for t in self.catalog.types]

@@ -43,7 +43,9 @@ CAMERA_SIZE = (320, 240)  # the head camera observables' default (width, height)
 def check_camera_size(width: int, height: int) -> tuple[int, int]:
     """(width, height) as ints, or a one-line error outside 1x1 .. ``MAX_IMAGE_SIZE``."""
     w, h = MAX_IMAGE_SIZE
-    if not (isinstance(width, int | np.integer) and isinstance(height, int | np.integer)):
+    if not all(
+        isinstance(v, int | np.integer) and not isinstance(v, bool) for v in (width, height)
+    ):
         raise CtxsearchError(f"image size must be whole pixels, got {width!r}x{height!r}")
     if not (0 < width <= w and 0 < height <= h):
         raise CtxsearchError(f"image size {width}x{height} outside 1x1..{w}x{h}")

@@ -46,7 +46,7 @@ class InputFileError(CtxsearchError):
 def open_regular(path: str | Path) -> int:
     """A read-only file descriptor of the regular file at ``path`` (symlinks resolved), opened
     without blocking; InputFileError for anything else. The caller closes it."""
-    p = Path(path)
+    p = _path(path)
     try:
         st = os.stat(p)  # follows symlinks: what would be read
     except FileNotFoundError:
@@ -69,11 +69,19 @@ def open_regular(path: str | Path) -> int:
     return fd
 
 
+def _path(path: str | Path) -> Path:
+    """``path`` as a Path the OS can take (InputFileError for a NUL byte in it)."""
+    p = Path(path)
+    if "\x00" in str(p):
+        raise InputFileError(p, "a file name with a NUL byte in it")
+    return p
+
+
 def regular_file_exists(path: str | Path) -> bool:
     """Whether a regular file is at ``path`` (itself or through symlinks); False if nothing is
     there (not even a symlink); InputFileError for anything else, e.g. a dangling symlink or a
     symlink loop (nothing may be created through one) or a FIFO. For outputs and stores."""
-    p = Path(path)
+    p = _path(path)
     try:
         os.lstat(p)
     except FileNotFoundError:

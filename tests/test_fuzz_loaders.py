@@ -364,3 +364,38 @@ def test_the_toml_writer_round_trips():
     for name in ("catalog", "style"):
         doc = tomllib.loads(example(name).decode())
         assert tomllib.loads(to_toml(doc).decode()) == doc
+
+
+# ---- the Gymnasium task's arguments -------------------------------------------------------------
+GYM_VALUES = st.one_of(
+    HOSTILE,
+    st.sampled_from([None, "office", "apartment", "perfect", "rgb_array", "human", 8, 64, 300.0]),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=20),
+)
+
+
+@FUZZ
+@given(data=st.data())
+def test_the_gym_tasks_arguments_make_a_task_or_give_the_one_line_error(data):
+    """Any values of ObjectSearchEnv's arguments: a task whose spaces hold what was asked, or a
+    one-line CtxsearchError (never a traceback, never budget_s=inf or top_k=True accepted)."""
+    from ctxsearch.agent.gym_env import ObjectSearchEnv
+
+    names = ["style", "detector", "kb", "width", "height", "budget_s", "top_k", "render_mode"]
+    valid = {"style": "office", "detector": "perfect", "width": 32, "height": 24}
+    args = dict(valid)
+    for name in data.draw(st.lists(st.sampled_from(names), min_size=1, max_size=3, unique=True)):
+        args[name] = data.draw(GYM_VALUES, label=name)
+    if isinstance(args.get("kb"), str) and args["kb"]:
+        args["kb"] = "/nonexistent/" + args["kb"].replace("/", "_")  # never a file of the repo
+    try:
+        env = ObjectSearchEnv(**args)
+    except CtxsearchError as exc:
+        assert "\n" not in str(exc) and "\r" not in str(exc)
+        return
+    assert math.isfinite(env.budget_s) and 0 < env.budget_s <= 1e9
+    assert type(env.top_k) is int and env.top_k >= 1
+    assert not isinstance(args.get("top_k"), bool) and not isinstance(args.get("budget_s"), bool)
+    assert env.observation_space["rgb"].shape == (env.height, env.width, 3)

@@ -434,3 +434,50 @@ def test_a_keyboard_interrupt_in_a_command_is_one_line_and_the_handler_is_restor
     assert main(["kb", "stats", "x.sqlite"]) == 130
     assert capsys.readouterr().err == "ctxsearch: interrupted\n"
     assert signal.getsignal(signal.SIGINT) is before
+
+
+# ---- the Gymnasium task's arguments -------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [
+        ({"budget_s": float("inf")}, "budget_s must be a number of seconds in (0, 1e+09]"),
+        ({"budget_s": float("nan")}, "budget_s must be"),
+        ({"budget_s": 1e300}, "budget_s must be"),
+        ({"budget_s": True}, "budget_s must be"),
+        ({"budget_s": "300"}, "budget_s must be"),
+        ({"top_k": True}, "top_k must be a whole number, got True"),
+        ({"top_k": 2.0}, "top_k must be a whole number"),
+        ({"top_k": 10**12}, "top_k must be in [1, 10000]"),
+        ({"width": True}, "image size must be whole pixels"),
+        ({"style": 5}, "style must be a name or a path"),
+        ({"style": ""}, "style must be a name or a path"),
+        ({"detector": ["perfect"]}, "detector must be a name or a path"),
+        ({"kb": 3.0}, "kb must be a name or a path"),
+        ({"render_mode": ["rgb_array"]}, "unknown render_mode"),
+        ({"style": "x/\x00.toml"}, "NUL byte"),
+        ({"detector": "\x00"}, "NUL byte"),
+    ],
+)
+def test_the_gym_task_refuses_arguments_of_the_wrong_type_or_range(kwargs, needle):
+    from ctxsearch.agent.gym_env import ObjectSearchEnv
+
+    args = {"style": "office", "detector": "perfect", "width": 32, "height": 24, **kwargs}
+    with pytest.raises(CtxsearchError) as err:
+        ObjectSearchEnv(**args)
+    assert needle in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+def test_the_gym_task_takes_numpy_numbers_and_a_deeply_nested_style_is_refused(tmp_path):
+    import numpy as np
+
+    from ctxsearch.agent.gym_env import ObjectSearchEnv
+
+    env = ObjectSearchEnv(
+        "office", "perfect", width=32, height=24, budget_s=np.float32(60), top_k=np.int64(3)
+    )
+    assert (env.budget_s, env.top_k, type(env.top_k)) == (60.0, 3, int)
+    assert env.observation_space["elapsed"].high[0] == pytest.approx(120.0)
+    deep = tmp_path / "deep.toml"
+    deep.write_text("a = " + "[" * 60_000 + "]" * 60_000 + "\n")
+    with pytest.raises(StyleError, match="nested more than 64 levels deep"):
+        ObjectSearchEnv(str(deep), "perfect", width=32, height=24)
