@@ -79,3 +79,20 @@ def test_help_and_kb_show_load_no_simulator(argv, tmp_path):
     *printed, loaded = proc.stdout.strip().splitlines()
     assert json.loads(loaded) == []
     assert "usage:" in proc.stdout if "--help" in argv else "0 examinations" in printed[0]
+
+
+def test_every_package_folder_is_installed_under_ctxsearch():
+    """pyproject.toml lists every folder of code (one with an __init__.py) under the one
+    ``ctxsearch`` namespace, so ``pip install .`` ships all of it and nothing else."""
+    import tomllib
+
+    doc = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    listed = set(doc["tool"]["setuptools"]["packages"])
+    found = {
+        "ctxsearch." + ".".join(p.parent.relative_to(ROOT).parts)
+        for layer in ("knowledge", "envs", "agent", "scripts")
+        for p in (ROOT / layer).rglob("__init__.py")
+    }
+    assert found <= listed, sorted(found - listed)
+    assert {n for n in listed if not n.startswith("ctxsearch")} == set()
+    assert doc["tool"]["setuptools"]["package-dir"] == {"ctxsearch": "."}
