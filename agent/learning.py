@@ -51,10 +51,11 @@ from ctxsearch.agent.run_state import (
 __all__ = ["LearnConfig", "Summary", "learn", "room_seed", "run_id"]  # LearnConfig, run_id: the
 # configuration lives with the run's state (agent.run_state); learn's callers find it here
 from ctxsearch.envs.floorplan import generate_layout
-from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.houses import HouseStyle, resolve_style
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.store import EvidenceStore
 
 ExamCallback = Callable[[ExamResult, KnowledgeBase], None]
@@ -72,6 +73,14 @@ def style_layouts(style: str, catalog: Catalog) -> tuple[str, LayoutFn]:
     """The style's name and its world generator (a room style's rooms or a house style's houses)."""
     st = resolve_style(style, catalog)
     return st.name, lambda index, seed, day=0: generate_layout(st, seed, catalog, day)
+
+
+def world_noun(style: str, catalog: Catalog) -> str:
+    """The word for one world of ``style``: "house" for a house style, else "room"."""
+    try:
+        return "house" if isinstance(resolve_style(style, catalog), HouseStyle) else "room"
+    except CtxsearchError:  # a caller's own layouts (``learn(layouts=...)``) under any name
+        return "room"
 
 
 def release_memory() -> None:
@@ -120,6 +129,7 @@ class Summary:
     detector: str | None = None  # camera mode's detector preset (None: the oracle has none)
     days: int = 1  # days the rooms were visited on
     revisits: int = 0  # known objects examined again on a later day (this call)
+    world: str = "room"  # what one world is called: "room", or "house" in a house style
 
     @property
     def exams_per_wall_s(self) -> float:
@@ -127,15 +137,28 @@ class Summary:
         return self.examinations / self.wall_s if self.wall_s > 0 else 0.0
 
     def lines(self) -> list[str]:
-        """Human-readable summary lines."""
-        days = (
-            [f"days: {self.days} (known objects put back for re-examination in this call: "
-             f"{self.revisits})"]
-            if self.days > 1
-            else []
-        )  # fmt: skip
+        """Human-readable summary lines: worlds named as the style's ("houses", "rooms"), and
+        with --days, the visits (a world on one day) apart from the worlds."""
+        w = self.world
+
+        def n(count: int, noun: str) -> str:
+            return f"{count} {noun}" + ("" if count == 1 else "s")
+
+        if self.days > 1:
+            head = (
+                f"run {self.run}: {n(self.rooms, w)} done on day 0; "
+                f"{n(self.rooms_done_now, 'visit')} (a {w} on one day) done in this call"
+            )
+            days = [
+                f"days: {self.days} (known objects put back for re-examination in this call: "
+                f"{self.revisits})"
+            ]
+        else:
+            head = f"run {self.run}: {n(self.rooms, w)} done ({self.rooms_done_now} in this call)"
+            days = []
+        done_now = f"{self.rooms_done_now} {'visit' if self.days > 1 else w}s"  # "of the 1 rooms"
         return [
-            f"run {self.run}: {self.rooms} rooms done ({self.rooms_done_now} in this call)",
+            head,
             *days,
             f"map: {self.map_mode}",
             f"detector: {self.detector or 'none (oracle perception reads the layout)'}",
@@ -145,12 +168,12 @@ class Summary:
             f"{self.exams_per_wall_s:.1f} examinations per wall second",
         ] + (
             [
-                f"room budget: {self.room_budget_s:g} s simulated per room; the budget ended "
-                f"{self.rooms_left_early} of the {self.rooms_done_now} rooms done in this call"
+                f"{w} budget: {self.room_budget_s:g} s simulated per {w}; the budget ended "
+                f"{self.rooms_left_early} of the {done_now} done in this call"
             ]
             if self.room_budget_s is not None
             else []
-        )
+        )  # fmt: skip
 
 
 # =========================================================================== learn
@@ -190,7 +213,7 @@ def learn(
     t_wall = time.perf_counter()
     summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode,
                       detector=detector.name if detector is not None else None,
-                      days=config.days)  # fmt: skip
+                      days=config.days, world=world_noun(config.style, catalog))  # fmt: skip
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
         kb = KnowledgeBase(catalog, store.alpha)

@@ -30,7 +30,7 @@ def test_learn_then_resume_then_kb_show(tmp_path, capsys):
     assert "0 rooms done" in out
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "1 rooms done (1 in this call)" in out
+    assert "1 room done (1 in this call)" in out
     assert "examinations per wall second" in out and "mean interval width" in out
     n_total = int(out.split(" in the store")[0].split()[-1])
     assert n_total > 5
@@ -189,3 +189,23 @@ def test_bench_learning_writes_its_four_files(tmp_path, capsys, budget):
 def test_bench_learning_bad_strategy_list(tmp_path, capsys):
     assert main(["bench", "learning", "--strategies", "hif,nope", "--out", str(tmp_path)]) == 2
     assert "unknown strategy 'nope'" in capsys.readouterr().err
+
+
+def test_summary_names_houses_visits_and_days():
+    """Houses are counted as houses, rooms as rooms; with --days the visits (a world on one
+    day) are told apart from the worlds."""
+    from ctxsearch.agent.learning import Summary, world_noun
+    from ctxsearch.knowledge.catalog import load_catalog
+
+    catalog = load_catalog()
+    assert world_noun("apartment", catalog) == "house"
+    assert world_noun("office", catalog) == "room"
+    houses = Summary("r", rooms=3, rooms_done_now=3, world="house").lines()
+    assert houses[0] == "run r: 3 houses done (3 in this call)"
+    days = Summary("r", rooms=4, rooms_done_now=20, days=5, world="room", room_budget_s=60.0)
+    text = "\n".join(days.lines())
+    assert "4 rooms done on day 0; 20 visits (a room on one day) done in this call" in text
+    assert "days: 5" in text and "of the 20 visits done in this call" in text
+    assert (
+        Summary("r", rooms=1, rooms_done_now=1).lines()[0] == "run r: 1 room done (1 in this call)"
+    )
