@@ -316,7 +316,7 @@ class _Viewer:
         rec.set_time(world.sim_time)
         rec.log_robot(frame.pose, spec, path=gaze.path)
         rec.log_camera(frame, dets)
-        seen = ", ".join(f"{d.type}#{d.instance_id}" for d in dets) or "nothing"
+        seen = ", ".join(d.label for d in dets) or "nothing"
         rec.log_text(f"view {i}: looking at {target.type} #{target.id}; detected {seen}")
         print(
             f"  view {i}: {target.type} #{target.id} from ({frame.pose.x:.2f}, {frame.pose.y:.2f}), "

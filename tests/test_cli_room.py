@@ -122,3 +122,14 @@ def test_draw_detections_enlarges_and_labels(catalog):
     img = room_views.draw_detections(np.zeros((240, 320, 3), np.uint8), dets, catalog)
     assert img.shape == (480, 640, 3)
     assert img.any()
+
+
+@pytest.mark.render
+def test_room_names_a_false_detection_as_such(tmp_path, capsys):
+    """Office seed 0's third view holds a detection of clutter: printed as "a false detection
+    (TYPE)", never by its raw negative id."""
+    args = _parse(["room", "--seed", "0", "--out", str(tmp_path), "--views", "3"])
+    assert args.func(args) == 0
+    printed = capsys.readouterr().out
+    assert "detected: " in printed and "a false detection (" in printed
+    assert "#-" not in printed
