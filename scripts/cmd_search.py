@@ -185,8 +185,14 @@ def _forgetting_knowledge(args: argparse.Namespace):
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
-    from ctxsearch.agent.search.runner import SearchConfig, search_once
+    from ctxsearch.agent.search.episode import check_budget, check_target
+    from ctxsearch.envs.houses import resolve_style
     from ctxsearch.knowledge.catalog import load_catalog
+
+    catalog = load_catalog()  # an impossible request is refused before the search stack loads
+    check_target(catalog, args.target, resolve_style(args.style, catalog))
+    check_budget(args.budget_seconds)
+    from ctxsearch.agent.search.runner import SearchConfig, search_once
 
     fields = _config_fields(args)
     policy = args.policy or DEFAULT_POLICY[fields["map"]]
@@ -268,6 +274,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
+    from ctxsearch.agent.search.episode import check_budget
+
+    check_budget(args.budget_seconds)  # refused before the benchmark's imports
     from ctxsearch.agent.search.registry import parse_policies
     from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
     from ctxsearch.scripts.sweep import SweepOptions

@@ -205,3 +205,38 @@ def test_the_parser_reads_the_policy_registry_and_the_modes():
         check_scenario(cmd_search.DEFAULT_POLICIES[scenario].split(","), scenario)
         assert scenario in POLICIES[cmd_search.DEFAULT_POLICY[scenario]].maps
     assert cmd_search.DEFAULT_POLICIES["built"].startswith("frontier,indirect")
+
+
+@pytest.mark.parametrize(
+    ("argv", "pattern"),
+    [
+        (["--style", "office", "--target", "Desk"], "target 'Desk' is a furniture type"),
+        (
+            ["--style", "apartment", "--target", "Microscope"],
+            "no world of style 'apartment' can hold",
+        ),
+        (
+            ["--style", "office", "--target", "Cup", "--budget-seconds", "1e-300"],
+            "too small to find anything",
+        ),
+        (["--style", "office", "--target", "Cup", "--budget-seconds", "0.4"], "0.25 s each: 0.5 s"),
+    ],
+)
+def test_impossible_requests_are_refused_up_front(store, capsys, argv, pattern):
+    """No episode is drawn for a request no world can satisfy (a draw would try 150 rooms and
+    more, minutes): refused from the style's definition and the time model, in well under the
+    few seconds allowed here."""
+    import time
+
+    t = time.perf_counter()
+    code = main(["search", "--kb", str(store), *argv])
+    assert time.perf_counter() - t < 5.0
+    _one_line_error(capsys, code, pattern)
+
+
+def test_bench_search_refuses_a_budget_below_two_images(store, tmp_path, capsys):
+    out = tmp_path / "bench"
+    code = main(["bench", "search", "--kb", str(store), "--style", "office", "--episodes", "2",
+                 "--budget-seconds", "1e-300", "--out", str(out)])  # fmt: skip
+    _one_line_error(capsys, code, "too small to find anything")
+    assert not out.exists()

@@ -19,8 +19,9 @@ from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
 from ctxsearch.agent.viewplan import Gaze
+from ctxsearch.envs.houses import WorldStyle
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.robot_spec import RobotPose
+from ctxsearch.envs.robot_spec import RobotPose, TimeModel
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 
@@ -176,10 +177,37 @@ def nearest_free_start(grid: OccupancyGrid, pose: RobotPose) -> RobotPose:
     return RobotPose(float(p[0]), float(p[1]), pose.yaw, pose.pan, pose.tilt)
 
 
-def check_target(catalog: Catalog, target: str) -> None:
-    """A one-line error unless ``target`` is a type of the catalog."""
+def check_target(catalog: Catalog, target: str, style: WorldStyle | None = None) -> None:
+    """A one-line error unless ``target`` is a small-object type of the catalog that worlds of
+    ``style`` (when given) can hold: checked on the style's definition (``style.types``: its
+    furniture, rules and clutter), so an impossible request is refused before any episode is
+    drawn, instead of after a draw that tries every room it may."""
+    small = [t.name for t in catalog.types if not t.is_furniture]
     if target not in catalog:
-        small = [t.name for t in catalog.types if not t.is_furniture]
         raise CtxsearchError(
             f"unknown target type '{target}' (small-object types: {', '.join(small)})"
+        )
+    if catalog.type(target).is_furniture:
+        raise CtxsearchError(
+            f"target '{target}' is a furniture type: a search looks for small objects "
+            f"({', '.join(small)})"
+        )
+    if style is not None and target not in style.types:
+        held = [t for t in small if t in style.types]
+        raise CtxsearchError(
+            f"no world of style '{style.name}' can hold a {target} (its small objects: "
+            f"{', '.join(held) or 'none'})"
+        )
+
+
+def check_budget(budget_s: float, time_model: TimeModel | None = None) -> None:
+    """A one-line error unless ``budget_s`` leaves time for the two images a find takes (a
+    detection and the image that confirms it, ``TimeModel.image_cost`` each): a smaller budget
+    is refused before any episode is drawn (no world could be feasible)."""
+    tm = time_model or TimeModel()
+    need = 2 * tm.image_cost
+    if not budget_s >= need:
+        raise CtxsearchError(
+            f"a budget of {budget_s:g} simulated s is too small to find anything: a find takes "
+            f"two images (a detection and its confirmation, {tm.image_cost:g} s each: {need:g} s)"
         )

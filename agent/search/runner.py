@@ -26,7 +26,13 @@ from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
-from ctxsearch.agent.search.episode import DEFAULT_BUDGET_S, Episode, SearchResult, check_target
+from ctxsearch.agent.search.episode import (
+    DEFAULT_BUDGET_S,
+    Episode,
+    SearchResult,
+    check_budget,
+    check_target,
+)
 from ctxsearch.agent.search.maps import RoomMaps
 from ctxsearch.agent.search.oracle import Oracle, OracleEye
 from ctxsearch.agent.search.policies import SearchPolicy, make_policy
@@ -367,11 +373,12 @@ def search_once(
     them side by side). ``kb`` (a KnowledgeBase) or ``kb_path`` (a store) gives the learned
     probabilities."""
     catalog = catalog or load_catalog()
-    check_target(catalog, target)
+    style = resolve_style(config.style, catalog)
+    check_target(catalog, target, style)  # both before any draw: refused in a second
+    check_budget(config.budget_s)
     names = list(config.policies)
     for n in names:
         split_name(n)
-    style = resolve_style(config.style, catalog)
     priors = load_priors(config, style, catalog, kb, kb_path, exclude_seeds)
     detector = config.detector_model(catalog)
     spec = DrawSpec.make(

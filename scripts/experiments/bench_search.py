@@ -60,19 +60,24 @@ from matplotlib.figure import Figure
 
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.draw import DrawSpec, WorldDraw, draw_episodes
-from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult
+from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult, check_budget
 from ctxsearch.agent.search.measures import (
     BOOTSTRAP_SAMPLES,
+    TIE_S,
     PairedRatio,
+    PairedStats,
     bootstrap_ci,
     oracle_violations,
     paired_ratio,
+    paired_stats,
     r4,
     spl,
 )
 from ctxsearch.agent.search.registry import split_name
 from ctxsearch.agent.search.runner import EpisodeSet, SearchConfig, load_priors, run_episode
-from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import WorldStyle, resolve_style
+from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -111,12 +116,15 @@ class PolicyStats:
     spl: float | None = None  # mean over episodes of S * t_oracle / max(t, t_oracle)
     paired: dict[str, PairedRatio] = field(default_factory=dict)  # baseline -> paired ratio
     oracle_violations: int = 0  # episodes this policy found the target sooner than the oracle
+    # baseline -> the statistics that can see a small effect (geometric mean, test, ties, power)
+    paired_stats: dict[str, PairedStats] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The JSON entry of search.json."""
         return {
             "success_rate": r4(self.success_rate),
             "spl": r4(self.spl),
+            "paired": {b: p.to_json() for b, p in self.paired_stats.items()},
             "paired_ratio": {b: p.to_json() for b, p in self.paired.items()},
             "median_s": r4(self.median_s),
             "median_ci": [r4(self.median_ci[0]), r4(self.median_ci[1])],
@@ -154,6 +162,7 @@ def aggregate(results: dict[str, list[SearchResult]], seed: int = 0) -> dict[str
         for base in BASELINES:
             if base in results and base != name:
                 out[name].paired[base] = paired_ratio(times[name], times[base], seed=seed)
+                out[name].paired_stats[base] = paired_stats(times[name], times[base], seed=seed)
         if "exhaustive" in results:
             pr = paired_ratio(times[name], times["exhaustive"], seed=seed)
             out[name].paired_ratio, out[name].paired_ratio_ci = pr.median, pr.ci
@@ -161,6 +170,59 @@ def aggregate(results: dict[str, list[SearchResult]], seed: int = 0) -> dict[str
             out[name].spl = spl(results[name], results[ORACLE])
             if name != ORACLE:
                 out[name].oracle_violations = oracle_violations(results[name], results[ORACLE])
+    return out
+
+
+def episode_facts(style: WorldStyle, eps: Sequence[Episode], catalog: Catalog) -> list[dict]:
+    """What each episode is like, for the strata of search.json's ``paired_by``: the target's
+    group (``detect_group``), whether an instance stands in the room the robot starts in (a
+    single room: always), and how many instances the world holds (``1``, ``2-3``, ``4+``). Read
+    from the true layout: a report, not the robot's knowledge."""
+    out = []
+    for ep in eps:
+        layout = generate_layout(style, ep.room_seed, catalog)
+        inst = layout.of_type(ep.target)
+        start = _room_at(layout, ep.start.x, ep.start.y)
+        same = not layout.rooms or any(layout.room_of.get(o.id) == start for o in inst)
+        k = len(inst)
+        out.append({
+            "target_group": detect_group(catalog, ep.target),
+            "start_room": "instance in the start room" if same else "none in the start room",
+            "instances": "1" if k <= 1 else "2-3" if k <= 3 else "4+",
+        })  # fmt: skip
+    return out
+
+
+def _room_at(layout: RoomLayout, x: float, y: float) -> int | None:
+    """The index of the house room whose outline holds (x, y) (None: none, or a single room)."""
+    for r in layout.rooms:
+        x0, y0, x1, y1 = r.outline
+        if x0 <= x <= x1 and y0 <= y <= y1:
+            return r.index
+    return None
+
+
+STRATA = ("target_group", "start_room", "instances")
+
+
+def paired_strata(
+    results: dict[str, list[SearchResult]], facts: Sequence[dict], seed: int = 0
+) -> dict[str, dict]:
+    """``paired_stats`` of every policy against every baseline that ran, within each stratum of
+    ``STRATA``: {stratum: {value: {"n": episodes, policy: {baseline: stats}}}}."""
+    bases = [b for b in BASELINES if b in results]
+    out: dict[str, dict] = {}
+    for kind in STRATA:
+        out[kind] = {}
+        for value in sorted({f[kind] for f in facts}):
+            idx = [i for i, f in enumerate(facts) if f[kind] == value]
+            t = {n: np.array([rs[i].time_to_find for i in idx]) for n, rs in results.items()}
+            cell: dict = {"n": len(idx)}
+            for name in results:
+                cell[name] = {
+                    b: paired_stats(t[name], t[b], seed=seed).to_json() for b in bases if b != name
+                }
+            out[kind][value] = cell
     return out
 
 
@@ -209,10 +271,44 @@ class BenchResult:
     files: list[Path] = field(default_factory=list)
     wall_s: float = 0.0
     draw: EpisodeDraw | None = None  # what the episode draw left out
+    facts: list[dict] = field(default_factory=list)  # episode_facts, for the strata
+
+
+def headline_table(stats: dict[str, PolicyStats]) -> str:
+    """search.md's first table: each policy against each baseline that ran, by the geometric
+    mean of the paired time ratio with its interval, the ratio of means, wins/losses/ties, the
+    signed-rank test and the episodes the measured effect needs for 80% power."""
+
+    def f(x, d=2):
+        return "-" if x is None or not math.isfinite(x) else f"{x:.{d}f}"
+
+    lines = [
+        "| policy | baseline | geometric mean [95% CI] | ratio of means [95% CI] | "
+        "wins/losses/ties | Wilcoxon p | episodes for 80% power |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for st in stats.values():
+        for b, p in st.paired_stats.items():
+            lines.append(
+                f"| {st.name} | {b} | {f(p.geo_mean)} [{f(p.geo_mean_ci[0])}, "
+                f"{f(p.geo_mean_ci[1])}] | {f(p.ratio_of_means)} [{f(p.ratio_of_means_ci[0])}, "
+                f"{f(p.ratio_of_means_ci[1])}] | {p.wins}/{p.losses}/{p.ties} | "
+                f"{f(p.wilcoxon_p, 3)} | {p.episodes_for_power or '-'} |"
+            )
+    lines.append("")
+    lines.append(
+        "Per episode, the policy's simulated seconds to find over the baseline's (a failure at "
+        f"the budget); a tie is within {TIE_S:g} s and counts as ratio 1; intervals: percentile "
+        "bootstrap over episodes; Wilcoxon: signed-rank test on the log ratios, ties dropped; "
+        "the last column: the paired episodes an effect of the measured size needs for 80% "
+        "power at a two-sided 5% level."
+    )
+    return "\n".join(lines)
 
 
 def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
-    """The Markdown table of search.md: the paired ratios to each baseline first."""
+    """The Markdown tables of search.md: the headline statistics (``headline_table``), then the
+    paired medians, success, spl and times."""
     bases = [b for b in BASELINES if b in stats]
 
     def f(x, d=1):
@@ -224,6 +320,8 @@ def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
         return f"{f(p.median, 2)} [{f(p.ci[0], 2)}, {f(p.ci[1], 2)}] {p.wins}/{p.losses}"
 
     lines = [
+        headline_table(stats),
+        "",
         "| policy | "
         + "".join(f"t / t_{b} [95% CI] wins/losses | " for b in bases)
         + "success | spl | median s [95% CI] | mean s [95% CI] | gazes | path m | "
@@ -306,6 +404,7 @@ def bench_search(
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
     style = resolve_style(config.style, catalog)
+    check_budget(config.budget_s)  # before the priors and the draw: refused at once
     priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb)
     detector = config.detector_model(catalog)
     sweep = sweep or SweepOptions()
@@ -327,6 +426,7 @@ def bench_search(
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.draw = draw
+    res.facts = episode_facts(style, eps, catalog)
     res.files = _write_files(config, Path(out), style.name, priors.kb, res)
     if (
         "indirect" in results and "frontier" in results
@@ -477,6 +577,7 @@ def _write_files(
         else None,
         "baselines": [b for b in BASELINES if b in stats],
         "policies": {n: st.to_json() for n, st in stats.items()},
+        "paired_by": paired_strata(results, res.facts, config.seed) if res.facts else {},
         "by_target": breakdown(eps, results, lambda ep: ep.target),
         "by_group": breakdown(eps, results, lambda ep: detect_group(catalog, ep.target)),
         "episode_list": [_episode_json(ep, i, results) for i, ep in enumerate(eps)],
