@@ -38,9 +38,32 @@ def test_example_imports_no_simulator():
     assert r.returncode == 0, r.stderr
 
 
-def test_readme_api_snippet_runs(tmp_path, monkeypatch):
+def test_example_runs_twice_on_one_store(tmp_path, capsys):
+    """The second call on the same store resumes: nothing examined again, the same intervals
+    (not 'another process is learning the same run')."""
+    store = tmp_path / "robot.sqlite"
+    assert real_robot_api.main(["--store", str(store)]) == 0
+    first = capsys.readouterr().out
+    assert real_robot_api.main(["--store", str(store)]) == 0
+    second = capsys.readouterr().out
+    assert "examined Table" in first and "examined Table" not in second
+    assert "room 102: 3 objects examined by an earlier call" in second
+    assert first.split("tables examined")[1] == second.split("tables examined")[1]
+    with EvidenceStore.open(store, real_robot_api.parse_catalog(real_robot_api.CATALOG)) as s:
+        assert s.examinations_count() == 7
+
+
+def test_readme_api_snippet_runs_twice(tmp_path, monkeypatch, capsys):
     text = (ROOT / "README.md").read_text()
     code = text.split("## Python API for other robots")[1].split("```python\n")[1].split("```")[0]
     monkeypatch.chdir(tmp_path)
-    exec(compile(code, "README.md", "exec"), {})
+    outs = []
+    for _ in range(2):
+        exec(compile(code, "README.md", "exec"), {})
+        outs.append(capsys.readouterr().out)
     assert (tmp_path / "robot.sqlite").exists()
+    assert outs[0] == outs[1] and "ON-TOP-OF-DESK" in outs[0]
+    from ctxsearch.knowledge.catalog import load_catalog
+
+    with EvidenceStore.open(tmp_path / "robot.sqlite", load_catalog()) as s:
+        assert s.examinations_count() == 1

@@ -2,6 +2,9 @@
 
     python scripts/examples/real_robot_api.py [--store PATH]
 
+Given the same ``--store`` again, it resumes: the objects it examined before are not examined
+again, so a second call records nothing new and prints the same intervals.
+
 A robot with its own detector (here: a few hand-written detections standing in for it) does what
 Figure 2 of the paper does, with the same code the simulated robot uses:
 
@@ -111,7 +114,11 @@ def main(argv: list[str] | None = None) -> int:
         path = args.store or Path(tmp) / "robot.sqlite"
         with EvidenceStore.open(path, catalog) as store:
             for room, detections in ROOMS.items():
-                examined: set[int] = set()
+                # Run again on the same store, it resumes: what this run examined is not again
+                # (the store's key, one examination per run, room and object, would refuse it).
+                examined = store.examined("my-robot", "lab", room)
+                if examined:
+                    print(f"room {room}: {len(examined)} objects examined by an earlier call")
                 while True:
                     kb = store.knowledge_base()
                     unexamined = [o for o in detections if o.id not in examined]
