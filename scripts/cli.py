@@ -38,6 +38,7 @@ COMMAND_MODULES = [
     "ctxsearch.scripts.cmd_learn",
     "ctxsearch.scripts.cmd_search",
     "ctxsearch.scripts.cmd_demo",
+    "ctxsearch.scripts.cmd_view",
 ]
 # Benchmark modules (`ctxsearch bench NAME`), each exposing register_bench(bench_subparsers).
 BENCH_MODULES = [
