@@ -38,7 +38,7 @@ examples:
 
 BENCH_EXAMPLES = """\
 examples:
-  ctxsearch bench kb                                all sizes, writes results/bench_kb.*
+  ctxsearch bench kb                                all sizes, prints the table only
   ctxsearch bench kb --sizes 100,1000 --out /tmp/bench
 """
 
@@ -217,9 +217,10 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out",
         type=argtypes.out_dir,
-        default=Path("results"),
+        default=None,
         metavar="DIR",
-        help="default: results",
+        help="write the files here (default: none, only the table is printed; make bench "
+        "writes results/)",
     )
     p.add_argument(
         "--sizes",
@@ -469,7 +470,10 @@ def run_bench(args: argparse.Namespace) -> int:
         f"ctxsearch bench kb --out {args.out} --sizes {','.join(str(t) for t in sizes)} "
         f"--reps {args.reps} --candidates {args.candidates} --seed {args.seed}"
     )
-    paths = bench.write_results(rows, args.out, command=command)
     print(bench.markdown_table(rows))
+    if args.out is None:  # a benchmark without --out writes nothing
+        print("no files written (--out DIR writes bench_kb.json, .csv, .md and .png)")
+        return 0
+    paths = bench.write_results(rows, args.out, command=command)
     print(f"wrote {paths['json']}, {paths['csv']}, {paths['md']} and {paths['png']}")
     return 0

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import tempfile
+from pathlib import Path
 
 from ctxsearch.scripts import argtypes
 
@@ -14,9 +16,15 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         help="simulator speed: layouts/s, build+compile ms, gazes/s, render overhead",
         description="Time the room generator, the MJCF build and compile per room, and gazes "
         "(move the head in MuJoCo, render segmentation and depth, detect) against the same "
-        "renders with a bare mujoco.Renderer. Writes DIR/bench_sim.json, DIR/bench_sim.md and DIR/bench_sim.png.",
+        "renders with a bare mujoco.Renderer. With --out DIR, writes DIR/bench_sim.json, "
+        "DIR/bench_sim.md, DIR/bench_sim.csv and DIR/bench_sim.png; without, prints the table only.",
     )
-    p.add_argument("--out", required=True, type=argtypes.out_dir, help="output directory")
+    p.add_argument(
+        "--out",
+        type=argtypes.out_dir,
+        default=None,
+        help="output directory (default: none, only the table is printed)",
+    )
     p.add_argument(
         "--rooms", type=argtypes.positive_int, default=5, help="rooms to build (default: 5)"
     )
@@ -55,8 +63,21 @@ def run_bench(args: argparse.Namespace) -> int:
     # Imported here: the benchmark pulls in MuJoCo, which `ctxsearch --help` must not wait for.
     from ctxsearch.scripts.experiments.bench_sim import format_table, run
 
-    results = run(
-        args.out,
+    if args.out is None:  # a benchmark without --out writes nothing: its files go to a temp dir
+        with tempfile.TemporaryDirectory(prefix="ctxsearch-bench-sim-") as tmp:
+            print(format_table(_run(run, args, Path(tmp))))
+        print("no files written (--out DIR writes bench_sim.json, .md, .csv and .png)")
+        return 0
+    print(format_table(_run(run, args, args.out)))
+    print(
+        f"wrote {args.out / 'bench_sim.json'}, {args.out / 'bench_sim.md'} and {args.out / 'bench_sim.png'}"
+    )
+    return 0
+
+
+def _run(run, args: argparse.Namespace, out: Path) -> dict:
+    return run(
+        out,
         rooms=args.rooms,
         gazes=args.gazes,
         style=args.style,
@@ -65,8 +86,3 @@ def run_bench(args: argparse.Namespace) -> int:
         explore=min(args.explore, args.rooms),
         frontier_rule=args.frontier_rule,
     )
-    print(format_table(results))
-    print(
-        f"wrote {args.out / 'bench_sim.json'}, {args.out / 'bench_sim.md'} and {args.out / 'bench_sim.png'}"
-    )
-    return 0

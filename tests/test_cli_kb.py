@@ -268,3 +268,12 @@ def test_bad_bench_sizes(capsys):
         main(["bench", "kb", "--sizes", "ten"])
     assert info.value.code == 2
     assert "comma-separated" in capsys.readouterr().err
+
+
+def test_bench_kb_without_out_writes_nothing(capsys, tmp_path, monkeypatch):
+    """A benchmark without --out writes nothing tracked (it once wrote results/ by default)."""
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = run_cli(capsys, "bench", "kb", "--sizes", "50", "--reps", "1")
+    assert rc == 0, err
+    assert "| types |" in out and "no files written" in out
+    assert list(tmp_path.iterdir()) == []

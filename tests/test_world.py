@@ -258,6 +258,23 @@ def test_bench_sim_writes_json_table_and_plot(tmp_path, capsys):
 
 
 @pytest.mark.render
+def test_bench_sim_without_out_writes_nothing(tmp_path, capsys, monkeypatch):
+    """Without --out only the table is printed (its files go to a removed temporary directory);
+    fewer gazes than the warm-up are timed as asked."""
+    import tempfile
+
+    from ctxsearch.scripts.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    assert main(["bench", "sim", "--rooms", "1", "--gazes", "3", "--explore", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "gazes per second" in out and "no files written" in out
+    assert [p.name for p in tmp_path.iterdir()] == ["tmp"] and not any((tmp_path / "tmp").iterdir())
+
+
+@pytest.mark.render
 def test_task_exposes_the_head_camera_as_observables(layout, catalog):
     from dm_control import composer
 

@@ -72,7 +72,7 @@ def _bare_gaze_ms(world: World, targets: np.ndarray) -> list[float]:
     option, cam = world._head_option, world._cam_id
     times = []
     with mujoco.Renderer(m, height=world.height, width=world.width) as r:
-        for k, (pan, tilt) in enumerate(np.vstack([targets[:WARMUP_GAZES], targets])):
+        for k, (pan, tilt) in enumerate(np.vstack([_warmup(targets), targets])):
             t = time.perf_counter()
             d.qpos[qadr] = pan, tilt
             mujoco.mj_forward(m, d)
@@ -84,6 +84,12 @@ def _bare_gaze_ms(world: World, targets: np.ndarray) -> list[float]:
             if k >= WARMUP_GAZES:
                 times.append((time.perf_counter() - t) * 1e3)
     return times
+
+
+def _warmup(targets: np.ndarray) -> np.ndarray:
+    """The WARMUP_GAZES untimed gazes before the timed ones: the first targets (repeated when
+    there are fewer: ``--gazes 3`` is timed on its 3 gazes, not on fewer)."""
+    return targets[np.arange(WARMUP_GAZES) % len(targets)]
 
 
 @dataclass
@@ -244,7 +250,7 @@ def _time_gazes(
     times.objects.append(len(lay.objects))
     world.reset_pose(start_pose(lay))
     times.renderer.append(_ms(lambda: world._renderer(world.width, world.height))[0])
-    for k, (pan, tilt) in enumerate(np.vstack([targets[:WARMUP_GAZES], targets])):
+    for k, (pan, tilt) in enumerate(np.vstack([_warmup(targets), targets])):
         t0 = time.perf_counter()
         world.move_head(pan, tilt)
         t1 = time.perf_counter()
