@@ -29,8 +29,11 @@ syscheck:
 demo: $(STAMP)
 	$(VENV)/bin/ctxsearch demo
 
+# The suite on every CPU (pytest-xdist; a test file's tests stay on one worker, so its module
+# fixtures are built once). TEST_WORKERS=0 runs it in this process.
+TEST_WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 # Regenerates every result the README quotes: the wall-clock timings alone, then two lanes side
 # by side (make -j2, their lines interleaved): lane A starts with the steps that

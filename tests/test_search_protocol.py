@@ -187,6 +187,13 @@ def test_no_policy_beats_the_oracle(tmp_path, detector, n, map_mode, desk_cup_st
     assert doc["start_redraws"] >= 0
     ctx_policy, baseline = policies[1], policies[0]
     assert doc["policies"][ctx_policy]["paired_ratio"][baseline]["wins"] >= 0
+    head = doc["policies"][ctx_policy]["paired"][baseline]
+    assert head["n"] == n and head["wins"] + head["losses"] + head["ties"] == n
+    assert set(doc["paired_by"]) == {"target_group", "start_room", "instances"}
+    assert sum(c["n"] for c in doc["paired_by"]["instances"].values()) == n
+    assert (out / "search.md").read_text().index("geometric mean") < (
+        out / "search.md"
+    ).read_text().index("t / t_")
     assert set(doc["by_group"]) <= {"small", "large"}
     assert sum(v["n"] for v in doc["by_target"].values()) == n
     with (out / "episodes.csv").open(newline="") as f:
@@ -375,3 +382,33 @@ def test_the_kept_draw_of_the_same_spec_passes_its_check(drawn, office, catalog)
     assert D.check_draw(draw_store.from_json(draw_store.to_json(drawn)), spec, catalog)
     learned = DrawSpec.make(office, 2, 5, catalog, 60.0, {drawn.episodes[0].room_seed})
     assert not D.check_draw(drawn, learned, catalog)  # a room the store learned in
+
+
+def test_paired_stats_see_what_a_median_pinned_by_ties_cannot():
+    """Issue 25: with half the episodes tied, the paired median sits at 1.00 while the geometric
+    mean shows the effect; ties are counted apart and dropped by the signed-rank test; the power
+    line grows as the effect shrinks."""
+    from ctxsearch.agent.search.measures import paired_stats
+
+    rng = np.random.default_rng(0)
+    base = rng.uniform(20.0, 200.0, 300)
+    t = base * np.exp(rng.normal(-0.3, 0.5, 300))
+    t[:160] = base[:160]  # ties: both found in the same first image
+    p = paired_stats(t, base)
+    assert paired_ratio(t, base).median == pytest.approx(1.0)
+    assert (p.wins + p.losses + p.ties, p.ties) == (300, 160)
+    assert 0.8 < p.geo_mean < 0.9 and p.geo_mean_ci[1] < 1.0
+    assert p.wilcoxon_p < 1e-6
+    assert p.ratio_of_means_ci[0] <= p.ratio_of_means <= p.ratio_of_means_ci[1]
+    weaker = paired_stats(np.where(t < base, (t + base) / 2, t), base)
+    assert weaker.episodes_for_power > p.episodes_for_power
+    same = paired_stats(base, base)
+    assert (same.geo_mean, same.ties, same.wilcoxon_p, same.episodes_for_power) == (
+        1.0,
+        300,
+        1.0,
+        None,
+    )
+    doc = p.to_json()
+    assert set(doc) == {"geo_mean", "geo_mean_ci", "ratio_of_means", "ratio_of_means_ci",
+                        "wilcoxon_p", "wins", "losses", "ties", "n", "episodes_for_power"}  # fmt: skip

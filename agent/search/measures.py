@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Protocol
 
 import numpy as np
@@ -146,3 +147,79 @@ def oracle_violations(results: Sequence[Outcome], oracle: Sequence[Outcome]) -> 
         for r, o in zip(results, oracle, strict=True)
         if r.success and (not o.success or r.sim_time < o.sim_time - TIE_S)
     )
+
+
+POWER = 0.8  # the power the episode count of ``PairedStats.episodes_for_power`` is sized for
+TEST_ALPHA = 0.05  # two-sided level of the signed-rank test and of that count
+
+
+@dataclass(frozen=True)
+class PairedStats:
+    """A policy against a baseline over paired episodes, the statistics that can see a small
+    effect: the geometric mean of the per-episode time ratio with a bootstrap interval (the
+    headline: ties count as ratio 1 and do not pin it as they pin a median), the ratio of mean
+    times with a paired bootstrap interval, the Wilcoxon signed-rank test on the log ratios
+    (ties dropped, two-sided), wins, losses and ties (within ``TIE_S``), and the episodes an
+    effect of the measured size would need for ``POWER`` at ``TEST_ALPHA`` (normal
+    approximation on the log ratio; None when there is no effect)."""
+
+    geo_mean: float
+    geo_mean_ci: tuple[float, float]
+    ratio_of_means: float
+    ratio_of_means_ci: tuple[float, float]
+    wilcoxon_p: float
+    wins: int
+    losses: int
+    ties: int
+    n: int
+    episodes_for_power: int | None
+
+    def to_json(self) -> dict:
+        """search.json's ``paired[baseline]`` entry."""
+        return {
+            "geo_mean": r4(self.geo_mean),
+            "geo_mean_ci": [r4(self.geo_mean_ci[0]), r4(self.geo_mean_ci[1])],
+            "ratio_of_means": r4(self.ratio_of_means),
+            "ratio_of_means_ci": [r4(self.ratio_of_means_ci[0]), r4(self.ratio_of_means_ci[1])],
+            "wilcoxon_p": r4(self.wilcoxon_p),
+            "wins": self.wins,
+            "losses": self.losses,
+            "ties": self.ties,
+            "n": self.n,
+            "episodes_for_power": self.episodes_for_power,
+        }
+
+
+def paired_stats(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> PairedStats:
+    """``PairedStats`` of times ``t`` against ``t_base`` (aligned episodes; failures at the
+    budget). The bootstrap resamples episodes (seeded); scipy is imported here, not with the
+    module, which the episode types use."""
+    from scipy import stats as sps
+
+    a, b = np.asarray(t, float), np.asarray(t_base, float)
+    if a.shape != b.shape:
+        raise ValueError(f"unpaired times: {a.shape} vs {b.shape}")
+    n = len(a)
+    tie = np.abs(a - b) <= TIE_S
+    wins, losses = int(np.sum((a < b) & ~tie)), int(np.sum((a > b) & ~tie))
+    if n == 0:
+        nan2 = (math.nan, math.nan)
+        return PairedStats(math.nan, nan2, math.nan, nan2, math.nan, 0, 0, 0, 0, None)
+    logr = np.where(tie, 0.0, np.log(np.maximum(a, TIE_S) / np.maximum(b, TIE_S)))
+    lo, hi = bootstrap_ci(logr, np.mean, seed=seed)
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, n, size=(BOOTSTRAP_SAMPLES, n))
+    rom = a[idx].mean(1) / np.maximum(b[idx].mean(1), TIE_S)
+    rom_ci = (float(np.quantile(rom, 0.025)), float(np.quantile(rom, 0.975)))
+    nonzero = logr[logr != 0.0]
+    p = float(sps.wilcoxon(nonzero).pvalue) if len(nonzero) else 1.0
+    sd, mean = float(np.std(logr, ddof=1)) if n > 1 else 0.0, float(np.mean(logr))
+    need = None
+    if mean != 0.0 and sd > 0.0:
+        z = NormalDist().inv_cdf(1 - TEST_ALPHA / 2) + NormalDist().inv_cdf(POWER)
+        need = int(math.ceil((z * sd / abs(mean)) ** 2))
+    return PairedStats(
+        float(np.exp(mean)), (float(np.exp(lo)), float(np.exp(hi))),
+        float(a.mean() / max(b.mean(), TIE_S)), rom_ci, p, wins, losses, n - wins - losses, n,
+        need,
+    )  # fmt: skip
