@@ -439,19 +439,6 @@ class Detection:
     bbox: tuple[int, int, int, int]
     score: float = 1.0  # the detector's confidence (module docstring)
 
-    @property
-    def false_positive(self) -> bool:
-        """Whether this detection is of no object (clutter): its id is negative."""
-        return self.instance_id < 0
-
-    @property
-    def label(self) -> str:
-        """How a person reads it: ``Cup#11``, or ``a false detection (Remote)`` for one of no
-        object (its negative id means nothing to a reader)."""
-        if self.false_positive:
-            return f"a false detection ({self.type})"
-        return f"{self.type}#{self.instance_id}"
-
 
 @functools.lru_cache(maxsize=8)
 def ray_scale(width: int, height: int, fovy_deg: float) -> np.ndarray:

@@ -46,6 +46,14 @@ def _furniture_targets(layout, catalog, k: int) -> list:
     return out
 
 
+def detection_label(d) -> str:
+    """How a person reads a detection: ``Cup#11``, or ``a false detection (Remote)`` for one of
+    no object (clutter: its negative id means nothing to a reader)."""
+    if d.instance_id < 0:
+        return f"a false detection ({d.type})"
+    return f"{d.type}#{d.instance_id}"
+
+
 def _overlaps(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool:
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
@@ -316,7 +324,7 @@ class _Viewer:
         rec.set_time(world.sim_time)
         rec.log_robot(frame.pose, spec, path=gaze.path)
         rec.log_camera(frame, dets)
-        seen = ", ".join(d.label for d in dets) or "nothing"
+        seen = ", ".join(detection_label(d) for d in dets) or "nothing"
         rec.log_text(f"view {i}: looking at {target.type} #{target.id}; detected {seen}")
         print(
             f"  view {i}: {target.type} #{target.id} from ({frame.pose.x:.2f}, {frame.pose.y:.2f}), "

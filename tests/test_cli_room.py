@@ -133,3 +133,14 @@ def test_room_names_a_false_detection_as_such(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "detected: " in printed and "a false detection (" in printed
     assert "#-" not in printed
+
+
+def test_a_detection_is_labelled_for_a_reader():
+    from ctxsearch.envs.detector import Detection
+    from ctxsearch.knowledge.geometry import ObjectInstance
+
+    pose = ObjectInstance("Remote", -38876137650113, (0.0, 0.0, 0.0), 0.0, (0.1, 0.05, 0.02))
+    false = Detection(-38876137650113, "Remote", pose, 40, 2.0, (0, 0, 5, 5), 0.3)
+    true = Detection(11, "Cup", pose, 40, 2.0, (0, 0, 5, 5))
+    assert room_views.detection_label(false) == "a false detection (Remote)"
+    assert room_views.detection_label(true) == "Cup#11"

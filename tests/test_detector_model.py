@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from ctxsearch.envs.detector import (
-    Detection,
     DetectorError,
     detection_rng,
     keep,
@@ -173,11 +172,3 @@ def test_special_files_as_detector_get_their_own_message(tmp_path, monkeypatch):
         with pytest.raises(DetectorError) as err:
             load_detector(given)
         assert f"is {kind}" in str(err.value) and "no such detector preset" not in str(err.value)
-
-
-def test_a_detection_is_labelled_for_a_reader():
-    pose = ObjectInstance("Remote", -38876137650113, (0.0, 0.0, 0.0), 0.0, (0.1, 0.05, 0.02))
-    false = Detection(-38876137650113, "Remote", pose, 40, 2.0, (0, 0, 5, 5), 0.3)
-    true = Detection(11, "Cup", pose, 40, 2.0, (0, 0, 5, 5))
-    assert (false.false_positive, false.label) == (True, "a false detection (Remote)")
-    assert (true.false_positive, true.label) == (False, "Cup#11")
