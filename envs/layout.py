@@ -10,7 +10,7 @@ footprint (origin at its centre), ``door`` its entrance in the outer wall, and `
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ctxsearch.knowledge.geometry import ObjectInstance
 
@@ -90,6 +90,23 @@ class RoomLayout:
     def is_house(self) -> bool:
         """True for a multi-room house (``rooms`` given), False for a single room."""
         return bool(self.rooms)
+
+    def without(self, ids: set[int] | frozenset[int]) -> RoomLayout:
+        """This layout less the objects of ``ids`` and whatever rests on them (as if they had
+        never been placed: the support and placement maps lose them too)."""
+        gone = set(ids)
+        while True:
+            more = {o for o, s in self.support.items() if s in gone and o not in gone}
+            if not more:
+                break
+            gone |= more
+        return replace(
+            self,
+            objects=tuple(o for o in self.objects if o.id not in gone),
+            support={k: v for k, v in self.support.items() if k not in gone},
+            placed_by={k: v for k, v in self.placed_by.items() if k not in gone},
+            room_of={k: v for k, v in self.room_of.items() if k not in gone},
+        )
 
     def by_id(self, obj_id: int) -> ObjectInstance:
         """The object with instance id ``obj_id``."""

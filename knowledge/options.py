@@ -80,6 +80,14 @@ class FrontierRule(StrEnum):
     INFO = "info"
 
 
+class Targets(StrEnum):
+    """What a search episode asks for: any instance of the target type (``type``), or the one
+    instance the world keeps of it (``instance``: "find my phone")."""
+
+    TYPE = "type"
+    INSTANCE = "instance"
+
+
 class Needs(StrEnum):
     """What a search policy's probabilities come from: nothing (no context), the learned
     knowledge store (``kb``) or the ground truth (``truth``)."""

@@ -13,7 +13,15 @@ from ctxsearch.agent.search.registry import (
     with_role,
 )
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import Estimate, Forget, IntervalMethod, MapMode, Rank, values
+from ctxsearch.knowledge.options import (
+    Estimate,
+    Forget,
+    IntervalMethod,
+    MapMode,
+    Rank,
+    Targets,
+    values,
+)
 from ctxsearch.knowledge.ranking import DEFAULT_ESTIMATE, DEFAULT_MIN_EVIDENCE, DEFAULT_RANK
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.sweep import add_sweep_arguments
@@ -77,6 +85,14 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         type=argtypes.positive_int,
         default=200,
         help="rooms sampled for the ground truth when --truth is not given (default: 200)",
+    )
+    p.add_argument(
+        "--targets",
+        choices=values(Targets),
+        default=Targets.TYPE.value,
+        help="what an episode asks for: type (any instance of the target type ends the search; "
+        "default) or instance (the world keeps one instance of the target, the others taken "
+        "out: 'find my phone')",
     )
     argtypes.add_detector_argument(p)
     argtypes.add_interval_argument(p)
@@ -156,6 +172,7 @@ def _config_fields(args: argparse.Namespace) -> dict:
         "min_evidence": args.min_evidence,
         "detector": args.detector,
         "interval": args.interval,
+        "targets": args.targets,
     }
 
 

@@ -412,3 +412,30 @@ def test_paired_stats_see_what_a_median_pinned_by_ties_cannot():
     doc = p.to_json()
     assert set(doc) == {"geo_mean", "geo_mean_ci", "ratio_of_means", "ratio_of_means_ci",
                         "wilcoxon_p", "wins", "losses", "ties", "n", "episodes_for_power"}  # fmt: skip
+
+
+def test_instance_targets_keep_one_instance_of_the_target_in_the_same_worlds(office, catalog):
+    """``--targets instance`` ("find my phone"): every episode's world keeps exactly one instance
+    of its target (what rests on the others goes with them), drawn from the same held-out worlds
+    in the same order as ``type``; ``type`` draws as before (the episode has no kept instance)."""
+    from dataclasses import replace
+
+    from ctxsearch.knowledge.options import Targets
+
+    spec = DrawSpec.make(office, 3, 5, catalog, 60.0)
+    by_type = D.draw_episodes(spec, catalog)
+    inst = D.draw_episodes(replace(spec, targets=Targets.INSTANCE), catalog)
+    assert all(e.instance is None for e in by_type.episodes)
+    held = [S.held_out_seed(5, i) for i in range(300)]
+    order = [held.index(e.room_seed) for e in inst.episodes]
+    assert order == sorted(order) and len(inst.episodes) == 3
+    for ep in inst.episodes:
+        whole = generate_layout(office, ep.room_seed, catalog)
+        world = S.episode_layout(whole, ep)
+        assert [o.id for o in world.of_type(ep.target)] == [ep.instance]
+        assert {o.id for o in whole.objects} - {o.id for o in world.objects} >= {
+            o.id for o in whole.of_type(ep.target) if o.id != ep.instance
+        }
+        assert all(s in {o.id for o in world.objects} or s is None for s in world.support.values())
+    assert D.check_draw(inst, replace(spec, targets=Targets.INSTANCE), catalog)
+    assert not D.check_draw(inst, spec, catalog)  # not the type draw

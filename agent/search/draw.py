@@ -33,6 +33,7 @@ from ctxsearch.agent.search.episode import (
     DEFAULT_BUDGET_S,
     Episode,
     EpisodeDraw,
+    episode_layout,
     held_out_seed,
     random_start,
     small_types_present,
@@ -46,6 +47,7 @@ from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.world import World
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import Targets
 
 MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
 EPISODE_TAG = 0xE915  # the episode stream of world i: (seed, i, EPISODE_TAG)
@@ -70,6 +72,9 @@ class DrawSpec:
     exclude_seeds: tuple[int, ...] = ()
     target: str | None = None
     detector: DetectorModel | None = None
+    # ``instance``: the world keeps one instance of the target, drawn after the target (set with
+    # dataclasses.replace; ``type``, the default, draws exactly as before the option)
+    targets: Targets = Targets.TYPE
 
     @classmethod
     def make(
@@ -111,6 +116,11 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
     tgt = episode_target(layout, catalog, spec.target, rng)
     if tgt is None:
         return WorldDraw(None)
+    keep = None
+    if spec.targets is Targets.INSTANCE:
+        instances = layout.of_type(tgt)
+        keep = instances[int(rng.integers(len(instances)))].id
+        layout = layout.without({o.id for o in instances if o.id != keep})
     robot = RobotSpec()
     grid = OccupancyGrid.from_layout(layout, robot)
     redraws = 0
@@ -128,7 +138,7 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
         view = oracle_view(eye, grid, start, 0.0, world.time_model, deadline_s=spec.budget_s)
     if view is None:
         return WorldDraw(None, "infeasible", redraws)
-    ep = Episode(-1, spec.style.name, room_seed, tgt, start, spec.budget_s, first_view=view)
+    ep = Episode(-1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, first_view=view)
     return WorldDraw(ep, None, redraws)
 
 
@@ -181,7 +191,8 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     episodes indexed in order, of the style, budget and target asked, in held-out worlds taken in
     index order (none a room the store learned in), each with a small target the world holds and
     a start on a free cell of its grid, a first oracle view (if any) of a true instance within the
-    budget, and counts that are counts."""
+    budget, the one instance kept where ``spec.targets`` asks for it, and counts that are
+    counts."""
     counts = (draw.visible_at_start, draw.infeasible, draw.start_redraws)
     if len(draw.episodes) != spec.episodes or min(counts) < 0:
         return False
@@ -194,6 +205,8 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
             return False
         if spec.target is not None and ep.target != spec.target:
             return False
+        if (ep.instance is not None) != (spec.targets is Targets.INSTANCE):
+            return False
         last = world
         if not _episode_fits(ep, spec, catalog):
             return False
@@ -203,9 +216,12 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
 def _episode_fits(ep: Episode, spec: DrawSpec, catalog: Catalog) -> bool:
     """The episode's world holds its target, the start is on a free cell, and its first oracle
     view (if any) sees a true instance within the budget."""
-    layout = generate_layout(spec.style, ep.room_seed, catalog)
-    if ep.target not in small_types_present(layout, catalog):
+    whole = generate_layout(spec.style, ep.room_seed, catalog)
+    if ep.target not in small_types_present(whole, catalog):
         return False
+    if ep.instance is not None and ep.instance not in {o.id for o in whole.of_type(ep.target)}:
+        return False
+    layout = episode_layout(whole, ep)
     grid = OccupancyGrid.from_layout(layout, RobotSpec())
     r, c = grid.to_cell(ep.start.xy)
     if not (grid.in_grid(r, c) and grid.free[r, c]):

@@ -141,6 +141,7 @@ def from_json(doc: dict) -> EpisodeDraw:
             str(e["target"]),
             RobotPose(*(_finite(x) for x in e["start"])),
             _finite(e["budget_s"]),
+            instance=None if e.get("instance") is None else int(e["instance"]),
             first_view=_view(e["first_view"]),
         )
         for e in doc["episodes"]

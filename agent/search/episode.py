@@ -59,6 +59,9 @@ class Episode:
     target: str
     start: RobotPose
     budget_s: float = DEFAULT_BUDGET_S
+    # ``--targets instance``: the one instance of the target the world keeps (the others are
+    # taken out of it: ``episode_layout``); None: every instance of the type counts.
+    instance: int | None = None
     # The oracle's first plan (``oracle_view`` from ``start`` at second 0), as the episode draw
     # computed it to check the episode is feasible: the Oracle policy starts from it instead of
     # planning the same view again. Not part of the episode's identity.
@@ -74,6 +77,7 @@ class Episode:
             "target": self.target,
             "start": [s.x, s.y, s.yaw],
             "budget_s": self.budget_s,
+            **({} if self.instance is None else {"instance": self.instance}),
         }
 
 
@@ -150,6 +154,15 @@ class EpisodeDraw:
     def excluded(self) -> dict[str, int]:
         """search.json's ``excluded``: worlds dropped, by reason."""
         return {"visible_at_start": self.visible_at_start, "infeasible": self.infeasible}
+
+
+def episode_layout(layout: RoomLayout, ep: Episode) -> RoomLayout:
+    """The world of episode ``ep`` from its generated ``layout``: as generated, or with
+    ``--targets instance`` every instance of the target but ``ep.instance`` taken out."""
+    if ep.instance is None:
+        return layout
+    others = {o.id for o in layout.of_type(ep.target) if o.id != ep.instance}
+    return layout.without(others)
 
 
 def random_start(layout: RoomLayout, grid: OccupancyGrid, rng: np.random.Generator) -> RobotPose:

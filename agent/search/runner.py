@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ctxsearch.agent.interfaces import Body
@@ -32,6 +32,7 @@ from ctxsearch.agent.search.episode import (
     SearchResult,
     check_budget,
     check_target,
+    episode_layout,
 )
 from ctxsearch.agent.search.maps import RoomMaps
 from ctxsearch.agent.search.oracle import Oracle, OracleEye
@@ -59,6 +60,7 @@ from ctxsearch.knowledge.options import (
     IntervalMethod,
     MapMode,
     Rank,
+    Targets,
     parse,
 )
 
@@ -86,6 +88,8 @@ class SearchConfig:
     # searches) or given (the furniture poses are known). The CLI passes given for single-room
     # styles unless --map says otherwise (default_map).
     map: MapMode = MapMode.BUILT
+    # type: any instance of the target type ends a search; instance: the world keeps one
+    targets: Targets = Targets.TYPE
 
     def __post_init__(self) -> None:
         # the modes parsed once, here (a one-line error for an unknown one)
@@ -93,6 +97,7 @@ class SearchConfig:
         object.__setattr__(self, "estimate", parse(Estimate, self.estimate))
         object.__setattr__(self, "interval", parse(IntervalMethod, self.interval))
         object.__setattr__(self, "map", parse(MapMode, self.map))
+        object.__setattr__(self, "targets", parse(Targets, self.targets))
 
     def detector_model(self, catalog: Catalog) -> DetectorModel:
         """The detector preset, loaded and checked against the catalog (one-line errors)."""
@@ -276,7 +281,7 @@ def search_room(
     progress: Callable[[str], None] | None = None,
 ) -> list[SearchResult]:
     """Build ``ep``'s room once and run each of ``what.runs`` in it; results in that order."""
-    layout = generate_layout(style, ep.room_seed, catalog)
+    layout = episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
     stream = None
     if what.shared is not None:
         names = [name for name, _, _ in what.runs]
@@ -384,6 +389,7 @@ def search_once(
     spec = DrawSpec.make(
         style, 1, config.seed, catalog, config.budget_s, priors.learned, target, detector
     )
+    spec = replace(spec, targets=config.targets)
     ep = make_episodes(spec, catalog)[0]
     records = list(records) if records is not None else [None] * len(names)
     runs = tuple(

@@ -52,7 +52,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +60,13 @@ from matplotlib.figure import Figure
 
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.draw import DrawSpec, WorldDraw, draw_episodes
-from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult, check_budget
+from ctxsearch.agent.search.episode import (
+    Episode,
+    EpisodeDraw,
+    SearchResult,
+    check_budget,
+    episode_layout,
+)
 from ctxsearch.agent.search.measures import (
     BOOTSTRAP_SAMPLES,
     TIE_S,
@@ -180,7 +186,7 @@ def episode_facts(style: WorldStyle, eps: Sequence[Episode], catalog: Catalog) -
     from the true layout: a report, not the robot's knowledge."""
     out = []
     for ep in eps:
-        layout = generate_layout(style, ep.room_seed, catalog)
+        layout = episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
         inst = layout.of_type(ep.target)
         start = _room_at(layout, ep.start.x, ep.start.y)
         same = not layout.rooms or any(layout.room_of.get(o.id) == start for o in inst)
@@ -412,6 +418,7 @@ def bench_search(
         style, config.episodes, config.seed, catalog, config.budget_s, priors.learned,
         detector=detector,
     )  # fmt: skip
+    spec = replace(spec, targets=config.targets)
     draw = draw_episodes(
         spec, catalog, workers=sweep.workers, runner=sweep_worlds(sweep), cache=config.draw_cache
     )
@@ -567,6 +574,7 @@ def _write_files(
         "detector": config.detector_model(catalog).name,
         "interval": config.interval,
         "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
+        "targets": config.targets,  # type: any instance ends a search; instance: one kept
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
