@@ -27,6 +27,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from ctxsearch.agent.search import draw_store
+from ctxsearch.agent.search.draw import DrawSpec, check_draw, draw_episodes
 from ctxsearch.envs.detector import DETECTORS_DIR, load_detector
 from ctxsearch.envs.houses import HOUSES_DIR, load_house
 from ctxsearch.envs.styles import STYLES_DIR, load_style
@@ -103,6 +105,25 @@ def _drift_example() -> bytes:
     )
 
 
+def _draw_spec():
+    """The draw the fuzzed file is read as: one office episode (benchmark seed 5)."""
+    return DrawSpec.make(load_style("office", CATALOG), 1, 5, CATALOG, 60.0)
+
+
+def _draw_example() -> bytes:
+    """A kept episode draw as ``bench search --draw-cache`` writes it."""
+    return json.dumps(draw_store.to_json(draw_episodes(_draw_spec(), CATALOG))).encode()
+
+
+def _load_draw(p: Path) -> object:
+    """The draw cache's reader as a loader: a file that is not the draw asked for is a miss (the
+    command draws again), here the one-line error."""
+    draw = draw_store.load(p.parent, p.stem)
+    if draw is None or not check_draw(draw, _draw_spec(), CATALOG):
+        raise CtxsearchError(f"{p}: not the episode draw asked for (a miss: drawn again)")
+    return draw
+
+
 LOADERS = {
     "catalog": Loader(load_catalog, DEFAULT_CATALOG.read_bytes, "types.toml", "toml"),
     "style": Loader(
@@ -131,6 +152,9 @@ LOADERS = {
     "drift": Loader(
         lambda p: load_style(p, CATALOG).on_day(5), _drift_example, "style.toml", "toml", ("drift",)
     ),
+    # The episode draw kept on disk (bench search --draw-cache): read, then checked against the
+    # draw asked for; anything else is a miss.
+    "draw": Loader(_load_draw, _draw_example, "draw.json", "json"),
 }
 _EXAMPLES: dict[str, bytes] = {}
 
