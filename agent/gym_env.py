@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import replace
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -65,8 +65,8 @@ from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search.context import confirming_detection
-from ctxsearch.agent.search.draw import DrawSpec, draw_world
-from ctxsearch.agent.search.episode import Episode
+from ctxsearch.agent.search.draw import DrawSpec, draw_episodes
+from ctxsearch.agent.search.episode import Episode, EpisodeDraw, episode_layout
 from ctxsearch.agent.search.priors import open_knowledge
 from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
 from ctxsearch.envs.camera import Frame
@@ -120,21 +120,22 @@ def draw_episode(
     style, index + 1, seed, ..., detector=detector)``: agent.search.draw's worlds in order, the
     target not visible from the start and detectable within the budget) and its room's layout."""
     spec = DrawSpec.make(style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector)
-    n, i = 0, 0
-    limit = 50 * (index + 1) + 100
-    while i < limit:
-        world = draw_world(spec, catalog, i)
-        i += 1
-        if world.episode is None:
-            continue
-        if n == index:
-            ep = replace(world.episode, index=index)
-            return ep, generate_layout(style, ep.room_seed, catalog)
-        n += 1
-    raise CtxsearchError(
-        f"no held-out room of style '{style.name}' holds a small object that can be searched "
-        f"for (tried {limit} rooms)"
-    )
+    draw = _DRAWS.get(spec)
+    if draw is None:
+        draw = draw_episodes(spec, catalog)
+        _DRAWS[spec] = draw
+        if len(_DRAWS) > DRAWS_KEPT:
+            _DRAWS.popitem(last=False)
+    _DRAWS.move_to_end(spec)
+    ep = draw.episodes[index]
+    return ep, episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
+
+
+# The draws this process made, newest last: a reset to a (seed, index) drawn before (an
+# evaluation that replays its seeds, vectorised copies of one task) takes its episode from here
+# instead of checking the worlds again (a draw is deterministic in its spec).
+DRAWS_KEPT = 64
+_DRAWS: OrderedDict[DrawSpec, EpisodeDraw] = OrderedDict()
 
 
 def _box(low, high, shape: tuple[int, ...] | None = None) -> spaces.Box:

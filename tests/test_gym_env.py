@@ -207,3 +207,30 @@ def test_example_runs_a_random_agent_and_exhaustive(capsys):
     assert out[0].startswith("random agent: ") and "simulated s" in out[0]
     assert out[1].startswith("exhaustive: ") and "simulated s" in out[1]
     assert math.isfinite(float(out[0].split(", ")[-1].split()[0]))
+
+
+def test_vectorised_copies_step_in_lockstep_and_a_drawn_seed_is_not_drawn_again(monkeypatch):
+    """gymnasium.make_vec (sync) runs copies of the task: a batch of observations, env i reset
+    with seed s + i draws the single task's episode for that seed; a reset to a (seed, index)
+    drawn before in the process reuses its draw (the draw is not made again)."""
+    vec = gymnasium.make_vec(
+        G.ENV_ID, num_envs=2, vectorization_mode="sync", style="office", detector="perfect", **SIZE
+    )
+    obs, info = vec.reset(seed=0)
+    assert obs["rgb"].shape == (2, SIZE["height"], SIZE["width"], 3)
+    single = make()
+    for i in range(2):
+        _, one = single.reset(seed=i)
+        assert (info["room_seed"][i], info["target"][i]) == (one["room_seed"], one["target"])
+    obs, reward, terminated, truncated, info = vec.step(np.array([7, 1]))
+    assert reward.shape == (2,) and reward[0] < 0 and reward[1] < 0
+    assert not terminated.any()
+    vec.close()
+
+    def no_draw(*a, **k):
+        raise AssertionError("drew again")
+
+    monkeypatch.setattr(G, "draw_episodes", no_draw)
+    _, again = single.reset(seed=1)
+    assert again["room_seed"] == one["room_seed"]
+    single.close()
