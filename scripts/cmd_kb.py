@@ -200,10 +200,11 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
     """Add ``bench kb``."""
     p = sub.add_parser(
         "kb",
-        help="knowledge-base speed and memory at up to 30 000 types (HIF choice, record)",
+        help="knowledge-base speed and memory at up to 100 000 types (HIF choice, record)",
         description=textwrap.dedent(
             """\
-            Synthetic catalogs of T types with 6 relations each, 1% of the T*6*T counts y nonzero.
+            Synthetic catalogs of T types with 6 relations each; per type and relation min(1% of T,
+            --related) related types with a nonzero y.
             Times one Highest-Impact-First choice among 50 candidate types (cold: each candidate's
             score recomputed after a record_examination), one record_examination, and the peak
             traced memory; and, where it fits (T <= 1000), the same choice with a dense (T, 6, T)
@@ -226,7 +227,14 @@ def register_bench(sub: argparse._SubParsersAction) -> None:
         "--sizes",
         type=_sizes,
         default=None,
-        help="comma-separated numbers of types (default: 100,1000,10000,30000)",
+        help="comma-separated numbers of types (default: 100,1000,10000,30000,100000)",
+    )
+    p.add_argument(
+        "--related",
+        type=argtypes.non_negative_int,
+        default=100,
+        metavar="K",
+        help="at most K related types per type and relation (0: no cap, 1%% of T) (default: 100)",
     )
     p.add_argument(
         "--reps", type=argtypes.positive_int, default=21, help="repetitions (default: 21)"
@@ -465,10 +473,12 @@ def run_bench(args: argparse.Namespace) -> int:
         candidates=args.candidates,
         seed=args.seed,
         progress=progress,
+        max_related=args.related or None,
     )
     command = (
         f"ctxsearch bench kb --out {args.out} --sizes {','.join(str(t) for t in sizes)} "
-        f"--reps {args.reps} --candidates {args.candidates} --seed {args.seed}"
+        f"--reps {args.reps} --candidates {args.candidates} --seed {args.seed} "
+        f"--related {args.related}"
     )
     print(bench.markdown_table(rows))
     if args.out is None:  # a benchmark without --out writes nothing
