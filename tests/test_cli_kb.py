@@ -227,6 +227,16 @@ def test_missing_store(capsys, tmp_path):
     assert not (tmp_path / "nope.sqlite").exists()
 
 
+def test_bench_kb_bounds_the_related_types_per_relation(capsys, tmp_path):
+    """--related K: at most K related types per type and relation (1% of T below it)."""
+    rc, _, err = run_cli(
+        capsys, "bench", "kb", "--sizes", "500", "--reps", "1", "--related", "2", "--out", tmp_path
+    )
+    assert rc == 0, err
+    (row,) = json.loads((tmp_path / "bench_kb.json").read_text())
+    assert row["nonzero"] == 500 * 6 * 2 and row["max_related"] == 2  # 1% of 500 would be 5
+
+
 def test_bench_kb_tiny(capsys, tmp_path):
     rc, out, err = run_cli(
         capsys, "bench", "kb", "--sizes", "50,100", "--reps", "3", "--out", tmp_path
@@ -238,7 +248,8 @@ def test_bench_kb_tiny(capsys, tmp_path):
         assert {"types", "choose_ms", "record_ms", "peak_mb", "dense_choose_ms"} <= set(r)
         assert r["choose_ms"] > 0 and r["record_ms"] > 0 and r["peak_mb"] > 0
         assert r["dense_choose_ms"] > 0  # T <= 1000: the dense comparison runs
-        assert r["nonzero"] == r["types"] * max(1, round(0.01 * 6 * r["types"]))
+        per_relation = min(max(1, round(0.01 * r["types"])), 100)  # 1% of T, at most --related
+        assert r["nonzero"] == r["types"] * 6 * per_relation and r["max_related"] == 100
     assert (tmp_path / "bench_kb.md").read_text().count("\n| ") >= 3
     assert (tmp_path / "bench_kb.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| types |" in out and "bench_kb.json" in out
