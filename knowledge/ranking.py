@@ -7,7 +7,7 @@ give one candidate volume v_rel(b) with probability P(rel(T)), read from a ``Pro
 the knowledge base's interval (its lower bound, the Wilson centre p0, or the upper bound, by
 ``rank``; for reference types with little evidence optionally the class's backoff estimate,
 ``BackoffProbabilities``), or a fixed table (ground truth, or a test's). ``candidate_volumes`` returns them best
-first. The simulated robot's search (``agent/search_space.py``) builds its regions from exactly
+first. The simulated robot's search (``agent/search/space.py``) builds its regions from exactly
 these candidates and then adds what only a robot with a map knows: which part of each volume it
 has already seen and how many seconds it costs to look there.
 

@@ -184,7 +184,7 @@ class OracleEye:
         (seconds since the episode started, after the image), ends the search with success: its
         first detection of the target is confirmed by the second image the robot takes from the
         same pose (read at ``sim_time`` plus an image's seconds: ``confirming_detection``) as a
-        true instance (``SearchContext._after_image``); and whether it showed the target at all
+        true instance (``agent.search.context.SearchContext``); and whether it showed the target at all
         (the robot then took that second image)."""
         # The false positives, which cost most to draw, are drawn only where they can decide:
         # they cover no pixel, so they come after every true detection in an image's list.

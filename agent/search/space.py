@@ -1,7 +1,7 @@
 """The pure parts of object search: detectability, where has been seen, candidate regions and
 their scores, coverage tours, and the expected-cost decision of detectability-driven search.
 
-Nothing here renders or steps MuJoCo; ``agent/search.py`` runs the policies on the world.
+Nothing here renders or steps MuJoCo; the policies (agent.search.policies) run on the world.
 
 Seen map. The room's volume is sampled on a lattice (``SeenMap``: 0.2 m in x and y, 0.15 m in z
 from 5 cm to 1.85 m, minus the points inside the solid parts of furniture, which no object can

@@ -1,9 +1,9 @@
 """Search on the robot's own map (``--map built``): where to look next, and Wixson & Ballard's
 efficiency model of indirect search. Pure numpy on agent.mapping's ``BuiltMap`` arrays; nothing
-here renders or drives (agent/search.py runs the policies).
+here renders or drives (the behaviours of agent.search run the policies).
 
 Viewpoints. A candidate viewpoint is a reachable free cell of the built map's navigable grid on a
-0.5 m lattice (``search_space.lattice_candidates``). Its *gain* for a detection range r is the
+0.5 m lattice (``space.lattice_candidates``). Its *gain* for a detection range r is the
 number of seen-map lattice points still to be seen for r (not seen from within r, not
 exhausted) that lie within r of the camera there and in a 2-D cell the camera can see: the
 built map's occupied cells, pooled onto the lattice's 0.2 m cells, stop each of ``RAY_COUNT``
@@ -20,7 +20,7 @@ inside the furniture's solid parts, which the robot does not know about, would.
 Wixson & Ballard's efficiency model (IJCV 12(2/3), 1994). Direct search for T costs the expected
 half of a coverage at T's detection range; indirect search via I costs finding I (coverage at
 I's larger range, one ring of images for furniture) plus looking into I's most likely relation
-volume, plus the direct search when T is not there (``search_space.indirect_plan``). Indirect
+volume, plus the direct search when T is not there (``space.indirect_plan``). Indirect
 search pays when the efficiency ratio C_direct / C_via exceeds 1 (``predicted_gain``). Coverage
 costs come from the area model ``area_cover_seconds`` (the house's footprint and room count,
 the detection range and the images per site), so the prediction needs no map: it is what the
@@ -149,7 +149,7 @@ class ViewpointScorer:
 
         ``weights`` (N,) non-negative: a point's share of what is left is its weight over the
         todo points' total instead of one over their count (where the target is likely, from
-        ``search_space.target_density``); the bound is then the weight within range, and gains
+        ``space.target_density``); the bound is then the weight within range, and gains
         are not cached (the weights change as objects are detected)."""
         count = int(todo.sum())
         if count < MIN_GAIN:
@@ -325,7 +325,7 @@ def predicted_plan(
     tm: TimeModel,
     candidates: Sequence[str],
 ) -> list[ss.IndirectOption]:
-    """Wixson & Ballard's expected costs (``search_space.indirect_plan``) with the area model's
+    """Wixson & Ballard's expected costs (``space.indirect_plan``) with the area model's
     coverage costs: the direct plan and one per candidate type, cheapest first."""
     cover = {target: area_cover_seconds(size.area, size.rooms, ranges[target], tm, SWEEP_IMAGES)}
     for name in candidates:

@@ -2,7 +2,7 @@
 
 Every ``indirect`` result records the intermediate type it searched for first
 (``SearchResult.intermediate``, None when no type was worth it) and the model's predicted gain
-C_direct / C_via (agent.search_explore.predicted_plan: for that type, else for the best
+C_direct / C_via (agent.search.viewpoints.predicted_plan: for that type, else for the best
 candidate type). ``indirect_analysis`` groups the paired episodes by that choice and reports,
 per group, the episodes, the median predicted gain and the *measured* gain: the paired
 per-episode ratio of indirect's time to find to the baseline's (``frontier`` on the built map;

@@ -234,7 +234,7 @@ def paired_strata(
 
 def detect_group(catalog: Catalog, type_name: str) -> str:
     """``small`` (hard to detect) or ``large``: small if the type's effective detection range
-    (agent.search_space.effective_range, from the catalog's sizes, min_pixels and max_range) is
+    (agent.search.space.effective_range, from the catalog's sizes, min_pixels and max_range) is
     below the median of the catalog's small-object (kind=object) types', so the rule holds for
     any style and catalog."""
     ranges = {t.name: ss.effective_range(t) for t in catalog.types if not t.is_furniture}
