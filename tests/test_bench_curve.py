@@ -116,6 +116,16 @@ def test_curve_files_and_ratios(curve_dir):
             r = e["scenarios"][sc]["context_to_baseline"]
             assert r["n"] == 3 and r["wins"] + r["losses"] + r["ties"] == 3
             assert r["ci"][0] <= r["median"] <= r["ci"][1]
+            pr = e["scenarios"][sc]["paired"]
+            g = pr["context_to_baseline"]
+            assert g["n"] == 3 and (g["wins"], g["losses"], g["ties"]) == (
+                r["wins"], r["losses"], r["ties"])  # fmt: skip
+            assert g["geo_mean_ci"][0] <= g["geo_mean"] <= g["geo_mean_ci"][1]
+            if e["k"] == 0:  # the context policy against itself at k = 0: all ties
+                assert (pr["context_to_k0"]["ties"], pr["context_to_k0"]["geo_mean"]) == (3, 1.0)
+    assert (curve_dir / "curve.md").read_text().index("geometric mean") < (
+        curve_dir / "curve.md"
+    ).read_text().index("cells: the median")
     # the asymptote ran once: the same at every k
     assert (
         len({json.dumps(e["scenarios"]["given"]["asymptote_to_baseline"]) for e in doc["curve"]})
@@ -158,6 +168,9 @@ def test_transfer_table_is_learned_in_by_searched_in(transfer_dir):
         grid = doc["paired_ratio"]["given"][m]
         assert list(grid) == styles and all(list(grid[x]) == styles for x in styles)
         assert all(grid[x][y]["n"] == 2 for x in styles for y in styles)
+        stats = doc["paired"]["given"][m]
+        assert all(stats[x][y]["n"] == 2 for x in styles for y in styles)
+        assert all(stats[x][y]["ties"] == grid[x][y]["ties"] for x in styles for y in styles)
         cost = doc["mismatched_to_in_domain"]["given"][m]
         assert list(cost["office"]) == ["biology_lab"] and list(cost["biology_lab"]) == ["office"]
         notice = doc["noticing"][m]

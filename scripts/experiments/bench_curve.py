@@ -40,6 +40,7 @@ from ctxsearch.scripts.experiments.scenarios import (
     Scenario,
     check_no_stores,
     check_policies,
+    paired,
     paired_ratio,
     result_rows,
     same_episodes,
@@ -199,7 +200,17 @@ def curve_doc(config: CurveConfig, points: list[CurvePoint]) -> dict:
         entry: dict = {"k": p.k, "examinations": p.examinations, "scenarios": {}}
         for sc in config.scenarios:
             tb = times(first[sc.name], sc.baseline)
+            t_ctx, t_ctx0 = times(p.results[sc.name], sc.context), times(first[sc.name], sc.context)
             entry["scenarios"][sc.name] = {
+                # the statistics that can see a small effect: against the baseline, and the
+                # context policy against itself with the empty store of k = 0
+                "paired": {
+                    "context_to_baseline": paired(t_ctx, tb, seed=s.seed),
+                    "context_to_k0": paired(t_ctx, t_ctx0, seed=s.seed),
+                    "asymptote_to_baseline": paired(
+                        times(first[sc.name], sc.asymptote), tb, seed=s.seed
+                    ),
+                },
                 "context_to_baseline": paired_ratio(
                     times(p.results[sc.name], sc.context), tb, seed=s.seed
                 ),
@@ -249,7 +260,42 @@ def format_table(doc: dict) -> str:
         "over episodes of t_context / t_baseline [95% bootstrap interval] (episodes won / lost); "
         f"a failure counted at the budget ({doc['budget_s']:.0f} s).",
     ]
+    if "paired" in doc["curve"][0]["scenarios"][names[0]]:
+        lines = [*_paired_table(doc, names), "", *lines]
     return "\n".join(lines)
+
+
+def _geo(r: dict) -> str:
+    """A geometric mean cell: mean [interval] wins/losses/ties p."""
+    if r["geo_mean"] is None:
+        return "-"
+    lo, hi = r["geo_mean_ci"]
+    return (f"{r['geo_mean']:.2f} [{lo:.2f}, {hi:.2f}] {r['wins']}/{r['losses']}/{r['ties']} "
+            f"p={r['wilcoxon_p']:.3f}")  # fmt: skip
+
+
+def _paired_table(doc: dict, names: list[str]) -> list[str]:
+    """curve.md's first table: by k, the geometric mean of the paired time ratio of the context
+    policy to the baseline and to itself at k = 0, with the ties and the signed-rank test."""
+    head = "| k | " + " | ".join(
+        f"{n}: {doc['scenarios'][n]['context']} / {doc['scenarios'][n]['baseline']} | "
+        f"{n}: / itself at k = 0"
+        for n in names
+    )
+    lines = [head + " |", "|---|" + "---|---|" * len(names)]
+    for e in doc["curve"]:
+        cells = []
+        for n in names:
+            pr = e["scenarios"][n]["paired"]
+            cells += [_geo(pr["context_to_baseline"]), _geo(pr["context_to_k0"])]
+        lines.append(f"| {e['k']} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "Cells: the geometric mean over episodes of the paired time ratio [95% bootstrap "
+        "interval], wins/losses/ties (a tie within 1e-6 s counts as ratio 1), and the Wilcoxon "
+        "signed-rank p on the log ratios (agent.search.measures.paired_stats).",
+    ]
+    return lines
 
 
 def plot_curve(doc: dict, path: Path) -> None:

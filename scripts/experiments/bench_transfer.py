@@ -47,6 +47,7 @@ from ctxsearch.scripts.experiments.scenarios import (
     Scenario,
     check_no_stores,
     check_policies,
+    paired,
     paired_ratio,
     result_rows,
     same_episodes,
@@ -272,7 +273,9 @@ def transfer_doc(config: TransferConfig, stores: dict, cells: dict, notice: dict
     s = config.search
     ratios: dict = {}
     cost: dict = {}
+    stats: dict = {}
     for sc in config.scenarios:
+        stats[sc.name] = {m: {x: {} for x in config.styles} for m in config.intervals}
         ratios[sc.name] = {m: {x: {} for x in config.styles} for m in config.intervals}
         cost[sc.name] = {m: {x: {} for x in config.styles} for m in config.intervals}
         for y in config.styles:
@@ -283,6 +286,7 @@ def transfer_doc(config: TransferConfig, stores: dict, cells: dict, notice: dict
                 for x in config.styles:
                     t = times(cell.context[(x, m)], sc.context)
                     ratios[sc.name][m][x][y] = paired_ratio(t, tb, seed=s.seed)
+                    stats[sc.name][m][x][y] = paired(t, tb, seed=s.seed)
                     if x != y:
                         cost[sc.name][m][x][y] = paired_ratio(t, t_in, seed=s.seed)
     first = next(iter(cells.values())).baseline
@@ -300,7 +304,10 @@ def transfer_doc(config: TransferConfig, stores: dict, cells: dict, notice: dict
             x: {k: v for k, v in d.items() if k.endswith("examinations")} for x, d in stores.items()
         },  # fmt: skip
         "scenarios": {sc.name: sc.to_json() for sc in config.scenarios},
-        # paired_ratio[map][interval][learned-in][searched-in]: context / baseline
+        # paired[map][interval][learned-in][searched-in]: context / baseline, the statistics
+        # that can see a small effect (geometric mean, ratio of means, Wilcoxon, ties, power)
+        "paired": stats,
+        # paired_ratio[map][interval][learned-in][searched-in]: context / baseline (the median)
         "paired_ratio": ratios,
         # mismatched_to_in_domain[map][interval][learned-in][searched-in]: t(mismatched context)
         # / t(in-domain context), episode by episode

@@ -136,6 +136,13 @@ def paired_ratio(t: Sequence[float], t_baseline: Sequence[float], seed: int = 0)
     return measures.paired_ratio(t, t_baseline, seed=seed).to_json()
 
 
+def paired(t: Sequence[float], t_baseline: Sequence[float], seed: int = 0) -> dict:
+    """The paired statistics of ``t`` against ``t_baseline`` as JSON (agent.search.measures.
+    paired_stats: geometric mean and ratio of means with intervals, Wilcoxon p, wins, losses,
+    ties, n, the episodes for 80% power)."""
+    return measures.paired_stats(t, t_baseline, seed=seed).to_json()
+
+
 def episode_key(ep: Episode) -> tuple:
     """What makes two episodes the same: room, target, start pose and budget."""
     return (ep.style, ep.room_seed, ep.target, ep.start.x, ep.start.y, ep.start.yaw, ep.budget_s)
