@@ -186,6 +186,11 @@ def draw_episodes(
     return draw
 
 
+def world_limit(episodes: int) -> int:
+    """How many worlds a draw of ``episodes`` episodes checks before it gives up."""
+    return 50 * episodes + 100
+
+
 def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     """Whether ``draw`` (read from a file) can be the draw of ``spec``: ``spec.episodes``
     episodes indexed in order, of the style, budget and target asked, in held-out worlds taken in
@@ -196,7 +201,7 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     counts = (draw.visible_at_start, draw.infeasible, draw.start_redraws)
     if len(draw.episodes) != spec.episodes or min(counts) < 0:
         return False
-    seeds = {held_out_seed(spec.seed, i): i for i in range(50 * spec.episodes + 100)}
+    seeds = {held_out_seed(spec.seed, i): i for i in range(world_limit(spec.episodes))}
     last = -1
     for k, ep in enumerate(draw.episodes):
         world = seeds.get(ep.room_seed, -1)
@@ -242,7 +247,7 @@ def _draw_worlds(
     """The worlds of a draw checked in rounds."""
     n = spec.episodes
     draw = EpisodeDraw([])
-    limit = 50 * n + 100
+    limit = world_limit(n)
     check = functools.partial(draw_world, spec, catalog)
     i = 0
     while len(draw.episodes) < n:

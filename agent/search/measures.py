@@ -108,14 +108,21 @@ class PairedRatio:
         }
 
 
+def _paired(t: Sequence[float], t_base: Sequence[float]):
+    """``t`` and ``t_base`` as aligned arrays, which episodes are ties (within ``TIE_S``), and
+    the wins and losses (the one tie rule of every paired statistic)."""
+    a, b = np.asarray(t, float), np.asarray(t_base, float)
+    if a.shape != b.shape:
+        raise ValueError(f"unpaired times: {a.shape} vs {b.shape}")
+    tie = np.abs(a - b) <= TIE_S
+    return a, b, tie, int(np.sum((a < b) & ~tie)), int(np.sum((a > b) & ~tie))
+
+
 def paired_ratio(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> PairedRatio:
     """The paired ratio of times ``t`` to ``t_base`` (aligned episodes; see ``PairedRatio``)."""
-    t, t_base = np.asarray(t, float), np.asarray(t_base, float)
-    if t.shape != t_base.shape:
-        raise ValueError(f"unpaired times: {t.shape} vs {t_base.shape}")
-    ratio = t / np.maximum(t_base, TIE_S)
+    a, b, _tie, wins, losses = _paired(t, t_base)
+    ratio = a / np.maximum(b, TIE_S)
     n = len(ratio)
-    wins, losses = int(np.sum(t < t_base - TIE_S)), int(np.sum(t > t_base + TIE_S))
     return PairedRatio(
         float(np.median(ratio)) if n else math.nan,
         bootstrap_ci(ratio, np.median, seed=seed),
@@ -196,12 +203,8 @@ def paired_stats(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> 
     module, which the episode types use."""
     from scipy import stats as sps
 
-    a, b = np.asarray(t, float), np.asarray(t_base, float)
-    if a.shape != b.shape:
-        raise ValueError(f"unpaired times: {a.shape} vs {b.shape}")
+    a, b, tie, wins, losses = _paired(t, t_base)
     n = len(a)
-    tie = np.abs(a - b) <= TIE_S
-    wins, losses = int(np.sum((a < b) & ~tie)), int(np.sum((a > b) & ~tie))
     if n == 0:
         nan2 = (math.nan, math.nan)
         return PairedStats(math.nan, nan2, math.nan, nan2, math.nan, 0, 0, 0, 0, None)

@@ -36,7 +36,7 @@ from ctxsearch.agent.search.context import SearchContext, SearchStopped
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS, cover, estimate_cover_seconds
 from ctxsearch.agent.search.episode import SearchResult
 from ctxsearch.agent.search.online import OnlineSearch, ViaOption
-from ctxsearch.agent.search.registry import info
+from ctxsearch.agent.search.registry import check_scenario
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
 from ctxsearch.knowledge.options import MapMode
@@ -270,9 +270,7 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
 def make_policy(name: str, mode: MapMode) -> SearchPolicy:
     """Policy ``name`` (a base name) as it runs in scenario ``mode``; one-line errors for an
     unknown name, a scenario it does not run in, and the oracle (which the runner builds)."""
-    p = info(name)
-    if mode not in p.maps:
-        raise CtxsearchError(f"policy '{name}' needs --map {p.maps[0]}")
+    check_scenario([name], mode)
     cls = _CLASSES.get(name)
     if cls is None:
         raise CtxsearchError(f"policy '{name}' reads the truth: the episode runner builds it")
