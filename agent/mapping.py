@@ -52,6 +52,7 @@ RAY_STRIDE = 12  # pixels between the rays traced into the seen-space record
 # Every second column of a depth image is used: 2 pixels are 4 cm across at 5 m (the cells are
 # 5 cm), and the rows, which space the far floor along the view, are all kept.
 COL_STRIDE = 2
+TALL_M = 1.0  # m: an obstacle this high hides what stands on lower furniture beyond it
 
 
 def default_map_mode(perception: str) -> str:
@@ -79,6 +80,7 @@ class BuiltMap:
         h = max(1, int(math.ceil((ymax - ymin) / resolution - 1e-9)))
         self.floor = np.zeros((h, w), bool)
         self.occupied = np.zeros((h, w), bool)
+        self.top_z = np.zeros((h, w), np.float32)  # the highest obstacle point seen per cell
         vw = max(1, int(math.ceil((xmax - xmin) / VOXEL)))
         vh = max(1, int(math.ceil((ymax - ymin) / VOXEL)))
         self.seen_voxels = np.zeros((vh, vw, max(1, int(math.ceil(top / VOXEL)))), bool)
@@ -101,6 +103,11 @@ class BuiltMap:
         h, w = self.floor.shape
         r = self.resolution
         return self.x0 + (np.arange(w) + 0.5) * r, self.y0 + (np.arange(h) + 0.5) * r
+
+    @property
+    def tall(self) -> np.ndarray:
+        """(H, W) bool: occupied cells with an obstacle point seen at or above ``TALL_M``."""
+        return self.occupied & (self.top_z >= TALL_M)
 
     @property
     def unknown(self) -> np.ndarray:
@@ -128,6 +135,7 @@ class BuiltMap:
         top = self.spec.camera_height + HEAD_MARGIN
         hit = ok & (z >= FLOOR_EPS) & (z <= top)
         self.occupied[rows[hit], cols[hit]] = True
+        np.maximum.at(self.top_z, (rows[hit], cols[hit]), z[hit])
         flo = ok & (z < FLOOR_EPS)
         self.floor[rows[flo], cols[flo]] = True
         self.floor &= ~self.occupied

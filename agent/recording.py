@@ -434,6 +434,23 @@ class Recorder:
 
         self._rec.log(self.entity("log"), rr.TextLog(msg, level=level))
 
+    def log_points(
+        self, entity: str, positions: np.ndarray, colors: np.ndarray, radii: np.ndarray
+    ) -> None:
+        """3-D points at ``entity`` (colours as 0-1 RGB, radii in metres); none clears it."""
+        if self._rec is None:
+            return
+        import rerun as rr
+
+        if len(positions) == 0:
+            self._rec.log(self.entity(entity), rr.Clear(recursive=False))
+            return
+        cols = [rgb255(c) for c in np.asarray(colors, float)]
+        self._rec.log(
+            self.entity(entity),
+            rr.Points3D(np.asarray(positions, float), colors=cols, radii=np.asarray(radii, float)),
+        )
+
     def log_scalar(self, path: str, value: float) -> None:
         """One value of a time series at entity ``path``."""
         if self._rec is None:

@@ -232,6 +232,11 @@ def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_stor
         assert not any(x.startswith(f"{root}: {root}:") for _, x in lines)  # no doubled prefix
     # Only the best three candidate regions carry a label on screen.
     assert "/location/world/search/best" in f.entities
+    # The belief is drawn on the floor and thins out as images come (agent.search.belief): a
+    # heat map at more than one time, beside the detectable mass left.
+    assert len(set(f.times["/location/world/search/belief"])) >= 2
+    assert "/location/search/mass_left/location" in f.entities
+    assert "/exhaustive/world/search/belief" not in f.entities  # a reference: no belief
     views = [(v["class"], v["origin"]) for v in f.views]
     for root in ("location", "exhaustive"):
         assert ("3D", f"{root}/world") in views

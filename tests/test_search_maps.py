@@ -179,7 +179,9 @@ def test_indirect_records_the_intermediate_it_searched_for(catalog):
 
 
 def _brute_best(scorer, grid, todo, here, rng, images, weights=None):
-    """Every candidate traced: the viewpoint ``ViewpointScorer.best`` must pick."""
+    """Every candidate traced: the viewpoint ``ViewpointScorer.best`` must pick (``rng``: a
+    range or a ``Sight``)."""
+    sight = rng if isinstance(rng, sx.Sight) else sx.Sight(rng)
     blocked = sx.coarse_blocked(scorer.built)
     dist = grid.distances_from(here)
     sub = np.flatnonzero(todo)
@@ -189,7 +191,7 @@ def _brute_best(scorer, grid, todo, here, rng, images, weights=None):
     for xy in ss.lattice_candidates(grid, here, 0.5):
         r, c = grid.to_cell(xy)
         d = float(dist[r, c]) if grid.in_grid(r, c) else math.inf
-        g, m = scorer._gain(blocked, xy, rng, sub, scorer.points[sub], w)
+        g, m = scorer._gain(blocked, xy, sight, sub, scorer.points[sub], w)
         if math.isfinite(d) and g >= sx.MIN_GAIN:
             s = scorer.tm.leg_estimate(d) + scorer.tm.looks_estimate(images, sx.HEAD_S)
             out.append(sx.Viewpoint(xy, g, m / left, s))
@@ -219,7 +221,7 @@ def test_lazy_viewpoint_choice_is_the_exhaustive_one(catalog):
         scorer, here, rng = ex.scorer(), ctx.body.pose().xy, ctx.target_range
         todo = ex.todo(rng)
         for step in range(3):
-            got = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, key="k")
+            got = scorer.best(ctx.grid, todo, here, sx.Sight(rng), sx.SWEEP_IMAGES, key="k")
             want = _brute_best(scorer, ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
             assert (got is None) == (want is None) and (step > 0 or got is not None)
             if got is not None:
@@ -235,8 +237,10 @@ def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(
     with _looked_around(catalog) as (ctx, ex):
         scorer, here, rng = ex.scorer(), ctx.body.pose().xy, ctx.target_range
         todo = ex.todo(rng)
-        plain = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES)
-        flat = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=np.ones(len(todo)))
+        plain = scorer.best(ctx.grid, todo, here, sx.Sight(rng), sx.SWEEP_IMAGES)
+        flat = scorer.best(
+            ctx.grid, todo, here, sx.Sight(rng), sx.SWEEP_IMAGES, weights=np.ones(len(todo))
+        )
         assert plain is not None and flat is not None
         assert (tuple(flat.xy), flat.gain) == (tuple(plain.xy), plain.gain)
         # All the weight on the todo points far from the unweighted choice.
@@ -244,13 +248,36 @@ def test_weighted_viewpoint_choice_is_the_exhaustive_one_and_follows_the_weight(
         far = todo & (np.linalg.norm(pts[:, :2] - plain.xy, axis=1) > 2.5)
         assert far.sum() >= sx.MIN_GAIN
         w = np.where(far, 1.0, 1e-6)
-        got = scorer.best(ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, weights=w)
+        got = scorer.best(ctx.grid, todo, here, sx.Sight(rng), sx.SWEEP_IMAGES, weights=w)
         want = _brute_best(scorer, ctx.grid, todo, here, rng, sx.SWEEP_IMAGES, w)
         assert got is not None and want is not None
         assert (tuple(got.xy), got.gain, got.seconds) == (tuple(want.xy), want.gain, want.seconds)
         assert abs(got.share - want.share) < 1e-12
         assert tuple(got.xy) != tuple(plain.xy)
         assert np.linalg.norm(pts[far, :2] - got.xy, axis=1).min() < rng
+
+
+@pytest.mark.render
+def test_viewpoint_choice_by_detection_probability_is_the_exhaustive_one(catalog):
+    """Weighed by the detection curve (each point's mass times P(found) at its distance), the
+    lazy choice is still the one tracing every candidate picks, and it values a point by its
+    distance: its share is below the unweighted one."""
+    with _looked_around(catalog) as (ctx, ex):
+        scorer, here, curve = ex.scorer(), ctx.body.pose().xy, ctx.curve
+        todo = ex.target_todo()
+        w = np.where(todo, ctx.misses.miss, 0.0)
+        sight = sx.Sight(curve.reach, curve.found)
+        got = scorer.best(ctx.grid, todo, here, sight, sx.SWEEP_IMAGES, weights=w)
+        want = _brute_best(scorer, ctx.grid, todo, here, sight, sx.SWEEP_IMAGES, w)
+        assert got is not None and want is not None
+        assert (tuple(got.xy), got.gain, got.seconds) == (tuple(want.xy), want.gain, want.seconds)
+        assert abs(got.share - want.share) < 1e-12
+        sub = np.flatnonzero(todo)
+        blocked = sx.coarse_blocked(scorer.built)
+        args = (sub, scorer.points[sub], w[sub])
+        g1, m1 = scorer._gain(blocked, got.xy, sight, *args)
+        g0, m0 = scorer._gain(blocked, got.xy, sx.Sight(curve.reach), *args)
+        assert g1 == g0 == got.gain and 0 < m1 <= m0  # equal for the perfect detector
 
 
 def test_target_density_spreads_each_volume_and_does_not_count_overlaps_twice():

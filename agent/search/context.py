@@ -23,6 +23,7 @@ from ctxsearch.agent.interfaces import Body, Perception, WrappedBody
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, plan_path
 from ctxsearch.agent.recording import Recorder
+from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.episode import Episode, GazeRecord, SearchResult
 from ctxsearch.agent.search.maps import RoomMaps
@@ -128,6 +129,19 @@ class SearchContext:
         self.intermediate: str | None = None
         self.predicted_gain: float | None = None
         self._confirming, self.unconfirmed = False, 0  # confirming a detection; not confirmed
+        # the robot's model of its detector for the target, and what every image missed
+        self.curve = belief.detection_curve(
+            catalog.type(self.target), maps.detector, self.spec, self.width, self.height
+        )
+        self.misses = belief.MissField(self.seen.points, self.curve)
+        self._held: tuple[np.ndarray, np.ndarray] | None = None
+        self.mass_left: float | None = None  # the belief's detectable mass left (online search)
+
+    @property
+    def occluders(self):
+        """What blocks the view: the robot's own map (built), the given map's footprints
+        (``maps.occluders``), or None."""
+        return self.built if self.built is not None else self.maps.occluders
 
     @property
     def grid(self) -> OccupancyGrid:
@@ -173,13 +187,17 @@ class SearchContext:
         dets = list(self.perception.last_detections)
         if self.built is not None:
             self.built.update(frame)
+        hit = next((d for d in dets if d.type == self.target), None)
+        if hit is not None and not self._confirming:  # what the miss field held there before
+            near = self.misses.near(hit.pose.position, CONFIRM_RADIUS_M)
+            self._held = (near, self.misses.miss[near].copy())
         if frame.depth is not None:
-            self.seen.update(frame.camera, frame.depth)
+            shown = self.seen.update(frame.camera, frame.depth)
         else:
-            self.seen.mark_frustum(frame.camera, self.target_range)
+            shown = self.seen.mark_frustum(frame.camera, self.misses.curve.reach)
+        self.misses.observe(frame.camera.position, shown)
         for d in dets:
             self.known.setdefault(d.instance_id, d.pose)
-        hit = next((d for d in dets if d.type == self.target), None)
         pose = self.body.pose()
         self.trace.append(
             GazeRecord(self.elapsed, pose, purpose, tuple((d.type, d.instance_id) for d in dets))
@@ -228,6 +246,11 @@ class SearchContext:
         if again is None:
             self.unconfirmed += 1
             self.known.pop(hit.instance_id, None)
+            if self._held is not None:  # the detector fired there (agent.search.belief)
+                near, held = self._held
+                self.misses.miss[near] = held * self.curve.unconfirmed_ratio(
+                    hit.distance, CONFIRM_RADIUS_M
+                )
             x, y = hit.pose.position[:2]
             self.note(f"{self.target} at ({x:.2f}, {y:.2f}) not confirmed by a second image")
         return again
@@ -302,4 +325,5 @@ class SearchContext:
             self.intermediate,
             self.predicted_gain,
             self.unconfirmed,
+            self.mass_left if self.found_id is None and t < self.episode.budget_s else None,
         )

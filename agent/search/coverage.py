@@ -13,6 +13,7 @@ import numpy as np
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.envs.camera import frustum_mask
+from ctxsearch.envs.robot_spec import wrap_angle
 
 FURNITURE_TILTS = (-0.35,)  # one ring of images finds furniture (detected from metres away)
 
@@ -97,6 +98,46 @@ def sweep(
         n += 1
         if until is not None and until():
             break
+    return n
+
+
+def belief_sweep(
+    ctx: SearchContext,
+    weights: np.ndarray,
+    *,
+    purpose: str = "explore",
+    min_share: float = ss.SWEEP_MIN_SHARE,
+) -> int:
+    """A pan/tilt sweep here for the target, by the belief (agent.search.belief): of the images
+    at headings 60 degrees apart and ``SWEEP_TILTS``, the one that finds the most belief mass
+    next (``weights`` (N,), each point's mass as the miss field holds it now, times the
+    probability a confirmed detection finds it at its distance, inside the frustum) is taken,
+    until the best left would find less than ``min_share`` of what the first image was expected
+    to find; images taken."""
+    pose = ctx.body.pose()
+    cam = np.array([pose.x, pose.y, ctx.spec.camera_height])
+    curve, pts = ctx.curve, ctx.seen.points
+    d = np.linalg.norm(pts - cam, axis=1)
+    idx = np.flatnonzero((d <= curve.reach) & (weights > 0))
+    if len(idx) == 0:
+        return 0
+    found, w0, m0 = curve.found(d[idx]), weights[idx], ctx.misses.miss[idx].copy()
+    h0 = pose.yaw + pose.pan
+    gazes = [(wrap_angle(h0 + i * math.pi / 3), t) for i in range(6) for t in ss.SWEEP_TILTS]
+    masks = np.array([frustum_mask(cam, h, t, pts[idx], ctx.spec, curve.reach) for h, t in gazes])
+    taken: set[int] = set()
+    first, n = None, 0
+    while len(taken) < len(gazes):
+        w = w0 * ctx.misses.miss[idx] / np.maximum(m0, 1e-12) * found
+        vals = (masks * w).sum(axis=1)  # not BLAS: the same sums on any thread count
+        vals[list(taken)] = -1.0
+        best = int(np.argmax(vals))
+        first = vals[best] if first is None else first
+        if vals[best] <= 0.0 or vals[best] < min_share * first:
+            break
+        taken.add(best)
+        ctx.look_heading(*gazes[best], purpose)
+        n += 1
     return n
 
 

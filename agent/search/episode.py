@@ -116,6 +116,20 @@ class SearchResult:
     intermediate: str | None = None
     predicted_gain: float | None = None
     unconfirmed: int = 0  # detections of the target a second image did not confirm
+    # the belief's detectable mass left when the policy stopped before its budget without a
+    # find (agent.search.belief.mass_left); None: found, out of time, or a policy without one
+    mass_left: float | None = None
+
+    @property
+    def stop(self) -> str:
+        """How the episode ended: ``found`` (success), ``false-find`` (a confirmed detection
+        the judge found to be no target), ``budget`` (out of time) or ``gave-up`` (the policy
+        stopped before its budget with nothing found)."""
+        if self.success:
+            return "found"
+        if self.found_id is not None and self.sim_time < self.budget_s:
+            return "false-find"
+        return "budget" if self.sim_time >= self.budget_s else "gave-up"
 
     @property
     def success(self) -> bool:

@@ -1,8 +1,9 @@
-"""Exploration on the robot's own map (``--map built``): drive to the viewpoint that shows the
-largest share of what is left to see per expected second and sweep there (viewpoint gain and
-exhaustion: agent.search.viewpoints), with near-floor images where the floor around is unknown so
-the map grows. ``Explorer`` holds one episode's exploration state (where it swept, what it gave
-up on); the online decision (agent.search.online) makes one per episode.
+"""Exploration for the online search (agent.search.online), on the robot's own map and on a given
+one: drive to the viewpoint that finds the most of what is left per expected second and sweep
+there (viewpoint gain and exhaustion: agent.search.viewpoints; for the target, the belief's mass
+times the probability of finding it at each point's distance: agent.search.belief), with
+near-floor images where the floor around is unknown so the built map grows. ``Explorer`` holds
+one episode's exploration state (where it swept, what it gave up on).
 """
 
 from __future__ import annotations
@@ -12,10 +13,11 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ctxsearch.agent.frontiers import NEAR_TILT
+from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.context import SearchContext
-from ctxsearch.agent.search.coverage import sweep
+from ctxsearch.agent.search.coverage import belief_sweep, sweep
 
 
 class Explorer:
@@ -28,12 +30,13 @@ class Explorer:
         self._scorer: sx.ViewpointScorer | None = None
         self.exhausted: dict[float, np.ndarray] = {}
         self.swept: dict[float, list[np.ndarray]] = {}
+        self.unstuck: list[np.ndarray] = []  # where the floor around was mapped to get unstuck
 
     def scorer(self) -> sx.ViewpointScorer:
         """The built map's viewpoint scorer (made on first use)."""
         if self._scorer is None:
             c = self.ctx
-            self._scorer = sx.ViewpointScorer(c.built, c.seen.points, c.spec, c.time_model)
+            self._scorer = sx.ViewpointScorer(c.occluders, c.seen.points, c.spec, c.time_model)
         return self._scorer
 
     def todo(self, rng: float, zmax: float | None = None) -> np.ndarray:
@@ -47,6 +50,13 @@ class Explorer:
             m &= self.ctx.seen.points[:, 2] <= zmax
         return m
 
+    def target_todo(self) -> np.ndarray:
+        """(N,) bool: the points still worth a look for the target: not given up on (exhausted)
+        and holding at least ``belief.MISS_DONE`` of their mass (agent.search.belief)."""
+        m = self.ctx.misses.miss > belief.MISS_DONE
+        ex = self.exhausted.get(self.ctx.target_range)
+        return m if ex is None else m & ~ex
+
     def viewpoint(
         self,
         rng: float,
@@ -54,18 +64,26 @@ class Explorer:
         zmax: float | None = None,
         weights: np.ndarray | None = None,
     ) -> sx.Viewpoint | None:
-        """Where to sweep next for range ``rng``: the best share per second (``weights``: of the
-        target's probability over the points, else of the points); None on a given map or if
-        none is worth it."""
+        """Where to sweep next for range ``rng``: the best share of the points per second
+        (``weights``: of their weight); None if none is worth it."""
+        return self._best(rng, self.todo(rng, zmax), sx.Sight(rng), images, weights, (rng, zmax))
+
+    def target_viewpoint(self, weights: np.ndarray) -> sx.Viewpoint | None:
+        """Where to sweep next for the target: the most belief mass (``weights``) found per
+        second, each point's mass times the probability that a sweep there finds it at its
+        distance (the detection curve); None if none is worth it."""
+        curve = self.ctx.curve
+        sight = sx.Sight(curve.reach, curve.found)
+        return self._best(self.ctx.target_range, self.target_todo(), sight, sx.SWEEP_IMAGES,
+                          weights, None)  # fmt: skip
+
+    def _best(self, rng, todo, sight, images, weights, key) -> sx.Viewpoint | None:
         ctx = self.ctx
-        if ctx.built is None:
+        if ctx.occluders is None:
             return None
         here = ctx.body.pose().xy
         avoid = np.array(self.swept[rng]) if self.swept.get(rng) else None
-        return self.scorer().best(
-            ctx.grid, self.todo(rng, zmax), here, rng, images, avoid, key=(rng, zmax),
-            weights=weights,
-        )  # fmt: skip
+        return self.scorer().best(ctx.grid, todo, here, sight, images, avoid, key, weights)
 
     def explore_step(
         self,
@@ -84,32 +102,64 @@ class Explorer:
                 self.map_floor()
         self.exhaust(rng, vp.xy)
 
-    def map_floor(self) -> None:
-        """Images at the near-floor tilt where the floor around is still unknown
-        (agent.search.viewpoints.floor_headings)."""
+    def map_floor(self, tilts: Sequence[float] = (NEAR_TILT,), min_unknown: float = 0.3) -> int:
+        """Images at the near-floor ``tilts`` where at least ``min_unknown`` of the floor around
+        is still unknown (agent.search.viewpoints.floor_headings); images taken."""
         ctx = self.ctx
         if ctx.built is None:
-            return
+            return 0
         p = ctx.body.pose()
-        for h in sx.floor_headings(ctx.built, p.xy, p.yaw + p.pan):
-            ctx.look_heading(h, NEAR_TILT, "map the floor")
+        n = 0
+        for h in sx.floor_headings(ctx.built, p.xy, p.yaw + p.pan, min_unknown=min_unknown):
+            for t in tilts:
+                ctx.look_heading(h, t, "map the floor")
+                n += 1
+        return n
+
+    def unstick(self) -> bool:
+        """When no viewpoint is reachable on the built map (the robot stands where the floor
+        around it was never in view: a doorway, a gap between furniture), images of the floor in
+        every heading with any unknown floor, at the near-floor tilt and the steepest one, once
+        per place; True if it took any (then the options are worth computing again)."""
+        ctx = self.ctx
+        if ctx.built is None:
+            return False
+        here = ctx.body.pose().xy
+        if any(np.hypot(*(here - xy)) < sx.VISITED_RADIUS for xy in self.unstuck):
+            return False  # once per place
+        self.unstuck.append(here)
+        return self.map_floor((NEAR_TILT, ctx.spec.tilt_range[0]), min_unknown=0.02) > 0
 
     def exhaust(self, rng: float, xy: np.ndarray | None = None) -> None:
         """Mark what a sweep at ``xy`` (default: here) left unseen nearby as exhausted for
         ``rng``; regions waiting for a gaze may be reachable now."""
         ctx = self.ctx
-        if ctx.built is None:
+        if ctx.occluders is None:
             return
         here = ctx.body.pose().xy if xy is None else np.asarray(xy, float)
-        ex = self.scorer().exhaust(here, ctx.seen.unseen(rng), rng)
+        ex = self.scorer().exhaust(here, ctx.seen.unseen(min(rng, sx.EXHAUST_RADIUS)), rng)
         old = self.exhausted.get(rng)
         self.exhausted[rng] = ex if old is None else old | ex
         ctx.waiting.clear()
 
-    def look_around(self) -> None:
-        """A sweep for the target where the robot stands (the first images of a built map)."""
+    def explore_target(self, vp: sx.Viewpoint, weights: np.ndarray) -> None:
+        """Drive to ``vp`` and sweep there for the target by the belief ``weights``
+        (``coverage.belief_sweep``); what stayed unseen nearby is exhausted."""
+        rng = self.ctx.target_range
+        self.swept.setdefault(rng, []).append(np.asarray(vp.xy, float))
+        if self.ctx.drive_to(vp.xy):
+            belief_sweep(self.ctx, weights)
+            self.map_floor()
+        self.exhaust(rng, vp.xy)
+
+    def look_around(self, weights: np.ndarray | None = None) -> None:
+        """A sweep for the target where the robot stands (the first images of a built map); by
+        the belief ``weights`` if given."""
         ctx = self.ctx
         self.swept.setdefault(ctx.target_range, []).append(ctx.body.pose().xy)
-        sweep(ctx, ctx.target_range, purpose="look around")
+        if weights is None:
+            sweep(ctx, ctx.target_range, purpose="look around")
+        else:
+            belief_sweep(ctx, weights, purpose="look around")
         self.map_floor()
         self.exhaust(ctx.target_range)

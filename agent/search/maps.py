@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ctxsearch.agent.mapping import BuiltMap
-from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.mapping import TALL_M, BuiltMap
+from ctxsearch.agent.navigation import OccupancyGrid, obstacle_boxes
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.envs.detector import DetectorModel
@@ -28,6 +28,29 @@ from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import MapMode
+
+
+@dataclass(frozen=True)
+class Occluders:
+    """What blocks the view on the given map, for agent.search.viewpoints' ray casting (the
+    arrays a ``BuiltMap`` offers): the footprints of the walls and of everything reaching below
+    the head, not inflated (``occupied`` (H, W) bool, cells of ``resolution`` m from
+    (``x0``, ``y0``))."""
+
+    occupied: np.ndarray
+    tall: np.ndarray  # the occupied cells of obstacles reaching agent.mapping.TALL_M
+    x0: float
+    y0: float
+    resolution: float
+
+    @classmethod
+    def from_layout(cls, layout: RoomLayout, spec: RobotSpec) -> Occluders:
+        """The given map's occluders (read from the true layout, as the given grid is)."""
+        boxes = obstacle_boxes(layout, spec)
+        tall = [b for b in boxes if float(b.center[2]) + float(b.half[2]) >= TALL_M]
+        g = OccupancyGrid.from_boxes(boxes, _bounds(layout), 0.0)
+        t = OccupancyGrid.from_boxes(tall, _bounds(layout), 0.0)
+        return cls(~g.free, ~t.free, g.x0, g.y0, g.resolution)
 
 
 @dataclass(frozen=True)
@@ -50,6 +73,7 @@ class RoomMaps:
     # The footprint's extent (x0, y0, x1, y1) and height: the allocation of a built map
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     top: float = 3.0
+    occluders: Occluders | None = None  # what blocks the view on the given map
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
         """An empty map of the robot's own over the footprint (``built``), None on a given map."""
@@ -96,8 +120,9 @@ class RoomMaps:
         size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
         seen = ss.SeenMap.for_room(layout, catalog)
         return cls(
-            grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height
-        )
+            grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height,
+            Occluders.from_layout(layout, spec),
+        )  # fmt: skip
 
     @classmethod
     def for_mode(

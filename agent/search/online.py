@@ -1,14 +1,20 @@
-"""The online decision on the built map: at each step the best expected probability of finding the
-target per expected second among (a) looking into a relation volume of an object detected so far,
-(b) sweeping for an intermediate type I that Wixson & Ballard's efficiency model says pays
-(agent.search.viewpoints.predicted_plan), valued as P(a new I is seen there) q_I and given up
-after the model's expected seconds to find one, and (c) the frontier step (agent.search.frontier).
+"""The online decision, on the robot's own map and on a given one: at each step the most belief
+mass found per expected second among (a) looking into a relation volume of a known object (the
+furniture map given, or what was detected so far), (b) sweeping for an intermediate type I that
+Wixson & Ballard's efficiency model says pays (agent.search.viewpoints.predicted_plan), valued as
+P(a new I is seen there) q_I and given up after the model's expected seconds to find one, and (c)
+sweeping from the viewpoint that finds the most mass per second (agent.search.frontier).
 
-All three are valued in one currency: the probability that T is at each point of the seen map
-given that it was not seen yet (``space.target_density``: the known objects' relation volumes
-spread their P(rel(T)) over their points, the unexplored rest gets the surveyed part's mean
-density), so the frontier step is drawn towards likely places and no option counts an overlap
-twice. With no knowledge source (``frontier``) every point weighs alike.
+All of them are valued in one currency, the belief of agent.search.belief: the prior density
+(``space.target_density``: the known objects' relation volumes spread their P(rel(T)) over their
+points, the unexplored rest gets the surveyed part's mean density; every point alike without
+knowledge: ``frontier`` and ``uniform``, the fair twins) times the miss field (what every image
+so far would have missed of a target there, by the detector's recall at that distance). A
+volume's value is its mass times the probability that the planned gazes find it; a sweep's is
+the mass times P(found) at each point's distance. No point is ever done: a distant glance
+leaves most of a volume's mass, so the robot goes close. The search stops before its budget
+only when less than ``belief.STOP_MASS`` of the detectable mass is left, or when no option is
+left after mapping the floor around (``Explorer.unstick``); the share left is reported.
 
 The options' seconds come from different estimates (a sweep's drive and images, a volume's
 planned gazes, the efficiency model's look), which err differently: each kind's expected seconds
@@ -25,12 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import regions as rg
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
+from ctxsearch.knowledge.geometry import ObjectInstance
 
 # The calibration of each option kind's expected seconds starts at 1 (estimates taken as they
 # are) and holds this many expected seconds of weight: after that much of a kind was done, its
@@ -72,12 +80,14 @@ class Option:
 @dataclass(frozen=True)
 class Belief:
     """Where the target may be: the candidate regions not looked into yet, the probability per
-    seen-map point given it was not seen yet (None: every point alike), and the density's total
-    over the points left (P(rel(T)) units)."""
+    seen-map point given every image so far (agent.search.belief; None: no point left), the
+    prior density's total over the points left times their miss (P(rel(T)) units), and the
+    detectable mass left (``belief.mass_left``)."""
 
     regions: list[ss.Region]
     weights: np.ndarray | None
     mass: float
+    left: float = 1.0
 
 
 class OnlineSearch:
@@ -101,17 +111,27 @@ class OnlineSearch:
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
 
     def run(self) -> None:
-        """Look around, then take the best option until none is left."""
+        """Look around, then take the best option until none is left or the belief's detectable
+        mass left is below ``belief.STOP_MASS``; the share left is the context's ``mass_left``."""
         ctx = self.ctx
-        self.explorer.look_around()
+        first = self.belief()
+        self.record(first)
+        self.explorer.look_around(first.weights)
         while True:
             ctx.check()
-            belief = self.belief()
-            options = [
-                o for o in (self.region_option(belief), self.direct_option(belief.weights)) if o
-            ]
-            options += [o for o in (self.via_option(v, belief.mass) for v in self.vias) if o]
+            b = self.belief()
+            ctx.mass_left = b.left
+            self.record(b)
+            if b.left < belief.STOP_MASS:
+                ctx.note(f"{100 * b.left:.1f}% of the detectable mass left: stop")
+                return
+            options = [o for o in (self.region_option(b), self.direct_option(b.weights)) if o]
+            options += [o for o in (self.via_option(v, b.mass) for v in self.vias) if o]
             if not options:
+                if self.explorer.unstick():
+                    ctx.note("no viewpoint reachable: mapped the floor around")
+                    continue
+                ctx.note(f"no option left with {100 * b.left:.1f}% of the detectable mass")
                 return
             best = max(options, key=lambda o: o.rate / self.scale(o.kind))
             f = self.scale(best.kind)
@@ -122,42 +142,62 @@ class OnlineSearch:
             sums[0] += best.seconds
             sums[1] += ctx.elapsed - t0
 
+    def record(self, b: Belief) -> None:
+        """The belief on the recording's floor (agent.search.belief.log_belief)."""
+        rec = self.ctx.recorder
+        if rec.enabled:
+            rec.set_time(self.ctx.elapsed)
+            belief.log_belief(rec, self.ctx.seen.points, b.weights, "world/search/belief")
+            rec.log_scalar(f"search/mass_left/{self.ctx.policy}", b.left)
+
     def scale(self, kind: str) -> float:
         """The calibration of ``kind``'s expected seconds: measured over expected so far."""
         exp_s, got_s = self.took.get(kind, (0.0, 0.0))
         return (got_s + CALIBRATION_PRIOR_S) / (exp_s + CALIBRATION_PRIOR_S)
 
     def belief(self) -> Belief:
-        """Where the target may be (``Belief``): the density normalised over the points left to
-        see; None without context or before a known object has a relation volume worth
-        anything; its total is then ``prior``."""
+        """Where the target may be (``Belief``): the prior (the known objects' relation volumes
+        with this search's P(rel(T)), ``space.target_density``; every point alike without
+        knowledge or before a known volume has any) times the miss field, normalised over the
+        points still worth a look (agent.search.belief)."""
         ctx = self.ctx
-        if self.builder is None:
-            return Belief([], None, 1.0)
-        every = self.builder.regions(list(ctx.known.values()))
-        skip = ctx.looked_into | ctx.waiting
-        regions = [r for r in every if r.key not in skip]
-        dens = ss.target_density(every, ~ctx.seen.unseen(sx.MAX_VIEW))
-        if dens is None:
-            return Belief(regions, None, self.prior)
-        mass = float(dens[self.explorer.todo(ctx.target_range)].sum())
-        if mass <= 0.0:
-            return Belief(regions, None, self.prior)
-        return Belief(regions, dens / mass, mass)
+        todo = self.explorer.target_todo()
+        keep = ~self.explorer.exhausted.get(ctx.target_range, np.zeros(len(todo), bool))
+        regions: list[ss.Region] = []
+        dens = None
+        stand = ctx.seen.standable()
+        if self.builder is not None:
+            every = self.builder.regions(self.known_objects())
+            skip = ctx.looked_into | ctx.waiting
+            regions = [r for r in every if r.key not in skip]
+            dens = ss.target_density(every, ~ctx.seen.unseen(sx.MAX_VIEW), stand)
+        prior = stand if dens is None else dens
+        miss = ctx.misses.miss
+        weights = belief.belief_weights(prior, miss, todo)
+        left = belief.mass_left(prior, miss, keep)
+        mass = self.prior if dens is None else float((dens * miss)[todo].sum())
+        return Belief(regions, weights, mass, left)
 
-    def direct_option(self, weights: np.ndarray | None = None) -> Option | None:
-        """Sweep the best frontier viewpoint for the target."""
+    def known_objects(self) -> list[ObjectInstance]:
+        """The objects whose relation volumes hold the prior: the furniture map given (none on
+        the built map) and everything detected so far."""
+        objs = {o.id: o for o in self.ctx.furniture_map()}
+        objs.update(self.ctx.known)
+        return list(objs.values())
+
+    def direct_option(self, weights: np.ndarray | None) -> Option | None:
+        """Sweep the viewpoint that finds the most belief mass per second."""
         ctx, ex = self.ctx, self.explorer
-        v = ex.viewpoint(ctx.target_range, sx.SWEEP_IMAGES, weights=weights)
+        if weights is None:
+            return None
+        v = ex.target_viewpoint(weights)
         if v is None:
             return None
         label = (
             f"explore for {ctx.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
-            f"{v.gain} points, ~{v.seconds:.0f} s"
+            f"P(find)={v.share:.3f}, ~{v.seconds:.0f} s"
         )
-        return Option(
-            v.rate, label, lambda: ex.explore_step(v, ctx.target_range), "explore", v.seconds
-        )
+        return Option(v.rate, label, lambda: ex.explore_target(v, weights), "explore", v.seconds)
 
     def via_option(self, via: ViaOption, mass: float = 1.0) -> Option | None:
         """Sweep for intermediate type ``via`` where a new one is most likely seen per second."""
@@ -211,6 +251,7 @@ class OnlineSearch:
                 ctx.waiting.add(r.key)
                 continue
             cost = rg.planned_seconds(ctx, gz)
+            r.score = self.found_by(r, gz, belief.weights)
             planned.append((r.score / max(cost, 1e-6), cost, r, gz))
         if not planned:
             return None
@@ -218,4 +259,17 @@ class OnlineSearch:
         label = f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s"
         return Option(
             rate, label, lambda: rg.look_region(ctx, best, gazes, self.gains), "region", cost
+        )
+
+    def found_by(self, region: ss.Region, gazes: Sequence, weights: np.ndarray | None) -> float:
+        """The belief mass the planned ``gazes`` into ``region`` are expected to find: its
+        points' mass times the probability a confirmed detection from the gazes' camera
+        positions finds them (``belief.gazes_found``)."""
+        if weights is None:
+            return region.score
+        ctx = self.ctx
+        cams = np.array([[g.pose.x, g.pose.y, ctx.spec.camera_height] for g in gazes])
+        pts = region.points
+        return float(
+            (weights[pts] * belief.gazes_found(ctx.curve, cams, ctx.seen.points[pts])).sum()
         )

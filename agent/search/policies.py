@@ -8,9 +8,11 @@ facts (scenarios, what they need, roles) are ``agent.search.registry``'s; the or
 - ``map-only`` (given): the value of the map alone: every relation volume of the known
   furniture, no probabilities, in the order of a short tour; then coverage.
 - ``exhaustive``: no context. Coverage (agent.search.coverage).
-- ``location`` (given): the location constraint: relation volumes of the furniture map and of
-  everything detected so far, ranked by P(T in the unseen part) per expected second; coverage
-  when no candidate has probability left.
+- ``uniform`` (given): no context, ``location``'s fair twin: the online decision
+  (agent.search.online) with every point alike on the given map; then coverage.
+- ``location`` (given): the location constraint as a belief (agent.search.belief): the online
+  decision over the relation volumes of the furniture map and of everything detected so far,
+  with P(rel(T)) from the knowledge; coverage when no option is left.
 - ``indirect``: detectability-driven, two algorithms by scenario. On the built map
   (``IndirectOnline``) the online decision among known objects' relation volumes, the
   intermediate types Wixson & Ballard's efficiency model says pay, and the frontier; it records
@@ -105,19 +107,24 @@ class MapOnly(SearchPolicy):
         cover(ctx)
 
 
-class Location(SearchPolicy):
-    """Location constraint around the furniture map and everything detected so far."""
+class Uniform(SearchPolicy):
+    """No context, on the given map: the online decision with every point alike (the belief of
+    agent.search.belief with a uniform prior), then coverage: ``location``'s fair twin."""
 
     def search(self, ctx: SearchContext) -> None:
-        base = ctx.furniture_map()
+        OnlineSearch(ctx, None).run()
+        ctx.note("no option left; coverage of what stayed unseen")
+        cover(ctx)
 
-        def known() -> list[ObjectInstance]:
-            objs = {o.id: o for o in base}
-            objs.update(ctx.known)
-            return list(objs.values())
 
-        rg.search_regions(ctx, needs_probs(ctx), known=known, replan=rg.REPLAN_REGIONS)
-        ctx.note("falling back to exhaustive coverage")
+class Location(SearchPolicy):
+    """The location constraint as a belief: the online decision over the relation volumes of the
+    furniture map and of everything detected so far, with P(rel(T)) from the knowledge (no
+    intermediate types), then coverage."""
+
+    def search(self, ctx: SearchContext) -> None:
+        OnlineSearch(ctx, needs_probs(ctx)).run()
+        ctx.note("no option left; coverage of what stayed unseen")
         cover(ctx)
 
 
@@ -260,6 +267,7 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
     "frontier": Frontier,
     "map-only": MapOnly,
     "exhaustive": Exhaustive,
+    "uniform": Uniform,
     "location": Location,
     "oracle-prior": Location,
     "indirect": {MapMode.BUILT: IndirectOnline, MapMode.GIVEN: IndirectPlanned},

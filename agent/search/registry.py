@@ -50,11 +50,13 @@ _B, _G = MapMode.BUILT, MapMode.GIVEN
 # In this order: each scenario's default policies are the entries with a role there, in order.
 REGISTRY: tuple[PolicyInfo, ...] = (
     PolicyInfo("frontier", (_B,), ((_B, Role.BASELINE),),
-               summary="no context: the frontier viewpoint with the most to see per second"),
-    PolicyInfo("map-only", (_G,), ((_G, Role.BASELINE),),
+               summary="no context: the belief with every point alike, on the robot's own map"),
+    PolicyInfo("uniform", (_G,), ((_G, Role.BASELINE),),
+               summary="no context: the belief with every point alike (location's twin)"),
+    PolicyInfo("map-only", (_G,), ((_G, Role.REFERENCE),),
                summary="no context: every relation volume of the known furniture, a short tour"),
     PolicyInfo("location", (_G,), ((_G, Role.CONTEXT),), Needs.KB,
-               summary="location constraint: relation volumes by P(rel(T)) per second"),
+               summary="location constraint: the belief over relation volumes by P(rel(T))"),
     PolicyInfo("indirect", (_B, _G), ((_B, Role.CONTEXT),), Needs.KB,
                summary="detectability-driven: intermediate types, volumes and frontier"),
     PolicyInfo("oracle-prior", (_G,), ((_G, Role.ASYMPTOTE),), Needs.TRUTH,

@@ -98,6 +98,10 @@ MERGE_JACCARD = 0.6
 SWEEP_HEADING_STEP = math.radians(60.0)
 SWEEP_TILTS = (-0.95, -0.35, 0.25)
 SWEEP_MIN_SHARE = 0.1  # an image of a sweep must show this share of what is unseen around
+# Where an object may stand (``SeenMap.standable``): a point seen with no surface seen below it
+# keeps this weight (free air; objects rest on something, a little is kept for what hangs).
+AIR_WEIGHT = 0.02
+SUPPORT_STRIDE = 4  # pixels between the depth points that mark supports (built map)
 
 
 # =========================================================================== detectability
@@ -130,10 +134,19 @@ def effective_range(
 # =========================================================================== the seen map
 @dataclass
 class SeenMap:
-    """Lattice points of the room's free volume and the distance each was best seen from."""
+    """Lattice points of the room's free volume, the distance each was best seen from, and where
+    an object can stand (``support``: the floor layer and the points just above a surface)."""
 
     points: np.ndarray  # (N, 3)
     best: np.ndarray  # (N,) metres; inf: never visible
+    # (N,) bool: a surface lies less than one lattice step below the point (the floor layer,
+    # a top, a shelf board): known from the furniture map (given), or seen in depth images
+    # (built: ``learn_support``); None: every point
+    support: np.ndarray | None = None
+    learn_support: bool = False
+    # the points' lattice keys sorted, and the point of each (``_keys``, made on first use)
+    _sorted: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _order: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def for_room(
@@ -146,13 +159,18 @@ class SeenMap:
         """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
         pts = cls._lattice(layout, step_xy, z)
         keep = np.ones(len(pts), bool)
+        rests = pts[:, 2] < z[0] + z[2] / 2  # the floor layer
         for o in layout.objects:
             if not catalog.type(o.type).is_furniture:
                 continue
             arr = world_parts_array(o, catalog)
             for c, yaw, h in zip(arr.centers, arr.yaws, arr.halves, strict=True):
                 keep &= ~Box(c, float(yaw), h).contains_points(pts)
-        return cls(pts[keep], np.full(int(keep.sum()), np.inf))
+                # the slab of one lattice step above the part's top rests on it
+                top = float(c[2] + h[2])
+                slab = Box((c[0], c[1], top + z[2] / 2), float(yaw), (h[0], h[1], z[2] / 2))
+                rests |= slab.contains_points(pts)
+        return cls(pts[keep], np.full(int(keep.sum()), np.inf), rests[keep])
 
     @classmethod
     def for_footprint(
@@ -164,7 +182,8 @@ class SeenMap:
         """The lattice over ``layout``'s footprint and height only (what a robot that knows
         nothing of the furniture may assume: ``--map built``)."""
         pts = cls._lattice(layout, step_xy, z)
-        return cls(pts, np.full(len(pts), np.inf))
+        floor = pts[:, 2] < z[0] + z[2] / 2
+        return cls(pts, np.full(len(pts), np.inf), floor, learn_support=True)
 
     @staticmethod
     def _lattice(layout: RoomLayout, step_xy: float, z: tuple[float, float, float]) -> np.ndarray:
@@ -182,7 +201,70 @@ class SeenMap:
 
     def copy(self) -> SeenMap:
         """An independent copy."""
-        return SeenMap(self.points.copy(), self.best.copy())
+        sup = None if self.support is None else self.support.copy()
+        return SeenMap(self.points.copy(), self.best.copy(), sup, self.learn_support)
+
+    def standable(self) -> np.ndarray:
+        """(N,) weights of where an object of the target may be: 1 on a support, ``AIR_WEIGHT``
+        elsewhere (free air: objects rest on something). On the built map a point not seen yet
+        may have a surface below it: it gets the share of the seen points of its height that
+        had one (Laplace's rule: (supported + 1) / (seen + 2)), so the space not explored yet
+        is expected to be furnished as the explored part was."""
+        if self.support is None:
+            return np.ones(len(self.points))
+        w = np.where(self.support, 1.0, AIR_WEIGHT)
+        if not self.learn_support:
+            return w
+        level = np.rint((self.points[:, 2] - LATTICE_Z[0]) / LATTICE_Z[2]).astype(np.int64)
+        seen = np.isfinite(self.best)
+        k = int(level.max()) + 1
+        rate = (np.bincount(level[seen & self.support], minlength=k) + 1.0) / (
+            np.bincount(level[seen], minlength=k) + 2.0
+        )
+        unknown = ~seen & ~self.support
+        w[unknown] = np.maximum(rate[level[unknown]], AIR_WEIGHT)
+        return w
+
+    def _supports(self, camera: PinholeCamera, depth: np.ndarray) -> None:
+        """Mark the points just above the level surfaces a depth image shows (every
+        ``SUPPORT_STRIDE`` pixel whose surface normal, from the neighbouring pixels, is within
+        about 25 degrees of vertical, up to the lattice's top): each supports the lattice point of
+        its column whose height is within one step above it. Walls and the sides of furniture
+        support nothing."""
+        pts = camera.backproject(depth)
+        n = np.cross(pts[:-1, 1:] - pts[:-1, :-1], pts[1:, :-1] - pts[:-1, :-1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            level = np.abs(n[..., 2]) > 0.9 * np.linalg.norm(n, axis=-1)
+        s = SUPPORT_STRIDE
+        hits = pts[:-1:s, :-1:s].reshape(-1, 3)
+        z0, z1, dz = LATTICE_Z
+        ok = level[::s, ::s].ravel() & np.isfinite(hits).all(axis=1)
+        ok &= (hits[:, 2] > 0.02) & (hits[:, 2] < z1)
+        hits = hits[ok]
+        if len(hits) == 0:
+            return
+        key = self._keys()
+        lo = self.points[:, :2].min(axis=0)
+        ix = np.floor((hits[:, 0] - lo[0]) / LATTICE_XY + 0.5).astype(np.int64)
+        iy = np.floor((hits[:, 1] - lo[1]) / LATTICE_XY + 0.5).astype(np.int64)
+        iz = np.ceil((hits[:, 2] - z0) / dz - 1e-9).astype(np.int64)
+        found = np.searchsorted(key, _lattice_key(ix, iy, iz))
+        found = np.clip(found, 0, len(key) - 1)
+        match = key[found] == _lattice_key(ix, iy, iz)
+        self.support[self._order[found[match]]] = True
+
+    def _keys(self) -> np.ndarray:
+        """The points' lattice keys, sorted (``_order``: the point of each; the lattice's
+        corner is the points' least x and y: the whole footprint lattice, ``for_footprint``)."""
+        if self._sorted is None:
+            lo = self.points[:, :2].min(axis=0)
+            ix = np.rint((self.points[:, 0] - lo[0]) / LATTICE_XY).astype(np.int64)
+            iy = np.rint((self.points[:, 1] - lo[1]) / LATTICE_XY).astype(np.int64)
+            iz = np.rint((self.points[:, 2] - LATTICE_Z[0]) / LATTICE_Z[2]).astype(np.int64)
+            k = _lattice_key(ix, iy, iz)
+            self._order = np.argsort(k, kind="stable")
+            self._sorted = k[self._order]
+        return self._sorted
 
     def update(self, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
         """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
@@ -201,16 +283,19 @@ class SeenMap:
             idx = idx[vis]
         dist = np.linalg.norm(self.points[idx] - np.asarray(camera.position, float), axis=1)
         self.best[idx] = np.minimum(self.best[idx], dist)
+        if self.learn_support and self.support is not None:
+            self._supports(camera, depth)
         mask = np.zeros(len(self.points), bool)
         mask[idx] = True
         return mask
 
-    def mark_frustum(self, camera: PinholeCamera, max_distance: float) -> None:
+    def mark_frustum(self, camera: PinholeCamera, max_distance: float) -> np.ndarray:
         """Record an image without depth: every point inside the frustum within ``max_distance``
-        (no occlusion; for bodies that render nothing)."""
+        (no occlusion; for bodies that render nothing). Returns their mask."""
         m = camera.sees(self.points, max_distance)
         d = np.linalg.norm(self.points[m] - np.asarray(camera.position, float), axis=1)
         self.best[m] = np.minimum(self.best[m], d)
+        return m
 
     def unseen(self, max_range: float) -> np.ndarray:
         """(N,) bool: points not yet seen from within ``max_range``."""
@@ -226,6 +311,11 @@ class SeenMap:
         return np.flatnonzero(
             Box(np.asarray(box.center, float), float(box.yaw), half).contains_points(self.points)
         )
+
+
+def _lattice_key(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray) -> np.ndarray:
+    """One integer per lattice cell (ix, iy, iz), for sorted look-ups."""
+    return (ix * 100_003 + iy) * 64 + iz
 
 
 # =========================================================================== candidate regions
@@ -420,7 +510,9 @@ def expected_mass(catalog: Catalog, probs: ProbabilitySource, target: str) -> fl
     return total if total > 0 else None
 
 
-def target_density(regions: Sequence[Region], surveyed: np.ndarray) -> np.ndarray | None:
+def target_density(
+    regions: Sequence[Region], surveyed: np.ndarray, stand: np.ndarray | None = None
+) -> np.ndarray | None:
     """(N,) where the target may be, in P(rel(T)) per seen-map point, from the known objects'
     relation volumes (``regions``; ``surveyed`` (N,) bool: the points seen from within the
     built map's depth range, where furniture would have been detected); None when no volume has
@@ -435,19 +527,24 @@ def target_density(regions: Sequence[Region], surveyed: np.ndarray) -> np.ndarra
     what is left to see, so the share of it an image or a volume shows is the probability that
     the target is there given that it was not found yet (``SearchContext.online_search``). The
     choice of the surveyed part's mean is this module's, not the paper's (which gives no
-    prior for space no known object explains)."""
-    regions = [r for r in regions if r.p > 0 and len(r.points)]
+    prior for space no known object explains).
+
+    ``stand`` (N,) weights of where an object can stand (``SeenMap.standable``; None: every
+    point alike): a volume's probability is spread over its points in proportion to them, the
+    mean density counts them, and the density is multiplied by them."""
+    stand = np.ones(len(surveyed)) if stand is None else np.asarray(stand, float)
+    regions = [r for r in regions if r.p > 0 and len(r.points) and stand[r.points].sum() > 0]
     if not regions:
         return None
     w = np.zeros(len(surveyed))
     covered = np.zeros(len(surveyed), bool)
     for r in regions:
-        w[r.points] = np.maximum(w[r.points], r.p / len(r.points))
+        w[r.points] = np.maximum(w[r.points], r.p / float(stand[r.points].sum()))
         covered[r.points] = True
     mass = float(sum(r.p for r in regions))
-    base = mass / max(int(np.count_nonzero(surveyed | covered)), 1)
+    base = mass / max(float(stand[surveyed | covered].sum()), 1.0)
     w[~covered] = base
-    return w
+    return w * stand
 
 
 def score_regions(
@@ -460,16 +557,15 @@ def score_regions(
 ) -> list[Region]:
     """Set every region's score and cost (expected seconds from ``xy``) and return them best
     first (score per second; ties: cheaper, then key). The score is P(T in its unseen part)
-    (``region_probabilities``), or with ``weights`` ((N,): the probability that the target is
-    at each point, ``target_density`` normalised over what is left to see) their sum over the
-    region's unseen points."""
+    (``region_probabilities``), or with ``weights`` ((N,): the belief, the probability that
+    the target is at each point given every image so far: agent.search.belief) their sum over
+    the region's points."""
     if not regions:
         return []
-    unseen = seen.unseen(target_range)
     if weights is None:
-        probs = region_probabilities(regions, unseen)
+        probs = region_probabilities(regions, seen.unseen(target_range))
     else:
-        probs = [float(weights[r.points][unseen[r.points]].sum()) for r in regions]
+        probs = [float(weights[r.points].sum()) for r in regions]
     field_ = costs.grid.distances_from(xy).ravel()
     for r, p in zip(regions, probs, strict=True):
         r.score = float(p)

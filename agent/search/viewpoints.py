@@ -30,8 +30,9 @@ robot can expect before it has seen anything.
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -46,9 +47,23 @@ RAY_COUNT = 120
 COARSE = ss.LATTICE_XY  # m: the visibility cells (the seen map's lattice spacing)
 EXHAUST_RADIUS = 1.5  # m
 MAX_VIEW = 5.0  # m: the built map's depth range; nothing further is counted as seen
+# Occlusion in 2-D with two heights (``Blockers``): points below LOW_Z are hidden by anything
+# occupied, points above it only by obstacles reaching agent.mapping.TALL_M (the camera is at
+# 1.2 m).
+LOW_Z = 0.4  # m
 MIN_GAIN = 8  # points a viewpoint must show to be worth driving to
 VISITED_RADIUS = 0.4  # m: a viewpoint this near an earlier sweep's is not chosen again
 HEAD_S = 0.6  # s: mean head slew per image
+
+
+@dataclass(frozen=True)
+class Sight:
+    """What a sweep is scored for: the range (m) within which it counts points and, for the
+    target, the probability of finding it against distance (agent.search.belief's
+    ``DetectionCurve.found``; None: every point within range counts fully)."""
+
+    range: float
+    found: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -67,14 +82,28 @@ class Viewpoint:
         return self.share / max(self.seconds, 1e-6)
 
 
-def coarse_blocked(built: BuiltMap, cell: float = COARSE) -> np.ndarray:
-    """(h, w) bool: coarse cells (``cell`` m, from the map's corner) holding an occupied cell."""
-    k = max(1, int(round(cell / built.resolution)))
-    occ = built.occupied
+@dataclass(frozen=True)
+class Blockers:
+    """Coarse cells that block the view (``coarse_blocked``): of the points near the floor
+    (below ``LOW_Z``), anything occupied (``low``); of the points higher up, only what reaches
+    ``TALL_M`` (``tall``): a camera at 1.2 m sees over a table or a bed onto the tops beyond."""
+
+    low: np.ndarray
+    tall: np.ndarray
+
+
+def _pool(occ: np.ndarray, k: int) -> np.ndarray:
     h, w = occ.shape
     pad = np.zeros((-(-h // k) * k, -(-w // k) * k), bool)
     pad[:h, :w] = occ
     return pad.reshape(pad.shape[0] // k, k, pad.shape[1] // k, k).any(axis=(1, 3))
+
+
+def coarse_blocked(built: Occupancy, cell: float = COARSE) -> Blockers:
+    """The coarse cells (``cell`` m, from the map's corner) holding an occupied cell, and those
+    holding a tall one (``Blockers``)."""
+    k = max(1, int(round(cell / built.resolution)))
+    return Blockers(_pool(built.occupied, k), _pool(built.tall, k))
 
 
 def visible_cells(
@@ -104,39 +133,65 @@ def visible_cells(
     return out
 
 
-class ViewpointScorer:
-    """Gains and seconds of candidate viewpoints on a built map (module docstring)."""
+class Occupancy(Protocol):
+    """What blocks the view, as cells: a ``BuiltMap`` (the robot's own map) or the given map's
+    ``agent.search.maps.Occluders``; ``tall``: the occupied cells reaching ``TALL_M``."""
 
-    def __init__(self, built: BuiltMap, points: np.ndarray, spec: RobotSpec, tm: TimeModel):
+    occupied: np.ndarray
+    tall: np.ndarray
+    x0: float
+    y0: float
+    resolution: float
+
+
+class ViewpointScorer:
+    """Gains and seconds of candidate viewpoints on a map whose occupied cells block the view
+    (``built``: the robot's own map, or the given map's occluders; module docstring)."""
+
+    def __init__(self, built: Occupancy, points: np.ndarray, spec: RobotSpec, tm: TimeModel):
         self.built, self.points, self.spec, self.tm = built, points, spec, tm
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
         self._gains: dict[Hashable, dict[tuple[float, float], int]] = {}  # best(): last gains
 
-    def visible_points(self, blocked: np.ndarray, xy: np.ndarray, rng: float) -> np.ndarray:
+    def visible_points(self, blocked: Blockers, xy: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
-        vis = visible_cells(blocked, self.origin, xy, min(rng, MAX_VIEW))
-        h, w = vis.shape
-        r, c = self.cells[:, 1], self.cells[:, 0]
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        m = np.zeros(len(self.points), bool)
-        m[ok] = vis[r[ok], c[ok]]
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
-        return m & (np.linalg.norm(self.points - cam, axis=1) <= min(rng, MAX_VIEW))
+        near = np.flatnonzero(np.linalg.norm(self.points - cam, axis=1) <= min(rng, MAX_VIEW))
+        m = np.zeros(len(self.points), bool)
+        m[near[self._visible(blocked, xy, min(rng, MAX_VIEW), near)]] = True
+        return m
+
+    def _visible(self, blocked: Blockers, xy: np.ndarray, rng: float, idx: np.ndarray):
+        """(len(idx),) bool: which of the points ``idx`` lie in a cell rays from ``xy`` reach
+        (``Blockers``: the low ones past anything occupied, the higher ones past tall things)."""
+        cells = self.cells[idx]
+        r, c = cells[:, 1], cells[:, 0]
+        out = np.zeros(len(idx), bool)
+        low = self.points[idx, 2] < LOW_Z
+        for grid, which in ((blocked.low, low), (blocked.tall, ~low)):
+            if not which.any():
+                continue
+            vis = visible_cells(grid, self.origin, xy, rng)
+            h, w = vis.shape
+            ok = which & (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            out[ok] = vis[r[ok], c[ok]]
+        return out
 
     def best(
         self,
         grid: OccupancyGrid,
         todo: np.ndarray,
         here: np.ndarray,
-        rng: float,
+        sight: Sight,
         images: float,
         avoid: np.ndarray | None = None,
         key: Hashable | None = None,
         weights: np.ndarray | None = None,
     ) -> Viewpoint | None:
-        """The candidate viewpoint with the best rate (share of the points ``todo`` (N,) bool at
-        range ``rng`` it shows per second, a sweep there taking ``images`` images; ties: fewer
+        """The candidate viewpoint with the best rate (share of the points ``todo`` (N,) bool
+        within ``sight.range`` it shows per second, a sweep taking ``images`` images; with
+        ``sight.found`` each point's share times P(found) at its distance; ties: fewer
         seconds, then smaller x, y); None if none shows ``MIN_GAIN`` points. Candidates within
         ``VISITED_RADIUS`` of a point of ``avoid`` (K, 2: where sweeps were made) are left out.
 
@@ -147,10 +202,9 @@ class ViewpointScorer:
         candidates are traced in order of that bound on their rate and the search stops when
         the bound falls below the best rate found: the viewpoint tracing them all would pick.
 
-        ``weights`` (N,) non-negative: a point's share of what is left is its weight over the
-        todo points' total instead of one over their count (where the target is likely, from
-        ``space.target_density``); the bound is then the weight within range, and gains
-        are not cached (the weights change as objects are detected)."""
+        ``weights`` (N,) non-negative: a point's share is its weight over the todo points'
+        total (the belief: agent.search.belief); the bound is then the weight within range, and
+        gains are not cached (the weights change with every image)."""
         count = int(todo.sum())
         if count < MIN_GAIN:
             return None
@@ -165,7 +219,7 @@ class ViewpointScorer:
         pts = self.points[sub]
         cache = self._gains.setdefault(key, {}) if key is not None and w is None else {}
         ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
-        upper, mass = self._bounds(cand, pts, rng, w, [cache.get(i, -1) for i in ids])
+        upper, mass = self._bounds(cand, pts, sight, w, [cache.get(i, -1) for i in ids])
         bound = mass / left / seconds
         blocked = None
         best: Viewpoint | None = None
@@ -176,7 +230,7 @@ class ViewpointScorer:
                 continue
             if blocked is None:
                 blocked = coarse_blocked(self.built)
-            g, m = self._gain(blocked, cand[i], rng, sub, pts, w)
+            g, m = self._gain(blocked, cand[i], sight, sub, pts, w)
             cache[ids[i]] = g
             if g < MIN_GAIN:
                 continue
@@ -207,37 +261,46 @@ class ViewpointScorer:
         return cand[reach], seconds
 
     def _bounds(
-        self, cand: np.ndarray, pts: np.ndarray, rng: float, w: np.ndarray | None, cached: list
+        self, cand: np.ndarray, pts: np.ndarray, sight: Sight, w: np.ndarray | None, cached: list
     ) -> tuple[np.ndarray, np.ndarray]:
         """Upper bounds on each candidate's gain: the count (``cached``, the last call's gain,
         where it is not -1, else the todo points ``pts`` within range) and the weight (``w``
-        over ``pts``; None: the count) of the todo points it may show."""
+        over ``pts``, times ``sight.found`` at its distance; None: the count) of the todo
+        points it may show."""
         upper = np.array(cached, np.int64)
         mass = upper.astype(float)
         new = np.flatnonzero(upper < 0)
-        view2 = min(rng, MAX_VIEW) ** 2
+        view2 = min(sight.range, MAX_VIEW) ** 2
         cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
         for k in range(0, len(new), 16):  # the todo points within range of each camera
-            near = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1) <= view2
+            d2 = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1)
+            near = d2 <= view2
             upper[new[k : k + 16]] = near.sum(1)
-            mass[new[k : k + 16]] = near.sum(1) if w is None else near @ w
+            if w is None:
+                mass[new[k : k + 16]] = near.sum(1)
+            elif sight.found is None:
+                mass[new[k : k + 16]] = (near * w).sum(1)  # not BLAS: thread-independent
+            else:
+                mass[new[k : k + 16]] = (near * sight.found(np.sqrt(d2)) * w).sum(1)
         return upper, mass
 
-    def _gain(self, blocked, xy, rng, sub, pts, weights=None) -> tuple[int, float]:
+    def _gain(self, blocked, xy, sight: Sight, sub, pts, weights=None) -> tuple[int, float]:
         """The todo points (``sub``, at ``pts``) a sweep at ``xy`` shows: their count and their
-        weight (``weights`` over ``sub``; None: the count)."""
+        weight (``weights`` over ``sub``, times ``sight.found`` at their distance; None: the
+        count)."""
+        rng = min(sight.range, MAX_VIEW)
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
-        near = np.flatnonzero(np.linalg.norm(pts - cam, axis=1) <= min(rng, MAX_VIEW))
+        dist = np.linalg.norm(pts - cam, axis=1)
+        near = np.flatnonzero(dist <= rng)
         if len(near) < MIN_GAIN:
             return 0, 0.0
-        vis = visible_cells(blocked, self.origin, xy, min(rng, MAX_VIEW))
-        h, w = vis.shape
-        cells = self.cells[sub[near]]
-        r, c = cells[:, 1], cells[:, 0]
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        shown = near[ok][vis[r[ok], c[ok]]]
+        shown = near[self._visible(blocked, xy, rng, sub[near])]
         g = len(shown)
-        return g, float(g) if weights is None else float(weights[shown].sum())
+        if weights is None:
+            return g, float(g)
+        if sight.found is None:
+            return g, float(weights[shown].sum())
+        return g, float((weights[shown] * sight.found(dist[shown])).sum())
 
     def exhaust(self, xy: np.ndarray, unseen: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: the points a sweep at ``xy`` should have shown but did not (module

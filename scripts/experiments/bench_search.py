@@ -99,8 +99,13 @@ EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode ei
 # (the nearest-frontier explorer on the built map, the known furniture's volumes without
 # probabilities on the given map, exhaustive coverage) and the policies with the true
 # probabilities.
-BASELINES = ("frontier", "map-only", "exhaustive", "oracle-prior", "oracle-prior-indirect")
+BASELINES = (
+    "frontier", "uniform", "map-only", "exhaustive", "oracle-prior", "oracle-prior-indirect"
+)  # fmt: skip
 ORACLE = "oracle"
+# An early stop (before the budget, nothing found) with more than this share of the belief's
+# detectable mass left counts as premature (issue 26's goal: none).
+EARLY_STOP_MASS = 0.10
 
 
 @dataclass
@@ -124,6 +129,10 @@ class PolicyStats:
     oracle_violations: int = 0  # episodes this policy found the target sooner than the oracle
     # baseline -> the statistics that can see a small effect (geometric mean, test, ties, power)
     paired_stats: dict[str, PairedStats] = field(default_factory=dict)
+    # episodes the policy stopped before its budget without a find, and of those the ones whose
+    # belief still held more than EARLY_STOP_MASS of its detectable mass (agent.search.belief)
+    gave_up: int = 0
+    gave_up_with_mass: int = 0
 
     def to_json(self) -> dict:
         """The JSON entry of search.json."""
@@ -141,6 +150,8 @@ class PolicyStats:
             "ratio_to_exhaustive": r4(self.ratio_to_exhaustive),
             "ratio_to_oracle": r4(self.ratio_to_oracle),
             "oracle_violations": self.oracle_violations,
+            "gave_up": self.gave_up,
+            "gave_up_with_mass": self.gave_up_with_mass,
         }
 
 
@@ -158,6 +169,10 @@ def aggregate(results: dict[str, list[SearchResult]], seed: int = 0) -> dict[str
             mean_ci=bootstrap_ci(t, np.mean, seed=seed),
             gazes=float(np.mean([r.gazes for r in rs])) if rs else math.nan,
             path_m=float(np.mean([r.path_m for r in rs])) if rs else math.nan,
+            gave_up=sum(r.stop == "gave-up" for r in rs),
+            gave_up_with_mass=sum(
+                r.stop == "gave-up" and (r.mass_left or 0.0) > EARLY_STOP_MASS for r in rs
+            ),
         )
     for ref, attr in (("exhaustive", "ratio_to_exhaustive"), (ORACLE, "ratio_to_oracle")):
         if ref in out and out[ref].median_s > 0:
@@ -502,6 +517,8 @@ EPISODE_COLUMNS = (
     "time_to_find_s",  # sim_s if success, else the budget
     "gazes",
     "path_m",
+    "stop",  # found, budget, false-find (a confirmed detection of no target) or gave-up
+    "mass_left",  # at a stop before the budget: the belief's detectable mass left (else empty)
 )
 
 
@@ -533,6 +550,8 @@ def episode_rows(
                 "time_to_find_s": float(r.time_to_find),
                 "gazes": int(r.gazes),
                 "path_m": float(r.path_m),
+                "stop": r.stop,
+                "mass_left": "" if r.mass_left is None else float(r.mass_left),
             }
 
 
@@ -616,6 +635,7 @@ def _write_files(
         f"{ex['visible_at_start']} worlds dropped as visible from every start tried) and "
         f"detectable within the budget ({ex['infeasible']} worlds dropped as infeasible); "
         f"oracle violations (a policy faster than the oracle): {doc['oracle_violations']}.\n\n"
+        + _stops_line(stats)
         + _breakdown_table(doc["by_group"], "target group")
         + "\n"
         + _breakdown_table(doc["by_target"], "target")
@@ -626,6 +646,18 @@ def _write_files(
         write_csv(out / "episodes.csv", EPISODE_COLUMNS, episode_rows(eps, results, catalog))
     )
     return files
+
+
+def _stops_line(stats: dict[str, PolicyStats]) -> str:
+    """A line on the early stops: per policy, the episodes it gave up before the budget and
+    those with more than ``EARLY_STOP_MASS`` of its belief's detectable mass left."""
+    parts = [f"{n} {st.gave_up} ({st.gave_up_with_mass})" for n, st in stats.items()]
+    return (
+        "Stops before the budget with nothing found (in brackets: with more than "
+        f"{100 * EARLY_STOP_MASS:.0f}% of the belief's detectable mass left): "
+        + ", ".join(parts)
+        + ".\n\n"
+    )
 
 
 def _breakdown_table(rows: dict[str, dict], what: str) -> str:
