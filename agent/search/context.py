@@ -15,7 +15,7 @@ and the search goes on.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from ctxsearch.knowledge.geometry import ObjectInstance
 # per image over a few hundred images); a false positive gets a new position in every image, a
 # true instance is detected again with its recall.
 CONFIRM_RADIUS_M = 0.5
+BELIEF_ENTITY = "world/search/belief"  # the recording's floor heat map of the belief
 
 
 class SearchStopped(Exception):
@@ -136,6 +137,8 @@ class SearchContext:
         self.misses = belief.MissField(self.seen.points, self.curve)
         self._held: tuple[np.ndarray, np.ndarray] | None = None
         self.mass_left: float | None = None  # the belief's detectable mass left (online search)
+        # the belief as it stands (set by a search that holds one): recorded after every image
+        self.belief_now: Callable[[], np.ndarray | None] | None = None
 
     @property
     def occluders(self):
@@ -210,6 +213,8 @@ class SearchContext:
             rec.log_scalar(
                 f"search/seen_fraction/{self.policy}", self.seen.seen_fraction(self.target_range)
             )
+            if self.belief_now is not None:
+                belief.log_belief(rec, self.seen.points, self.belief_now(), BELIEF_ENTITY)
         if self._confirming:
             return dets
         if hit is not None and self.found_id is None:

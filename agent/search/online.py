@@ -35,7 +35,7 @@ from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import regions as rg
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
-from ctxsearch.agent.search.context import SearchContext
+from ctxsearch.agent.search.context import BELIEF_ENTITY, SearchContext
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.knowledge.geometry import ObjectInstance
@@ -147,7 +147,7 @@ class OnlineSearch:
         rec = self.ctx.recorder
         if rec.enabled:
             rec.set_time(self.ctx.elapsed)
-            belief.log_belief(rec, self.ctx.seen.points, b.weights, "world/search/belief")
+            belief.log_belief(rec, self.ctx.seen.points, b.weights, BELIEF_ENTITY)
             rec.log_scalar(f"search/mass_left/{self.ctx.policy}", b.left)
 
     def scale(self, kind: str) -> float:
@@ -174,6 +174,7 @@ class OnlineSearch:
         prior = stand if dens is None else dens
         miss = ctx.misses.miss
         weights = belief.belief_weights(prior, miss, todo)
+        ctx.belief_now = lambda: belief.belief_weights(prior, ctx.misses.miss, todo)
         left = belief.mass_left(prior, miss, keep)
         mass = self.prior if dens is None else float((dens * miss)[todo].sum())
         return Belief(regions, weights, mass, left)
