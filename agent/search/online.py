@@ -111,12 +111,15 @@ class OnlineSearch:
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
 
     def run(self) -> None:
-        """Look around, then take the best option until none is left or the belief's detectable
-        mass left is below ``belief.STOP_MASS``; the share left is the context's ``mass_left``."""
+        """Look around (on the built map: its first images map the floor), then take the best
+        option until none is left or the belief's detectable mass left is below
+        ``belief.STOP_MASS``; the share left is the context's ``mass_left``. On a given map a
+        sweep where the robot stands is one of the options, taken when it is worth its seconds."""
         ctx = self.ctx
         first = self.belief()
         self.record(first)
-        self.explorer.look_around(first.weights)
+        if ctx.built is not None:  # the robot's own map starts from the floor it can see
+            self.explorer.look_around(first.weights)
         while True:
             ctx.check()
             b = self.belief()
