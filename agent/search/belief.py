@@ -112,13 +112,6 @@ class DetectionCurve:
         share = min(1.0, np.pi * radius * radius / footprint)
         return p * (1.0 - p) / (self.false_report_rate() * share)
 
-    def distance_for(self, p_found: float) -> float:
-        """The farthest distance (m, to 1 cm) where ``found`` is at least ``p_found`` (0 if
-        nowhere)."""
-        d = np.arange(0.05, MAX_REACH_M + 1e-9, 0.01)
-        ok = np.flatnonzero(self.found(d) >= p_found)
-        return float(d[ok[-1]]) if len(ok) else 0.0
-
 
 def detection_curve(
     typ: ObjectType, model: DetectorModel | None, spec: RobotSpec, width: int, height: int

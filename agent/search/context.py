@@ -197,7 +197,7 @@ class SearchContext:
         if frame.depth is not None:
             shown = self.seen.update(frame.camera, frame.depth)
         else:
-            shown = self.seen.mark_frustum(frame.camera, self.misses.curve.reach)
+            shown = self.seen.mark_frustum(frame.camera, self.curve.reach)
         self.misses.observe(frame.camera.position, shown)
         for d in dets:
             self.known.setdefault(d.instance_id, d.pose)

@@ -50,12 +50,15 @@ class Explorer:
             m &= self.ctx.seen.points[:, 2] <= zmax
         return m
 
-    def target_todo(self) -> np.ndarray:
-        """(N,) bool: the points still worth a look for the target: not given up on (exhausted)
-        and holding at least ``belief.MISS_DONE`` of their mass (agent.search.belief)."""
-        m = self.ctx.misses.miss > belief.MISS_DONE
+    def given_up(self) -> np.ndarray:
+        """(N,) bool: the points given up on for the target (exhausted: hidden from nearby)."""
         ex = self.exhausted.get(self.ctx.target_range)
-        return m if ex is None else m & ~ex
+        return np.zeros(len(self.ctx.seen), bool) if ex is None else ex
+
+    def target_todo(self) -> np.ndarray:
+        """(N,) bool: the points still worth a look for the target: not given up on and holding
+        at least ``belief.MISS_DONE`` of their mass (agent.search.belief)."""
+        return (self.ctx.misses.miss > belief.MISS_DONE) & ~self.given_up()
 
     def viewpoint(
         self,

@@ -165,7 +165,7 @@ class OnlineSearch:
         points still worth a look (agent.search.belief)."""
         ctx = self.ctx
         todo = self.explorer.target_todo()
-        keep = ~self.explorer.exhausted.get(ctx.target_range, np.zeros(len(todo), bool))
+        keep = ~self.explorer.given_up()
         regions: list[ss.Region] = []
         dens = None
         stand = ctx.seen.standable()

@@ -87,13 +87,17 @@ class Exhaustive(SearchPolicy):
         cover(ctx)
 
 
-class Frontier(SearchPolicy):
-    """No context, on the built map: the online decision with every point alike, then
-    coverage."""
+class Online(SearchPolicy):
+    """The online search (agent.search.online), then coverage of what stayed unseen. Without
+    context (``context`` False) every standable point is alike: ``frontier`` on the built map and
+    ``uniform`` on the given map, the fair twins; with it, the knowledge's P(rel(T)) over the
+    known objects' relation volumes (``Location``)."""
+
+    context = False
 
     def search(self, ctx: SearchContext) -> None:
-        OnlineSearch(ctx, None).run()
-        ctx.note("no viewpoint left; coverage of what stayed unseen")
+        OnlineSearch(ctx, needs_probs(ctx) if self.context else None).run()
+        ctx.note("no option left; coverage of what stayed unseen")
         cover(ctx)
 
 
@@ -107,25 +111,12 @@ class MapOnly(SearchPolicy):
         cover(ctx)
 
 
-class Uniform(SearchPolicy):
-    """No context, on the given map: the online decision with every point alike (the belief of
-    agent.search.belief with a uniform prior), then coverage: ``location``'s fair twin."""
-
-    def search(self, ctx: SearchContext) -> None:
-        OnlineSearch(ctx, None).run()
-        ctx.note("no option left; coverage of what stayed unseen")
-        cover(ctx)
-
-
-class Location(SearchPolicy):
-    """The location constraint as a belief: the online decision over the relation volumes of the
+class Location(Online):
+    """The location constraint as a belief: the online search over the relation volumes of the
     furniture map and of everything detected so far, with P(rel(T)) from the knowledge (no
     intermediate types), then coverage."""
 
-    def search(self, ctx: SearchContext) -> None:
-        OnlineSearch(ctx, needs_probs(ctx)).run()
-        ctx.note("no option left; coverage of what stayed unseen")
-        cover(ctx)
+    context = True
 
 
 def candidate_types(ctx: SearchContext, probs: ss.ProbabilitySource) -> list[str]:
@@ -264,10 +255,10 @@ class IndirectPlanned(SearchPolicy):
 # The algorithm behind each policy name, by scenario (the oracle: agent.search.oracle.Oracle,
 # built by the episode runner with what it reads of the truth).
 _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
-    "frontier": Frontier,
+    "frontier": Online,
     "map-only": MapOnly,
     "exhaustive": Exhaustive,
-    "uniform": Uniform,
+    "uniform": Online,
     "location": Location,
     "oracle-prior": Location,
     "indirect": {MapMode.BUILT: IndirectOnline, MapMode.GIVEN: IndirectPlanned},
