@@ -11,8 +11,13 @@ An episode is the benchmark's (``ctxsearch bench search``, ``agent.search.draw``
 ``reset(seed=s)`` draws the benchmark's episode 0 for seed s (``options={"index": k}``: its
 episode k) with agent.search.draw, as the benchmark does: held-out rooms the store (``kb``) did
 not learn in, a target drawn among the room's small types, a start from which it is not visible
-and from which the oracle's planner detects it within the budget (with the env's detector). ``reset()`` without a seed draws the seed from the
-environment's own generator, so one seeded reset fixes every later episode.
+and from which the oracle's planner detects it within the budget (with the env's detector;
+the task has no oracle, so the planner is asked only whether, not when: ``DrawSpec.first_view``
+False, the same episodes at a fraction of the images). ``reset()`` without a seed draws the seed
+from the environment's own generator, so one seeded reset fixes every later episode. A reset to
+a (seed, index) drawn before in the process reuses its draw; ``draw_cache=DIR`` keeps the draws
+on disk for later processes (vectorised copies, the next training run). What a reset costs:
+``scripts/examples/gym_timing.py`` (README).
 
 Actions (``Discrete(8)``, ``ACTIONS``), each charged by the one time model
 (``envs.robot_spec.TimeModel``) through the World, as every search policy is:
@@ -54,6 +59,7 @@ from __future__ import annotations
 import math
 import numbers
 from collections import OrderedDict
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -115,14 +121,18 @@ def draw_episode(
     budget_s: float = DEFAULT_BUDGET_S,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
     detector: DetectorModel | None = None,
+    cache: Path | None = None,
 ) -> tuple[Episode, RoomLayout]:
     """Episode ``index`` of the benchmark's episodes for ``seed`` (the draw of ``DrawSpec.make(
     style, index + 1, seed, ..., detector=detector)``: agent.search.draw's worlds in order, the
-    target not visible from the start and detectable within the budget) and its room's layout."""
+    target not visible from the start and detectable within the budget) and its room's layout.
+    ``cache``: a directory where the draw is kept for later processes (agent.search.draw_store:
+    the benchmark's draw cache; None: this process only)."""
     spec = DrawSpec.make(style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector)
+    spec = replace(spec, first_view=False)  # the task has no oracle: whether, not when
     draw = _DRAWS.get(spec)
     if draw is None:
-        draw = draw_episodes(spec, catalog)
+        draw = draw_episodes(spec, catalog, cache=cache)
         _DRAWS[spec] = draw
         if len(_DRAWS) > DRAWS_KEPT:
             _DRAWS.popitem(last=False)
@@ -150,7 +160,7 @@ MAX_BUDGET_S = 1e9  # simulated seconds, as the CLI's --budget-seconds
 MAX_TOP_K = 10_000  # context rows
 
 
-def _check_arguments(style, detector, kb, budget_s, top_k, render_mode) -> None:
+def _check_arguments(style, detector, kb, budget_s, top_k, render_mode, draw_cache) -> None:
     """A one-line CtxsearchError for an argument of the wrong type or out of range (the files
     they name are checked by their loaders): budget_s a finite number in (0, MAX_BUDGET_S], top_k
     a whole number in [1, MAX_TOP_K] (not a bool), names strings or paths."""
@@ -158,6 +168,7 @@ def _check_arguments(style, detector, kb, budget_s, top_k, render_mode) -> None:
         ("style", style, (str, Path)),
         ("detector", detector, (str, Path, type(None))),
         ("kb", kb, (str, Path, KnowledgeBase, type(None))),
+        ("draw_cache", draw_cache, (str, Path, type(None))),
     ):
         if not isinstance(value, kinds) or (isinstance(value, str) and not value):
             raise CtxsearchError(f"{name} must be a name or a path, got {value!r}"[:300])
@@ -195,8 +206,10 @@ class ObjectSearchEnv(gymnasium.Env):
         budget_s: float = DEFAULT_BUDGET_S,
         top_k: int = DEFAULT_TOP_K,
         render_mode: str | None = None,
+        draw_cache: str | Path | None = None,
     ) -> None:
-        _check_arguments(style, detector, kb, budget_s, top_k, render_mode)
+        _check_arguments(style, detector, kb, budget_s, top_k, render_mode, draw_cache)
+        self.draw_cache = None if draw_cache is None else Path(draw_cache)
         self.catalog = load_catalog()
         self.style = resolve_style(style, self.catalog)
         self.detector_model: DetectorModel = default_or_named(
@@ -255,6 +268,7 @@ class ObjectSearchEnv(gymnasium.Env):
             budget_s=self.budget_s,
             exclude_seeds=self.learned,
             detector=self.detector_model,
+            cache=self.draw_cache,
         )
         self.close()
         self.world = World(

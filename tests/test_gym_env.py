@@ -234,3 +234,26 @@ def test_vectorised_copies_step_in_lockstep_and_a_drawn_seed_is_not_drawn_again(
     _, again = single.reset(seed=1)
     assert again["room_seed"] == one["room_seed"]
     single.close()
+
+
+def test_a_draw_cache_serves_a_later_process_without_drawing(tmp_path, monkeypatch):
+    """``draw_cache``: the first reset to a seed keeps its draw in the directory (the benchmark's
+    draw cache); a later process (the kept draws forgotten) resets to it without checking a
+    world, to the same episode, and the episode has no oracle view (the task has no oracle)."""
+    env = make(draw_cache=tmp_path / "draws")
+    env.reset(seed=11)
+    first = env.unwrapped.episode
+    env.close()
+    assert first.first_view is None and len(list((tmp_path / "draws").glob("*.json"))) == 1
+    monkeypatch.setattr(G, "_DRAWS", type(G._DRAWS)())
+
+    def no_world(*_a, **_k):
+        raise AssertionError("a world was checked: the cache was not read")
+
+    monkeypatch.setattr("ctxsearch.agent.search.draw.draw_world", no_world)
+    env = make(draw_cache=str(tmp_path / "draws"))
+    env.reset(seed=11)
+    assert env.unwrapped.episode == first and env.unwrapped.episode.start == first.start
+    env.close()
+    with pytest.raises(CtxsearchError, match="draw_cache must be a name or a path"):
+        make(draw_cache=3)

@@ -75,6 +75,11 @@ class DrawSpec:
     # ``instance``: the world keeps one instance of the target, drawn after the target (set with
     # dataclasses.replace; ``type``, the default, draws exactly as before the option)
     targets: Targets = Targets.TYPE
+    # ``first_view`` False: the draw asks only whether the oracle finds the target within the
+    # budget, not its soonest view (``oracle_view(soonest=False)``): the same worlds, targets and
+    # starts, each episode's ``first_view`` None (the Oracle policy then plans it at its first
+    # step), several times fewer images (the Gymnasium task, which has no oracle)
+    first_view: bool = True
 
     @classmethod
     def make(
@@ -128,16 +133,21 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
         eye = OracleEye(world, layout, catalog, spec.detector, tgt)
         for _ in range(MAX_START_TRIES):
             start = random_start(layout, grid, rng)
-            if eye.start_visibility(start) < VISIBLE_MIN_P:
+            if eye.start_visibility(start, enough=VISIBLE_MIN_P) < VISIBLE_MIN_P:
                 break
             redraws += 1
         else:
             return WorldDraw(None, "visible_at_start", redraws)
         world.reset_pose(start)
         # planned at the episode's second 0, as the Oracle policy would plan it
-        view = oracle_view(eye, grid, start, 0.0, world.time_model, deadline_s=spec.budget_s)
+        view = oracle_view(
+            eye, grid, start, 0.0, world.time_model, deadline_s=spec.budget_s,
+            soonest=spec.first_view,
+        )  # fmt: skip
     if view is None:
         return WorldDraw(None, "infeasible", redraws)
+    if not spec.first_view:
+        view = None
     ep = Episode(-1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, first_view=view)
     return WorldDraw(ep, None, redraws)
 

@@ -248,14 +248,19 @@ class OracleEye:
         """True if a view whose probability (``probability``) is ``p`` may detect the target."""
         return p >= (1.0 if self.model.perfect else MIN_RECALL)
 
-    def start_visibility(self, start: RobotPose) -> float:
+    def start_visibility(self, start: RobotPose, enough: float = math.inf) -> float:
         """The largest probability that some image from ``start`` (turning in place, pan and
         tilt, no driving) reports a true target instance: the head aimed at each instance, its
-        pixels times ``PERSPECTIVE_GAIN`` (an image showing it off-centre may show more)."""
+        pixels times ``PERSPECTIVE_GAIN`` (an image showing it off-centre may show more). The
+        instances are looked at nearest first, and the look stops at the first whose
+        probability reaches ``enough`` (returned then; a caller that asks only whether the
+        largest reaches a level decides the same with fewer images)."""
         spec = self.body.spec
         best = 0.0
         cam = np.array([start.x, start.y, spec.camera_height])
-        for o in self.instances:
+        for o in sorted(self.instances, key=lambda o: (box_distance(cam, o), o.id)):
+            if best >= enough:
+                break
             if box_distance(cam, o) > self.reach or not self.may_see(start.xy, o):
                 continue  # out of the detector's reach or behind walls: no image needed
             if not self.rays_meet(cam, o):
@@ -404,10 +409,15 @@ def oracle_view(
     *,
     deadline_s: float = math.inf,
     exclude: set[tuple] | frozenset[tuple] = frozenset(),
+    soonest: bool = True,
 ) -> OracleView | None:
     """The soonest view from ``pose`` (at the body's simulated second ``now``) whose image the
     detector reads as a true target instance, within ``deadline_s`` seconds (see the comment
-    above); None if no candidate view does (or ``ORACLE_MAX_RENDERS`` renders found none)."""
+    above); None if no candidate view does (or ``ORACLE_MAX_RENDERS`` renders found none).
+    ``soonest`` False: the first such view in the order of the lower bounds instead, which is
+    None exactly when the soonest is (both look at the same views, in the same order, until the
+    first that ends the search) at a fraction of the images (7-24 instead of 30-190 in office
+    rooms): whether the target can be found in time, not when."""
     spec = eye.body.spec
     if not eye.instances:
         return None
@@ -440,6 +450,8 @@ def oracle_view(
             hit = eye.first_success(eye.frame_at(g.pose), now + g.cost, now + limit)
         if hit is not None and hit - now < limit + 1e-9:
             best = OracleView(hit - now, g, o.id, eye.renders - renders0, key)
+            if not soonest:
+                break
     return best
 
 
