@@ -137,10 +137,11 @@ def own_session() -> bool:
     return True
 
 
-def _start_ray(workers: int, ray_address: str | None) -> bool:
+def _start_ray(workers: int, ray_address: str | None, announce: bool = False) -> bool:
     """Connect to Ray (a local one of ``workers`` CPUs, or the cluster at ``ray_address``) unless
-    already connected; True if this call connected. A cluster that cannot be reached is a
-    one-line CtxsearchError within a bounded time (``RAY_CONNECT_TIMEOUT_S``)."""
+    already connected; True if this call connected (with ``announce``, after a status line on
+    stderr: a local start takes seconds). A cluster that cannot be reached is a one-line
+    CtxsearchError within a bounded time (``RAY_CONNECT_TIMEOUT_S``)."""
     if ray_address:
         check_reachable(ray_address)  # before Ray's import: nothing listening fails at once
     # Ray reads its C++ settings when it is first imported: the connection limits go first.
@@ -151,6 +152,10 @@ def _start_ray(workers: int, ray_address: str | None) -> bool:
 
         if ray.is_initialized():
             return False
+        if announce:
+            where = f"the Ray cluster at {ray_address}" if ray_address else "a local Ray"
+            print(f"ctxsearch: starting {where} ..." if not ray_address else
+                  f"ctxsearch: connecting to {where} ...", file=sys.stderr, flush=True)  # fmt: skip
         kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
         try:
             if ray_address:
@@ -168,7 +173,14 @@ def _start_ray(workers: int, ray_address: str | None) -> bool:
                 # the driver's priority.
                 ray.init(num_cpus=workers, _system_config={"worker_niceness": 0}, **kwargs)
         except (ConnectionError, RuntimeError, ValueError, OSError) as exc:
-            where = ray_address or "a local Ray"
+            if ray_address == "auto" and "Could not find any running Ray" in str(exc):
+                # Ray's own text names its --address flag, which ctxsearch does not have
+                raise CtxsearchError(
+                    "--ray-address auto: no Ray cluster runs on this machine (start one with "
+                    "'ray start --head', give --ray-address HOST:PORT, or run a local one with "
+                    "--workers N)"
+                ) from None
+            where = f"--ray-address {ray_address}" if ray_address else "a local Ray"
             raise CtxsearchError(f"cannot start {where}: {' '.join(str(exc).split())}") from None
     return True
 
@@ -235,13 +247,14 @@ def _env(values: dict[str, str]) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def session(options: SweepOptions) -> Iterator[None]:
+def session(options: SweepOptions, progress: bool = False) -> Iterator[None]:
     """One Ray connection for several ``run_units`` calls of the same options (each call would
-    otherwise start and stop its own); nothing at all for a serial sweep."""
+    otherwise start and stop its own); nothing at all for a serial sweep. ``progress``: a status
+    line on stderr while Ray starts."""
     if options.workers == 1 and not options.ray_address:
         yield
         return
-    started = _start_ray(options.workers, options.ray_address)
+    started = _start_ray(options.workers, options.ray_address, progress)
     try:
         yield
     finally:
@@ -252,7 +265,8 @@ def session(options: SweepOptions) -> Iterator[None]:
 
 
 def _run_on_ray(fn, units, workers, ray_address, desc, progress):
-    started = _start_ray(workers, ray_address)  # first: it imports Ray with its settings
+    # first: it imports Ray with its settings
+    started = _start_ray(workers, ray_address, progress)
     import ray
     from ray.exceptions import RayTaskError
 

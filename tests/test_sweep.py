@@ -195,3 +195,26 @@ def test_a_listening_address_passes_the_check_and_ray_gets_bounded_settings(monk
     with sweep._env(sweep._RAY_CONNECT_ENV):
         assert os.environ[timeout] == "5" and os.environ[wait] == "7"
     assert timeout not in os.environ and os.environ[wait] == "7"
+
+
+def test_ray_address_auto_without_a_cluster_names_ctxsearchs_own_flag(monkeypatch, capsys):
+    """Ray's text for 'auto' with nothing running tells the user to set its ``--address`` flag;
+    ctxsearch's error names its own flags instead (Ray's failure is simulated: a real 'auto'
+    could find another test's Ray)."""
+    import ray
+
+    from ctxsearch.scripts.cli import main
+
+    def nothing_runs(*_a, **_k):
+        raise ConnectionError(
+            "Could not find any running Ray instance. Please specify the one to connect to by "
+            "setting `--address` flag or `RAY_ADDRESS` environment variable."
+        )
+
+    monkeypatch.setattr(ray, "init", nothing_runs)
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    argv = ["truth", "--style", "office", "--samples", "2", "--out", "/nonexistent/t.json"]
+    assert main([*argv, "--ray-address", "auto", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--ray-address auto: no Ray cluster runs" in err, err
+    assert "--address` flag" not in err and "--workers N" in err

@@ -93,10 +93,15 @@ class DrawSpec:
         target: str | None = None,
         detector: DetectorModel | None = None,
     ) -> DrawSpec:
-        """The spec with ``catalog``'s fingerprint and the excluded seeds sorted."""
+        """The spec with ``catalog``'s fingerprint and, of the excluded seeds, those the draw
+        can meet (the room seeds of its ``world_limit`` worlds), sorted: the draw is the same,
+        and so is its key, for every store whose learning rooms it never meets (the curve's
+        snapshots, the transfer's stores: one draw, not one per store)."""
+        worlds = {held_out_seed(int(seed), i) for i in range(world_limit(int(episodes)))}
+        exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds))
         return cls(
-            style, int(episodes), int(seed), catalog.fingerprint, float(budget_s),
-            tuple(sorted(int(s) for s in exclude_seeds)), target, detector,
+            style, int(episodes), int(seed), catalog.fingerprint, float(budget_s), exclude,
+            target, detector,
         )  # fmt: skip
 
 
@@ -269,7 +274,7 @@ def _draw_worlds(
             )
         # A round: as many worlds as episodes still needed (at least two per worker).
         m = min(limit - i, max(n - len(draw.episodes), 2 * workers))
-        rounds = runner(check, list(range(i, i + m)), f"episodes {spec.style.name}")
+        rounds = runner(check, list(range(i, i + m)), f"episode draw {spec.style.name}")
         i += m
         for world in rounds:
             if len(draw.episodes) >= n:

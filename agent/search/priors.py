@@ -78,13 +78,16 @@ def truth_probabilities(
     samples: int = 200,
     seed: int = 0,
     path: str | Path | None = None,
+    progress: bool = False,
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
-    at ``path`` if given, else estimated over ``samples`` generated rooms of ``style``."""
+    at ``path`` if given, else estimated over ``samples`` generated rooms of ``style`` (a
+    progress bar on stderr with ``progress``)."""
     if path is not None:
         doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
         return ss.TableProbabilities.from_truth(doc)
-    return ss.TableProbabilities.from_truth(ground_truth(style, samples, seed, catalog))
+    doc = ground_truth(style, samples, seed, catalog, progress=progress)
+    return ss.TableProbabilities.from_truth(doc)
 
 
 @dataclass(frozen=True)
@@ -155,11 +158,13 @@ def make_priors(
     catalog: Catalog,
     settings: PriorSettings,
     source: KnowledgeSource = KnowledgeSource(),
+    progress: bool = False,
 ) -> Priors:
     """The priors of ``policies`` in scenario ``mode``: the knowledge of ``source`` (a store's
     learning rooms join its ``exclude_seeds``), and the ground truth if an oracle-prior policy
-    runs. With the backoff estimate the evidence is also pooled over the hierarchy (from the
-    store's log, or from the knowledge base's counts)."""
+    runs (estimated with a progress bar on stderr if ``progress``). With the backoff estimate
+    the evidence is also pooled over the hierarchy (from the store's log, or from the knowledge
+    base's counts)."""
     estimate = parse(Estimate, settings.estimate)
     check_scenario(policies, mode)
     learned = set(source.exclude_seeds)
@@ -173,7 +178,9 @@ def make_priors(
         pooled = PooledCounts.from_knowledge_base(kb)
     truth = None
     if any(info(split_name(n)[0]).needs is Needs.TRUTH for n in policies):
-        truth = truth_probabilities(style, catalog, settings.truth_samples, path=settings.truth)
+        truth = truth_probabilities(
+            style, catalog, settings.truth_samples, path=settings.truth, progress=progress
+        )
     rank = parse(Rank, settings.rank)
     priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence)
     priors.check(policies)

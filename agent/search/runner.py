@@ -124,12 +124,14 @@ def load_priors(
     kb: KnowledgeBase | None = None,
     kb_path: Path | str | None = None,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    progress: bool = False,
 ) -> Priors:
     """The priors of ``config``'s policies (agent.search.priors.make_priors): ``kb`` or the store
     at ``kb_path`` (whose learning rooms join ``exclude_seeds``), and the ground truth if an
-    oracle-prior policy runs."""
+    oracle-prior policy runs (a progress bar with ``progress``)."""
     source = KnowledgeSource(kb, kb_path, frozenset(exclude_seeds))
-    return make_priors(config.policies, config.map, style, catalog, config.prior_settings(), source)
+    settings = config.prior_settings()
+    return make_priors(config.policies, config.map, style, catalog, settings, source, progress)
 
 
 class EpisodeSensor:

@@ -90,7 +90,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import Estimate
 from ctxsearch.scripts.experiments.bench_indirect import indirect_analysis, write_indirect
 from ctxsearch.scripts.experiments.tables import write_csv
-from ctxsearch.scripts.sweep import SweepOptions, run_units
+from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 
 EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode either way)
 
@@ -426,7 +426,7 @@ def bench_search(
         raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
     style = resolve_style(config.style, catalog)
     check_budget(config.budget_s)  # before the priors and the draw: refused at once
-    priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb)
+    priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb, progress=bar)
     detector = config.detector_model(catalog)
     sweep = sweep or SweepOptions()
     spec = DrawSpec.make(
@@ -434,12 +434,14 @@ def bench_search(
         detector=detector,
     )  # fmt: skip
     spec = replace(spec, targets=config.targets)
-    draw = draw_episodes(
-        spec, catalog, workers=sweep.workers, runner=sweep_worlds(sweep), cache=config.draw_cache
-    )
-    eps = draw.episodes
-    what = EpisodeSet(style, tuple(names), priors.for_policy, detector, config.map)
-    results = _run_batches(eps, what, sweep, bar)
+    runner = sweep_worlds(sweep, bar)
+    with session(sweep, bar):  # one Ray for the draw's rounds and the searches
+        draw = draw_episodes(
+            spec, catalog, workers=sweep.workers, runner=runner, cache=config.draw_cache
+        )
+        eps = draw.episodes
+        what = EpisodeSet(style, tuple(names), priors.for_policy, detector, config.map)
+        results = _run_batches(eps, what, sweep, bar)
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -458,14 +460,14 @@ def bench_search(
     return res
 
 
-def sweep_worlds(sweep: SweepOptions):
+def sweep_worlds(sweep: SweepOptions, bar: bool = False):
     """An episode draw's world runner (agent.search.draw.WorldRunner) on ``sweep``'s workers
-    (serial, or Ray tasks)."""
+    (serial, or Ray tasks), a progress bar over each round's worlds with ``bar``."""
 
     def run(check: Callable[[int], WorldDraw], indices: list[int], desc: str) -> list[WorldDraw]:
         return run_units(
             check, indices, workers=sweep.workers, ray_address=sweep.ray_address, desc=desc,
-            progress=False,
+            progress=bar,
         )  # fmt: skip
 
     return run
