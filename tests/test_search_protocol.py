@@ -237,15 +237,22 @@ def test_no_policy_beats_the_oracle(tmp_path, detector, n, map_mode, desk_cup_st
     }
 
 
+@pytest.fixture(scope="module")
+def drawn_realistic(office, catalog):
+    """Two episodes drawn with the realistic detector (the first is also the one-episode draw:
+    a draw's episodes are the first kept worlds in index order)."""
+    return draw(office, 2, 5, catalog, 60.0, detector=load_detector("realistic", catalog))
+
+
 @pytest.mark.render
-def test_the_oracle_plans_on_the_episodes_clock(office, catalog):
+def test_the_oracle_plans_on_the_episodes_clock(office, catalog, drawn_realistic):
     """The detector's draws are indexed by the seconds since the episode started, and the
     oracle plans with those: planning itself (no plan from the draw), it searches the same
     after another policy ran in the shared world (whose clock ran on) as alone."""
     from dataclasses import replace
 
     real = load_detector("realistic", catalog)
-    eps = draw(office, 2, 5, catalog, 60.0, detector=real).episodes
+    eps = drawn_realistic.episodes
     for ep in (replace(e, first_view=None) for e in eps):
         alone = run_ep(ep, ["oracle"], catalog, office, real)[0]
         after = run_ep(ep, ["map-only", "oracle"], catalog, office, real)
@@ -255,7 +262,9 @@ def test_the_oracle_plans_on_the_episodes_clock(office, catalog):
 
 
 @pytest.mark.render
-def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catalog):
+def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(
+    office, catalog, drawn_realistic
+):
     """``first_success`` walks the images the robot takes one after the other at one pose: an
     image that shows the target is followed by its confirming image (two images' seconds to the
     next), the first pair that confirms a true instance ends it; none after ``until`` and at
@@ -264,7 +273,7 @@ def test_the_oracle_reads_a_view_as_the_robot_will_take_its_images(office, catal
     from ctxsearch.envs.floorplan import generate_layout
 
     real = load_detector("realistic", catalog)
-    ep = draw(office, 1, 5, catalog, 60.0, detector=real).episodes[0]
+    ep = drawn_realistic.episodes[0]
     layout = generate_layout(office, ep.room_seed, catalog)
     with World(layout, catalog) as w:
         eye = O.OracleEye(w, layout, catalog, real, ep.target)

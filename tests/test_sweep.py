@@ -91,8 +91,23 @@ def _strip_timing(x):
     return x
 
 
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local Ray of two workers for the commands' serial-vs-Ray checks below (each command
+    would otherwise start and stop its own: ~7 s each; a command finds it running and keeps it,
+    as inside ``session``). The tests above start and stop their own, as a command does."""
+    import ray
+
+    from ctxsearch.scripts.sweep import SweepOptions, session
+
+    assert not ray.is_initialized()
+    with session(SweepOptions(workers=2)):
+        yield
+    assert not ray.is_initialized()
+
+
 @pytest.mark.slow
-def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
+def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path, local_ray):
     import json
 
     from ctxsearch.scripts.cli import main
@@ -109,7 +124,7 @@ def test_bench_learning_on_two_workers_gives_the_serial_json(tmp_path):
 
 
 @pytest.mark.slow
-def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
+def test_truth_on_two_workers_gives_the_serial_file(tmp_path, local_ray):
     from ctxsearch.scripts.cli import main
 
     args = ["truth", "--style", "office", "--samples", "25", "--no-progress"]
@@ -119,7 +134,7 @@ def test_truth_on_two_workers_gives_the_serial_file(tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_store):
+def test_bench_search_on_two_workers_gives_the_serial_files(tmp_path, desk_cup_store, local_ray):
     import json
 
     from ctxsearch.scripts.cli import main
