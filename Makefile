@@ -89,7 +89,7 @@ bench-b: $(STAMP)
 	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
 	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 # Detector x interval against the truth, camera mode: office after 10 and 30 rooms, apartment after
-# 3 and 10 houses (8 runs each).
+# 3 and 10 houses (12 runs each: 6 detector settings x 2 seeds).
 	$(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals --workers $(WORKERS)
 	$(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 100 --out results/intervals_apartment --workers $(WORKERS)
 

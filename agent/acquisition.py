@@ -197,6 +197,11 @@ class RoomLearner:
         if drive_along(self.body, self.grid, xy):
             self.log.robot(self)
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """``obj`` as a candidate reference (the perception's ``reference``: confirmed by as
+        many images as the run asks), None while it may not be one."""
+        return self.perception.reference(obj)
+
     def look(self, purpose: str) -> list[ObjectInstance]:
         """Take an image where the head points; what the perception recognizes in it."""
         frame = self.body.capture(rgb=self.log.recording, depth=True)
@@ -225,9 +230,10 @@ class RoomLearner:
             stored = self._stored_next(choice.obj)  # a replay: the store's examination
             related = self.examine(choice.obj, stored, gazes)  # lines 15-16
             self._record(choice, related, stored)  # lines 17-20
-            for _, o in related:  # line 21
-                if o.id not in self.examined:
-                    self.unexamined.setdefault(o.id, o)
+            for _, o in related:  # line 21 (a related object a reference only once confirmed)
+                ref = self.reference(o) if o.id not in self.examined else None
+                if ref is not None:
+                    self.unexamined.setdefault(o.id, ref)
             yield self._done_exam(choice, related, len(gazes), stored)
         if self.n_room < len(self.prior):
             raise resume_error(
@@ -348,8 +354,9 @@ class RoomLearner:
         reading the stored relations."""
         det, run = self.run.settings.detector, self.run
         errs = det is not None and not det.perfect
+        c = run.settings.config
         return run.services.perceive is None and (
-            errs or run.settings.config.confirm > 1 or run.settings.config.min_score > 0
+            errs or c.confirm > 1 or c.min_score > 0 or c.confirm_reference > 1
         )
 
     def _reexamine(self, obj: ObjectInstance, stored: StoredExam, gazes: Sequence[Gaze]) -> Related:

@@ -76,7 +76,8 @@ class Explorer:
         """A recognizable object not in ``examined`` (the nearest known), or None."""
         L = self.L
         while True:
-            cands = [o for oid, o in sorted(self.seen.items()) if oid not in examined]
+            seen = [o for oid, o in sorted(self.seen.items()) if oid not in examined]
+            cands = [c for c in map(L.reference, seen) if c is not None]  # confirmed ones
             if cands:
                 return strat.nearest_object(cands, L.costs.at(L.body.pose()))
             if L.budget_spent():  # no new exploration step once the room's time is spent

@@ -82,7 +82,8 @@ class FrontierExplorer:
         L = self.L
         while True:
             skip = examined | self.deferred
-            cands = [o for oid, o in sorted(self.seen.items()) if oid not in skip]
+            seen = [o for oid, o in sorted(self.seen.items()) if oid not in skip]
+            cands = [c for c in map(L.reference, seen) if c is not None]  # confirmed ones
             if cands:
                 return strat.nearest_object(cands, L.costs.at(L.body.pose()))
             if L.budget_spent():

@@ -124,6 +124,11 @@ class Perception(Protocol):
         """RELATED-OBJECTS of ``obj`` given what its examination saw: (relation, object) pairs."""
         ...
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """``obj`` (perhaps under another type) once it may be the reference of an examination,
+        None while it may not (a perception that trusts every object it sees returns ``obj``)."""
+        ...
+
     def close(self) -> None:
         """Release the body and whatever perception holds."""
         ...

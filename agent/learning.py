@@ -208,7 +208,9 @@ def learn(
         style, layouts = style_layouts(style, catalog)
     map_mode = config.map_used
     detector = config.detector_model(catalog) if perceive is None else None
-    label = perception_label(config.perception, detector, config.confirm, config.min_score)
+    label = perception_label(
+        config.perception, detector, config.confirm, config.min_score, config.confirm_reference
+    )
     rid = config.run_key(label)
     t_wall = time.perf_counter()
     summary = Summary(rid, room_budget_s=config.room_budget_s, map_mode=map_mode,

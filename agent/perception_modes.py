@@ -37,27 +37,36 @@ DEFAULT_DETECTOR = "realistic"  # camera mode's default preset (assets/detectors
 @dataclass(frozen=True)
 class Sensing:
     """Camera mode's detector settings: the preset (None: perfect), the run's seed its stream
-    derives from, how many images of a room must detect an object before it counts, and the
-    confidence one of its detections must reach (envs.detector: ``Detection.score``)."""
+    derives from, how many images of a room must detect an object before it counts as related
+    (``confirm``) and before it may be the reference of an examination (``confirm_reference``),
+    and the confidence one of its detections must reach (envs.detector: ``Detection.score``)."""
 
     detector: DetectorModel | None = None
     seed: int = 0
     confirm: int = 1
     min_score: float = 0.0
+    confirm_reference: int = 1
 
 
 def perception_label(
-    mode: str, detector: DetectorModel | None, confirm: int = 1, min_score: float = 0.0
+    mode: str,
+    detector: DetectorModel | None,
+    confirm: int = 1,
+    min_score: float = 0.0,
+    confirm_reference: int = 1,
 ) -> str:
     """The perception's name in run keys and results: the mode, and in camera mode the detector
     unless it is the perfect one (so runs made before detector models keep their keys), the
-    confirmation count if above 1 and the minimum confidence if above 0."""
+    confirmation count if above 1, the minimum confidence if above 0 and the reference's
+    confirmation count if above 1."""
     if mode != PerceptionMode.CAMERA or detector is None:
         return mode
     label = mode if detector.perfect else f"{mode}+{detector.name}"
     if confirm > 1:
         label += f"+confirm{confirm}"
-    return label if min_score <= 0 else f"{label}+score{min_score:g}"
+    if min_score > 0:
+        label += f"+score{min_score:g}"
+    return label if confirm_reference <= 1 else f"{label}+ref{confirm_reference}"
 
 
 # =========================================================================== the oracle's body
@@ -239,6 +248,10 @@ class OraclePerception:
             pts.append(c + np.column_stack([cy * lx - sy * ly, sy * lx + cy * ly, h[:, 2]]))
         return np.stack(pts)
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """Every object the oracle sees is real: ``obj``."""
+        return obj
+
     def related(
         self, obj: ObjectInstance, seen: Sequence[ObjectInstance]
     ) -> list[tuple[str, ObjectInstance]]:
@@ -260,7 +273,11 @@ class CameraPerception:
     ``confirm`` k > 1, ``related`` counts only objects k images of this room detected, under the
     type most of them reported; with ``min_score`` c > 0, only objects one of whose detections in
     this room scored at least c (a detection confidence threshold on the counting, not on what
-    the robot sees: a weak detection still makes an object a candidate to examine)."""
+    the robot sees: a weak detection still makes an object a candidate to examine); with
+    ``confirm_reference`` k > 1, an object may be the reference of an examination (``reference``)
+    only once k images of this room detected it, under the type most of them reported: a false
+    positive is drawn anew in every image, so it is almost never detected twice (issue 28; the
+    detections of one object are associated by its id, a tracker's perfect data association)."""
 
     name = "camera"
     reads_truth = False
@@ -289,6 +306,7 @@ class CameraPerception:
         self.detector = SimDetector(model, layout, catalog, sensing.seed)
         self.confirm = int(sensing.confirm)
         self.min_score = float(sensing.min_score)
+        self.confirm_reference = int(sensing.confirm_reference)
         self._sightings: dict[int, Counter[str]] = {}
         self._best_score: dict[int, float] = {}
         self.last_detections: Sequence[Detection] = ()
@@ -298,7 +316,7 @@ class CameraPerception:
         if frame is None:
             raise CtxsearchError("camera perception needs an image (the body rendered none)")
         self.last_detections = self.detector(frame, self.body.sim_time)
-        if self.confirm > 1:
+        if self.confirm > 1 or self.confirm_reference > 1:
             for d in self.last_detections:
                 self._sightings.setdefault(d.instance_id, Counter())[d.type] += 1
         for d in self.last_detections:
@@ -316,10 +334,18 @@ class CameraPerception:
             seen = [o for o in seen if self._best_score.get(o.id, 0.0) >= self.min_score]
         return geometry.related(self.catalog, obj, seen)
 
-    def _confirmed(self, obj: ObjectInstance) -> ObjectInstance | None:
-        """``obj`` under its majority type if ``confirm`` images detected it, else None."""
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """``obj`` as the reference of an examination: under its majority type once
+        ``confirm_reference`` images of this room detected it, else None (not yet)."""
+        if self.confirm_reference <= 1:
+            return obj
+        return self._confirmed(obj, self.confirm_reference)
+
+    def _confirmed(self, obj: ObjectInstance, k: int | None = None) -> ObjectInstance | None:
+        """``obj`` under its majority type if ``k`` (default ``confirm``) images detected it,
+        else None."""
         counts = self._sightings.get(obj.id)
-        if counts is None or sum(counts.values()) < self.confirm:
+        if counts is None or sum(counts.values()) < (self.confirm if k is None else k):
             return None
         best = max(sorted(counts), key=counts.__getitem__)
         return obj if best == obj.type else replace(obj, type=best)

@@ -118,7 +118,10 @@ class LearnConfig:
     ``detector``: camera mode's preset, a name in assets/detectors or a file (None: realistic);
     ``confirm``: camera mode counts an object as related once that many images of the room
     detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
-    detections scored at least that confidence (0: any detection counts).
+    detections scored at least that confidence (0: any detection counts); ``confirm_reference``:
+    an object may be the reference of an examination once that many images of the room detected
+    it (1: at once, as published; issue 28: a false positive, drawn anew in every image, then
+    almost never is).
     ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
     ``reexamine`` (agent.run_state.REEXAMINE_POLICIES) and ``reexamine_rate``: whether a known
     object is examined again on a later day; ``forgetting``: how old evidence counts for that
@@ -143,6 +146,7 @@ class LearnConfig:
     detector: str | None = None
     confirm: int = 1
     min_score: float = 0.0
+    confirm_reference: int = 1
     days: int = 1
     reexamine: str = "never"
     reexamine_rate: float = DEFAULT_REEXAMINE_RATE
@@ -180,6 +184,10 @@ class LearnConfig:
                 )
         if self.confirm < 1:
             raise CtxsearchError(f"confirm must be >= 1 images, got {self.confirm}")
+        if self.confirm_reference < 1:
+            raise CtxsearchError(
+                f"confirm reference must be >= 1 images, got {self.confirm_reference}"
+            )
         if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
             raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
         if self.days < 1:
@@ -276,7 +284,7 @@ class Run:
         if self.services.perceive is not None:
             return self.services.perceive(layout, self.services.catalog, c.spec, c.time_model, rgb)
         mode = st.perception.split("+")[0]
-        sensing = Sensing(st.detector, c.seed, c.confirm, c.min_score)
+        sensing = Sensing(st.detector, c.seed, c.confirm, c.min_score, c.confirm_reference)
         return make_perception(
             mode, layout, self.services.catalog, c.spec, c.time_model, rgb=rgb, sensing=sensing
         )

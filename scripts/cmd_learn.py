@@ -12,6 +12,12 @@ from ctxsearch.knowledge.options import Forget, IntervalMethod
 from ctxsearch.scripts import INTERRUPTED, argtypes
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
+# bench intervals' default settings (scripts.experiments.bench_intervals.DEFAULT_SETTINGS, kept
+# here so that --help need not import the benchmark; a test checks they agree)
+INTERVAL_SETTINGS = (
+    "perfect,realistic,realistic+confirm2,realistic+score0.5,realistic+ref2,realistic+confirm2+ref2"
+)
+
 ROOM_BUDGET_HELP = (
     "simulated seconds the robot may spend in each room: when they are spent it leaves the room "
     "(the examination in flight completes), whatever is left unexamined (default: no limit, "
@@ -138,6 +144,15 @@ def _add_camera_args(p: argparse.ArgumentParser) -> None:
         help="camera mode: count a related object only once one of its detections scored at "
         "least C (0..1; the detector's confidence; default: 0, any detection)",
     )
+    p.add_argument(
+        "--confirm-reference",
+        type=argtypes.positive_int,
+        default=1,
+        metavar="K",
+        help="camera mode: examine an object only once K images of the room detected it (2: "
+        "a false positive, drawn anew in every image, is almost never examined; default: 1, "
+        "at once)",
+    )
 
 
 def _add_day_args(p: argparse.ArgumentParser) -> None:
@@ -194,6 +209,7 @@ def run_learn(args: argparse.Namespace) -> int:
             detector=args.detector,
             confirm=args.confirm,
             min_score=args.min_score,
+            confirm_reference=args.confirm_reference,
             days=args.days,
             reexamine=args.reexamine,
             reexamine_rate=rate,
@@ -410,8 +426,8 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=argtypes.positive_int, default=3, help="seeds (default: 3)")
     p.add_argument(
         "--settings",
-        default="perfect,realistic,realistic+confirm2,realistic+score0.5",
-        help="detector settings (default: perfect,realistic,realistic+confirm2,realistic+score0.5)",
+        default=INTERVAL_SETTINGS,
+        help=f"detector settings (default: {INTERVAL_SETTINGS})",
     )
     p.add_argument(
         "--truth-samples",

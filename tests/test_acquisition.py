@@ -609,6 +609,9 @@ def test_a_perception_of_ones_own_plugs_into_learn(tmp_path):
             self.calls["related"] += 1
             return self._inner.related(obj, seen)
 
+        def reference(self, obj):
+            return obj
+
         def close(self):
             self._inner.close()
 

@@ -37,3 +37,11 @@ def test_bench_intervals_writes_per_seed_csv(tmp_path):
     for ref, median in row["bias_by_type"].items():
         vals = [float(r["bias"]) for r in bias if r["ref_type"] == ref]
         assert statistics.median(vals) == pytest.approx(median)
+
+
+def test_bench_intervals_default_settings_match_the_cli_copy():
+    from ctxsearch.scripts.cmd_learn import INTERVAL_SETTINGS
+    from ctxsearch.scripts.experiments.bench_intervals import DEFAULT_SETTINGS, SETTINGS
+
+    assert ",".join(DEFAULT_SETTINGS) == INTERVAL_SETTINGS
+    assert set(DEFAULT_SETTINGS) <= {s[0] for s in SETTINGS}

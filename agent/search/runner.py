@@ -159,6 +159,10 @@ class EpisodeSensor:
         """RELATED-OBJECTS of ``obj`` among the detected poses ``seen``."""
         return geometry.related(self.catalog, obj, seen)
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """A search examines nothing: every object may be a reference, ``obj``."""
+        return obj
+
     def close(self) -> None:
         """Nothing to release: the world belongs to the episode."""
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import tempfile
 import time
@@ -40,12 +41,16 @@ from ctxsearch.scripts.experiments.learning_trace import LearningBenchConfig, Tr
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units
 
-# (label, detector preset, confirm, min score): the detector settings compared. ``confirm2``
-# counts an object once two images detected it; ``score0.5`` once a detection of it scored 0.5.
-SETTINGS = (("perfect", "perfect", 1, 0.0), ("realistic", "realistic", 1, 0.0),
-            ("realistic+confirm2", "realistic", 2, 0.0),
-            ("realistic+score0.5", "realistic", 1, 0.5))  # fmt: skip
-DEFAULT_SETTINGS = ("perfect", "realistic", "realistic+confirm2", "realistic+score0.5")
+# (label, detector preset, confirm, min score, confirm reference): the detector settings
+# compared. ``confirm2`` counts a related object once two images detected it; ``score0.5`` once a
+# detection of it scored 0.5; ``ref2`` examines an object once two images detected it (issue 28).
+SETTINGS = (("perfect", "perfect", 1, 0.0, 1), ("realistic", "realistic", 1, 0.0, 1),
+            ("realistic+confirm2", "realistic", 2, 0.0, 1),
+            ("realistic+score0.5", "realistic", 1, 0.5, 1),
+            ("realistic+ref2", "realistic", 1, 0.0, 2),
+            ("realistic+confirm2+ref2", "realistic", 2, 0.0, 2))  # fmt: skip
+DEFAULT_SETTINGS = ("perfect", "realistic", "realistic+confirm2", "realistic+score0.5",
+                    "realistic+ref2", "realistic+confirm2+ref2")  # fmt: skip
 CELLS = (
     ("coverage_informative", "wilson_coverage_informative"),
     ("mean_abs_error", "wilson_mean_abs_error"),
@@ -72,10 +77,11 @@ def _run(
     style, setting, seed = unit
     truth = truths[style]
     catalog = load_catalog()
-    _, detector, confirm, min_score = setting
+    _, detector, confirm, min_score, confirm_reference = setting
     config = LearningBenchConfig(
         style, rooms, 1, ("hif",), perception="camera", alpha=alpha, detector=detector,
         interval="clustered", confirm=confirm, min_score=min_score,
+        confirm_reference=confirm_reference,
     )  # fmt: skip
     shm = Path("/dev/shm")
     tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
@@ -86,6 +92,12 @@ def _run(
 def _at_room(tr: Trace, room: int) -> int:
     """Examinations made by the end of room ``room`` (1-based; all if the run was shorter)."""
     return int(sum(tr.room_exams[:room]))
+
+
+def phantom_share(tr: Trace, k: int) -> float:
+    """The share of the first ``k`` examinations whose reference the room does not hold under
+    the type it was examined as (a false positive or a look-alike; NaN before any)."""
+    return float(np.mean(tr.phantom[:k])) if k else math.nan
 
 
 def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float) -> dict:
@@ -150,7 +162,9 @@ def bench_intervals(
             for mark in config.room_marks:
                 ks = [_at_room(t, mark) for t in traces]
                 row = {"style": style, "detector": setting[0], "rooms": mark,
-                       "examinations": float(np.median(ks))}  # fmt: skip
+                       "examinations": float(np.median(ks)),
+                       "phantom_reference_share": float(np.nanmedian(
+                           [phantom_share(t, k) for t, k in zip(traces, ks, strict=True)]))}  # fmt: skip
                 for clustered_key, wilson_key in CELLS:
                     for name, key in (("clustered", clustered_key), ("wilson", wilson_key)):
                         vals = [t.at_exam(k, key) for t, k in zip(traces, ks, strict=True)]
@@ -182,6 +196,7 @@ RUN_COLUMNS = (
     "rooms",  # the room mark: figures after this many rooms
     "examinations",
     *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson")),
+    "phantom_reference_share",
 )
 # intervals_bias.csv: mean p0 - p_true over a reference type's informative entries, per seed.
 BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type", "bias")
@@ -206,7 +221,7 @@ def _seed_rows(
             for ck, wk in CELLS
             for name in ("clustered", "wilson")
         }
-        runs.append({**key, **cells})
+        runs.append({**key, **cells, "phantom_reference_share": phantom_share(tr, k)})
         for ref, b in _bias(tr, k, truth_p, refs, alpha).items():
             biases.append({**key, "ref_type": ref, "bias": b})
 
@@ -219,18 +234,22 @@ def markdown(doc: dict) -> str:
         f"HIF in camera mode, {doc['seeds']} seeds (medians), alpha {doc['alpha']} (nominal "
         f"coverage {1 - doc['alpha']:.2f}), ground truth from {doc['truth_samples']} rooms. "
         "Coverage is over the informative entries (n_A >= 1, 0.02 <= p_true <= 0.98); error and "
-        "width over every entry with ground truth.",
+        "width over every entry with ground truth. Phantom references: the share of "
+        "examinations whose reference the room does not hold under the type it was examined as "
+        "(false positives, look-alikes).",
         "",
         "| style | detector | rooms | exams | coverage_informative wilson | clustered | "
-        "mean abs(p0 - p_true) wilson | clustered | mean width wilson | clustered |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "mean abs(p0 - p_true) wilson | clustered | mean width wilson | clustered | "
+        "phantom references |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in doc["rows"]:
         lines.append(
             f"| {r['style']} | {r['detector']} | {r['rooms']} | {r['examinations']:.0f} | "
             f"{r['wilson_coverage_informative']:.3f} | {r['clustered_coverage_informative']:.3f} | "
             f"{r['wilson_mean_abs_error']:.4f} | {r['clustered_mean_abs_error']:.4f} | "
-            f"{r['wilson_mean_width']:.3f} | {r['clustered_mean_width']:.3f} |"
+            f"{r['wilson_mean_width']:.3f} | {r['clustered_mean_width']:.3f} | "
+            f"{r.get('phantom_reference_share', math.nan):.3f} |"
         )
     lines += ["", "## Bias of p0 (Wilson centre) per reference type: mean p0 - p_true over its "
               "informative entries, at the last room mark", ""]  # fmt: skip

@@ -173,6 +173,9 @@ class Trace:
     # With run_trace(keep_counts=True): the truth entries and their (y, n) after every exam.
     entries: list[dict] = field(default_factory=list)
     counts: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    # Per examination: was its reference a phantom, an object the room does not hold under the
+    # type it was examined as (a false positive, or a look-alike reported as another type)?
+    phantom: list[bool] = field(default_factory=list)
 
     def at_exam(self, k: int, metric: str) -> float:
         """The metric after examination k (1-based), or NaN past the end."""
@@ -225,6 +228,7 @@ class LearningBenchConfig:
     detector: str | None = None  # camera mode's preset (None: realistic; oracle: none)
     interval: str = "wilson"  # the intervals measured: wilson or clustered
     confirm: int = 1  # camera mode: images that must detect a related object
+    confirm_reference: int = 1  # camera mode: images that must detect a reference
     min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
 
     @property
@@ -250,11 +254,13 @@ class _Hooks:
     ):
         self.trace, self.tracker, self.generate, self.keep = trace, tracker, generate, keep
         self.order = {t: i for i, t in enumerate(catalog.type_names)}
+        self.types: dict[int, dict[int, str]] = {}  # room index -> its objects' true types
 
     def layouts(self, index, seed):
         """The room ``index`` (seed ``seed``), its object count noted."""
         tr = self.trace
         layout = self.generate(index, seed)
+        self.types[index] = {o.id: o.type for o in layout.objects}
         while len(tr.room_objects) <= index:
             tr.room_objects.append(0)
             tr.room_exams.append(0)
@@ -290,6 +296,8 @@ class _Hooks:
         """Record one examination and the metrics after it."""
         tr = self.trace
         tr.room_exams[res.room_index] += 1
+        obj = res.choice.obj
+        tr.phantom.append(self.types.get(res.room_index, {}).get(obj.id) != obj.type)
         self.tracker.record(res.choice.obj.type, res.pairs, res.room_index)
         tr.sim_s.append(res.sim_time)
         for k, v in self.tracker.metrics().items():
@@ -332,6 +340,7 @@ def run_trace(
             room_budget_s=room_budget_s,
             detector=config.detector,
             confirm=config.confirm,
+            confirm_reference=config.confirm_reference,
             min_score=config.min_score,
         ),
         catalog=catalog,
