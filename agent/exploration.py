@@ -38,6 +38,10 @@ class ExploringRoom(Protocol):
         """Take an image where the head points and return what it recognizes."""
         ...
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """``obj`` once it may be examined (its perception's ``reference``), else None."""
+        ...
+
 
 class Explorer:
     """Figure 2, line 5: find a nearby recognizable object not yet examined.

@@ -198,6 +198,10 @@ class _MapOnlyRoom:
         seg = path[-1] - path[-2]
         self.body.drive(path, math.atan2(seg[1], seg[0]))
 
+    def reference(self, obj: ObjectInstance) -> ObjectInstance | None:
+        """Nothing is recognized, so nothing is asked: ``obj``."""
+        return obj
+
     def look(self, purpose: str) -> list[ObjectInstance]:
         """One depth image into the map; recognizes nothing."""
         self.built.update(self.body.capture(rgb=False, depth=True))
