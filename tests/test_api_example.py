@@ -67,3 +67,18 @@ def test_readme_api_snippet_runs_twice(tmp_path, monkeypatch, capsys):
 
     with EvidenceStore.open(tmp_path / "robot.sqlite", load_catalog()) as s:
         assert s.examinations_count() == 1
+
+
+def test_longest_silence_times_a_commands_gaps(capsys):
+    """scripts/examples/longest_silence.py (issue 29's measure): the gap between two outputs and
+    the command's exit code."""
+    import sys
+
+    from ctxsearch.scripts.examples import longest_silence
+
+    code = "import sys, time; print(1, flush=True); time.sleep(1.0); print(2); sys.exit(3)"
+    assert longest_silence.main([sys.executable, "-c", code]) == 3
+    err = capsys.readouterr().err
+    assert err.startswith("exit 3, ") and "first output after" in err
+    first_gap = err.splitlines()[1]
+    assert first_gap.startswith("  silent 1.") and "'1\\r\\n'" in first_gap, err
