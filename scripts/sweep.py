@@ -153,9 +153,9 @@ def _start_ray(workers: int, ray_address: str | None, announce: bool = False) ->
         if ray.is_initialized():
             return False
         if announce:
-            where = f"the Ray cluster at {ray_address}" if ray_address else "a local Ray"
-            print(f"ctxsearch: starting {where} ..." if not ray_address else
-                  f"ctxsearch: connecting to {where} ...", file=sys.stderr, flush=True)  # fmt: skip
+            what = f"connecting to the Ray cluster at {ray_address}" if ray_address else (
+                "starting a local Ray")  # fmt: skip
+            print(f"ctxsearch: {what} ...", file=sys.stderr, flush=True)
         kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
         try:
             if ray_address:

@@ -149,7 +149,9 @@ def test_an_infeasible_world_is_dropped_and_counted(office, catalog, monkeypatch
     assert d.infeasible == 1 and len(d.episodes) == 1
 
 
-def test_a_draw_that_asks_only_whether_keeps_the_same_worlds_starts_and_drops(office, catalog):
+def test_a_draw_that_asks_only_whether_keeps_the_same_worlds_starts_and_drops(
+    office, catalog, monkeypatch
+):
     """``DrawSpec.first_view`` False (the Gymnasium task's draw): the oracle's planner stops at
     its first view that ends the search, so the same worlds are kept or dropped (one kept at a
     6 s budget, one infeasible at 3 s, realistic detector: its draws decide) from the same
@@ -166,19 +168,16 @@ def test_a_draw_that_asks_only_whether_keeps_the_same_worlds_starts_and_drops(of
         renders[kw.get("soonest", True)] += eye.renders - r0
         return out
 
-    D.oracle_view = counted
-    try:
-        for budget, world, dropped in ((6.0, 2, None), (3.0, 6, "infeasible")):
-            spec = DrawSpec.make(office, 1, 5, catalog, budget, detector=realistic)
-            a = draw_world(spec, catalog, world)
-            b = draw_world(replace(spec, first_view=False), catalog, world)
-            assert (a.dropped, b.dropped) == (dropped, dropped)
-            assert a.redraws == b.redraws and a.episode == b.episode
-            if dropped is None:
-                assert a.episode.first_view is not None and b.episode.first_view is None
-                assert (a.episode.start, a.episode.target) == (b.episode.start, b.episode.target)
-    finally:
-        D.oracle_view = real
+    monkeypatch.setattr(D, "oracle_view", counted)
+    for budget, world, dropped in ((6.0, 2, None), (3.0, 6, "infeasible")):
+        spec = DrawSpec.make(office, 1, 5, catalog, budget, detector=realistic)
+        a = draw_world(spec, catalog, world)
+        b = draw_world(replace(spec, first_view=False), catalog, world)
+        assert (a.dropped, b.dropped) == (dropped, dropped)
+        assert a.redraws == b.redraws and a.episode == b.episode
+        if dropped is None:
+            assert a.episode.first_view is not None and b.episode.first_view is None
+            assert (a.episode.start, a.episode.target) == (b.episode.start, b.episode.target)
     assert renders[False] < renders[True]
 
 

@@ -97,8 +97,8 @@ class DrawSpec:
         can meet (the room seeds of its ``world_limit`` worlds), sorted: the draw is the same,
         and so is its key, for every store whose learning rooms it never meets (the curve's
         snapshots, the transfer's stores: one draw, not one per store)."""
-        worlds = {held_out_seed(int(seed), i) for i in range(world_limit(int(episodes)))}
-        exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds))
+        worlds = draw_worlds(int(seed), int(episodes))
+        exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds.keys()))
         return cls(
             style, int(episodes), int(seed), catalog.fingerprint, float(budget_s), exclude,
             target, detector,
@@ -206,6 +206,12 @@ def world_limit(episodes: int) -> int:
     return 50 * episodes + 100
 
 
+def draw_worlds(seed: int, episodes: int) -> dict[int, int]:
+    """Room seed -> world index of every world a draw of ``episodes`` episodes for benchmark
+    seed ``seed`` may check."""
+    return {held_out_seed(seed, i): i for i in range(world_limit(episodes))}
+
+
 def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     """Whether ``draw`` (read from a file) can be the draw of ``spec``: ``spec.episodes``
     episodes indexed in order, of the style, budget and target asked, in held-out worlds taken in
@@ -216,7 +222,7 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     counts = (draw.visible_at_start, draw.infeasible, draw.start_redraws)
     if len(draw.episodes) != spec.episodes or min(counts) < 0:
         return False
-    seeds = {held_out_seed(spec.seed, i): i for i in range(world_limit(spec.episodes))}
+    seeds = draw_worlds(spec.seed, spec.episodes)
     last = -1
     for k, ep in enumerate(draw.episodes):
         world = seeds.get(ep.room_seed, -1)

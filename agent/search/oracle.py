@@ -258,10 +258,11 @@ class OracleEye:
         spec = self.body.spec
         best = 0.0
         cam = np.array([start.x, start.y, spec.camera_height])
-        for o in sorted(self.instances, key=lambda o: (box_distance(cam, o), o.id)):
+        near_first = sorted((box_distance(cam, o), o.id, o) for o in self.instances)
+        for dist, _, o in near_first:
             if best >= enough:
                 break
-            if box_distance(cam, o) > self.reach or not self.may_see(start.xy, o):
+            if dist > self.reach or not self.may_see(start.xy, o):
                 continue  # out of the detector's reach or behind walls: no image needed
             if not self.rays_meet(cam, o):
                 continue  # hidden from here
