@@ -48,6 +48,7 @@ BENCH_MODULES = [
     "ctxsearch.scripts.cmd_search",
     "ctxsearch.scripts.cmd_hierarchy",
     "ctxsearch.scripts.cmd_context",
+    "ctxsearch.scripts.cmd_room",
 ]
 
 

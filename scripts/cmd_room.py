@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,7 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "MuJoCo, drive the robot to viewpoints looking at its furniture and write "
         "DIR/overview.png (top-down; a house's rooms labelled), DIR/view_*.png (head camera, "
         "detections drawn), DIR/layout.json (rooms with style and outline, doors, every object "
-        "with type, id, pose, size and room) and, with --record, a rerun recording.",
+        "with type, id, pose, size and room) and, with --record, a rerun recording. For a house, "
+        "the robot also explores it from the door with its own depth map and cuts the map into "
+        "rooms: DIR/rooms.png (the plan beside the robot's rooms) and DIR/rooms.json (the "
+        "intersection over union of each plan room with its segment).",
     )
     p.add_argument(
         "--style",
@@ -41,8 +46,55 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="object-type catalog (default: assets/types.toml)",
     )
+    p.add_argument(
+        "--no-segment",
+        action="store_true",
+        help="a house: skip the exploration and the robot's rooms (rooms.png, rooms.json)",
+    )
     argtypes.add_detector_argument(p)
     p.set_defaults(func=run)
+
+
+def register_bench(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench rooms``."""
+    p = bench_sub.add_parser(
+        "rooms",
+        help="the robot's room segmentation of its own map against the house plans (IoU)",
+        description="In each house the robot explores from the door until no frontier is left, "
+        "builds its own map from depth and cuts it into rooms at the doors (distance-transform "
+        "segmentation); each plan room's intersection over union with its segment is measured. "
+        "Writes DIR/rooms.json, DIR/rooms.md and DIR/rooms.csv (one row per house room).",
+    )
+    p.add_argument(
+        "--styles",
+        default="apartment,family_house,office_floor",
+        help="comma-separated house styles (default: apartment,family_house,office_floor)",
+    )
+    p.add_argument(
+        "--houses", type=argtypes.positive_int, default=10, help="houses per style (default: 10)"
+    )
+    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
+    add_sweep_arguments(p)
+    p.set_defaults(func=run_rooms)
+
+
+def run_rooms(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench rooms``."""
+    # Imported here: the benchmark pulls in MuJoCo, which `--help` must not wait for.
+    from ctxsearch.envs.houses import load_house
+    from ctxsearch.knowledge.catalog import load_catalog
+    from ctxsearch.scripts.experiments.bench_rooms import bench_rooms, markdown
+
+    styles = tuple(x.strip() for x in args.styles.split(",") if x.strip())
+    if not styles:
+        raise CtxsearchError("--styles: give at least one house style")
+    catalog = load_catalog()
+    for s in styles:
+        load_house(s, catalog)  # a one-line error for a room style or an unknown name
+    doc = bench_rooms(styles, args.houses, args.out, SweepOptions.from_args(args))
+    print(markdown(doc))
+    print(f"wrote {', '.join(str(args.out / f'rooms.{x}') for x in ('json', 'md', 'csv'))}")
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         height=args.height,
         catalog=args.catalog,
         detector=args.detector,
+        segment=not args.no_segment,
     )
     for p in show_room(config):
         print(f"wrote {p}")

@@ -395,6 +395,12 @@ def test_room_cli_on_a_house_writes_plan_views_and_layout(tmp_path, capsys):
     assert {"style", "outline"} <= set(data["rooms"][0])
     assert {"type", "id", "position", "yaw", "size", "room"} <= set(data["objects"][0])
     assert all(0 <= o["room"] < len(data["rooms"]) for o in data["objects"])
+    # the robot's own rooms (issue 27): it explored the house and cut its map at the doors
+    rooms = json.loads((out / "rooms.json").read_text())
+    assert rooms["segments"] == len(lay.rooms) and rooms["explore_sim_s"] > 0
+    assert all(r["iou"] >= 0.8 for r in rooms["rooms"] if r["seen"] >= 0.9)
+    plan_and_robot = cv2.imread(str(out / "rooms.png"))  # side by side
+    assert plan_and_robot.shape[1] > plan_and_robot.shape[0]
 
 
 def test_visible_rooms_by_portals():
