@@ -89,9 +89,12 @@ bench-b: $(STAMP)
 	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
 	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 # Detector x interval against the truth, camera mode: office after 10 and 30 rooms, apartment after
-# 3 and 10 houses (12 runs each: 6 detector settings x 2 seeds).
-	$(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 100 --out results/intervals --workers $(WORKERS)
-	$(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 100 --out results/intervals_apartment --workers $(WORKERS)
+# 3 and 10 houses (14 runs each: 7 detector settings x 2 seeds).
+	$(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
+	$(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 400 --out results/intervals_apartment --workers $(WORKERS)
+# The robot's rooms against the plans: 10 houses of every stock house style, explored and segmented.
+	$(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
+	$(CTX) room --style family_house --seed 1 --views 0 --out results/rooms/family_house_1
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

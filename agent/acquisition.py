@@ -17,7 +17,9 @@ it room after room; the knowledge carries over). Faithfully to Figure 2:
   detected poses (the examined object's own pose is the reference); an object no reachable
   viewpoint can see into is marked examined without counting as a trial;
 - lines 17-20: one transaction in the evidence store and the same counts in the knowledge base
-  (intervals are derived from counts on demand, see DESIGN.md);
+  (intervals are derived from counts on demand, see DESIGN.md); with the camera perception the
+  examination's row carries what its images could show (agent.exam_views: per relation volume
+  and type, the expected recall and false-report rate), which ``--interval corrected`` reads;
 - line 21: UNEXAMINED := (UNEXAMINED + RELATED-OBJECTS) - EXAMINED.
 
 The robot is an agent.interfaces ``Body`` and ``Perception`` (agent.perception_modes: ``camera``
@@ -60,18 +62,21 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from ctxsearch.agent import strategies as strat
+from ctxsearch.agent.exam_views import ViewModel, Views
 from ctxsearch.agent.exam_volumes import group_volume_members, relation_boxes
 from ctxsearch.agent.exploration import Explorer
 from ctxsearch.agent.frontiers import FrontierExplorer
 from ctxsearch.agent.grid_costs import GridCosts
+from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, drive_along, nearest_free
 from ctxsearch.agent.resume import ReplayBody, replayed_related, resume_error
 from ctxsearch.agent.run_state import ExamResult, Run, StoredExam, room_rng
 from ctxsearch.agent.strategies import Choice, EuclideanCosts
-from ctxsearch.agent.viewplan import Gaze, execute_gaze, plan_gazes
-from ctxsearch.envs.camera import Frame
+from ctxsearch.agent.viewplan import Gaze, GazePlanOptions, execute_gaze, plan_gazes
+from ctxsearch.envs.camera import Frame, focal_length
+from ctxsearch.envs.detector import load_detector
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose
 from ctxsearch.envs.rooms import door_entry
@@ -115,6 +120,9 @@ class RoomLearner:
         )
         self.perception = run.perception_in(layout, rgb=log.recording)
         self.body = self.perception.body
+        self.view_model = view_model(run, self.perception.reads_truth)
+        self._views: Views = ()  # what the last examination's images could show
+        self.exam_options = exam_options(run, self.view_model, self.body)
         self.body.reset_pose(self.start_pose)
         self._t0 = self.body.sim_time
         self.rng = room_rng(run.settings.config.seed, room_index, self.day)
@@ -298,11 +306,18 @@ class RoomLearner:
         return choice
 
     def plan_examination(self, obj: ObjectInstance, start: RobotPose) -> list[Gaze]:
-        """The gazes (agent.viewplan) that cover the object's relation volumes, group by group."""
+        """The gazes (agent.viewplan) that cover the object's relation volumes, group by group;
+        with ``exam_recall``, from viewpoints within the range it asks for where any sees the
+        group (agent.exam_views), else from the planner's own range."""
         gazes: list[Gaze] = []
         pose = start
+        tm = self.run.settings.config.time_model
         for box, _members in group_volume_members(relation_boxes(self.catalog, obj)):
-            gs = plan_gazes(self.grid, box, pose, self.spec, self.run.settings.config.time_model)
+            gs = []
+            if self.exam_options is not None:
+                gs = plan_gazes(self.grid, box, pose, self.spec, tm, self.exam_options)
+            if not gs:
+                gs = plan_gazes(self.grid, box, pose, self.spec, tm)
             gazes.extend(gs)
             if gs:
                 pose = gs[-1].pose
@@ -337,6 +352,7 @@ class RoomLearner:
             return replayed_related(stored, self.layout.objects)
         seen: dict[int, ObjectInstance] = {}
         need_images = not self.perception.reads_truth or self.log.recording
+        frames = []
         for gaze in gazes:
             frame = execute_gaze(self.body, self.grid, gaze, rgb=self.log.recording, depth=True)
             self._mapped(frame)
@@ -345,6 +361,8 @@ class RoomLearner:
                 objs = self.perception.see(frame)
                 seen.update((o.id, o) for o in objs)
                 self.log.frame(self, frame, objs, purpose="examine")
+                frames.append(frame)
+        self._views = () if self.view_model is None else self.view_model.views(obj, frames)
         return self.perception.related(obj, list(seen.values()))
 
     def _replays_by_images(self) -> bool:
@@ -387,6 +405,7 @@ class RoomLearner:
                     run.services.strategy.name,
                     tuple(sorted({(r, o.type, o.id) for r, o in related})),
                     self.day,
+                    self._views,
                 )  # fmt: skip
             )
         self.kb.record_examination(obj.type, geometry.related_pairs(related))
@@ -420,6 +439,34 @@ class RoomLearner:
     def close(self) -> None:
         """Release the perception's body (the renderer in camera mode)."""
         self.perception.close()
+
+
+def view_model(run: Run, reads_truth: bool) -> ViewModel | None:
+    """The model of what the run's images can show (agent.exam_views): for the camera
+    perception with the simulated detector; None for the oracle and a user's own perception."""
+    if reads_truth or run.services.perceive is not None:
+        return None
+    c = run.settings.config
+    model = run.settings.detector or load_detector("perfect")
+    return ViewModel(run.services.catalog, model, c.confirm, c.min_score)
+
+
+def exam_options(run: Run, model: ViewModel | None, body: Body) -> GazePlanOptions | None:
+    """The gaze planner's options for examinations planned to see (``exam_recall``; None:
+    the planner's defaults). A one-line error without a model of the detector."""
+    recall = run.settings.config.exam_recall
+    if recall is None:
+        return None
+    if model is None:
+        raise CtxsearchError(
+            "--exam-recall needs the camera perception with the simulated detector (the robot "
+            "plans with its detector's recall curve)"
+        )
+    spec = run.settings.config.spec
+    w, h = body.width, body.height
+    return GazePlanOptions(
+        max_distance=model.exam_range(recall, focal_length(spec.fovy_deg, h), w, h)
+    )
 
 
 def start_pose(layout: RoomLayout, grid: OccupancyGrid) -> RobotPose:

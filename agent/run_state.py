@@ -121,7 +121,9 @@ class LearnConfig:
     detections scored at least that confidence (0: any detection counts); ``confirm_reference``:
     an object may be the reference of an examination once that many images of the room detected
     it (1: at once, as published; issue 28: a false positive, drawn anew in every image, then
-    almost never is).
+    almost never is); ``exam_recall``: camera mode plans examinations to see (agent.exam_views:
+    the gaze planner's viewpoints stay within the distance at which the catalog's object types
+    are detected with that mean single-image recall; None: the planner's own range, as before).
     ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
     ``reexamine`` (agent.run_state.REEXAMINE_POLICIES) and ``reexamine_rate``: whether a known
     object is examined again on a later day; ``forgetting``: how old evidence counts for that
@@ -147,6 +149,7 @@ class LearnConfig:
     confirm: int = 1
     min_score: float = 0.0
     confirm_reference: int = 1
+    exam_recall: float | None = None
     days: int = 1
     reexamine: str = "never"
     reexamine_rate: float = DEFAULT_REEXAMINE_RATE
@@ -188,6 +191,9 @@ class LearnConfig:
             raise CtxsearchError(
                 f"confirm reference must be >= 1 images, got {self.confirm_reference}"
             )
+        r = self.exam_recall
+        if r is not None and not (isinstance(r, int | float) and 0.0 < r < 1.0):
+            raise CtxsearchError(f"exam recall must be in (0, 1), got {r!r}")
         if not (isinstance(self.min_score, int | float) and 0.0 <= self.min_score <= 1.0):
             raise CtxsearchError(f"min score must be in [0, 1], got {self.min_score!r}")
         if self.days < 1:
@@ -219,9 +225,11 @@ class LearnConfig:
         return replace(self, room_budget_s=budget, map_mode=self.map_used)
 
     def run_key(self, label: str) -> str:
-        """The store's run key (``run_id``, and the re-examination policy where it is not the
-        paper's) for the perception ``label``."""
+        """The store's run key (``run_id``, examinations planned to see, and the re-examination
+        policy where it is not the paper's) for the perception ``label``."""
         rid = run_id(self.strategy, label, self.seed, self.room_budget_s, self.map_used)
+        if self.exam_recall is not None:
+            rid = f"{rid}/exam-recall={self.exam_recall:g}"
         if self.reexamine == Reexamine.NEVER:
             return rid
         return f"{rid}/reexamine={self.reexamine}:{self.reexamine_rate:g}/forget={self.forgetting.label}"

@@ -136,6 +136,23 @@ class PinholeCamera:
             ok &= np.linalg.norm(local, axis=1) <= max_distance
         return ok
 
+    def visible(self, points: np.ndarray, depth: np.ndarray, tol: float) -> np.ndarray:
+        """(N,) bool: which world ``points`` (N, 3) an image with ``depth`` (H, W, optical-axis
+        metres) shows: inside the image, more than 5 cm in front of the camera, and not more
+        than ``tol`` m behind the surface the depth image holds at their pixel."""
+        depth = np.asarray(depth, float)
+        h, w = depth.shape
+        uv, z = self.project(points)
+        ok = z > 0.05
+        with np.errstate(invalid="ignore"):
+            ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        idx = np.flatnonzero(ok)
+        if len(idx):
+            col = np.clip(uv[idx, 0].astype(int), 0, w - 1)
+            row = np.clip(uv[idx, 1].astype(int), 0, h - 1)
+            ok[idx] = z[idx] <= depth[row, col] + tol
+        return ok
+
     def _local_rays(self) -> np.ndarray:
         f = self.focal
         x = (np.arange(self.width) + 0.5 - self.width / 2) / f

@@ -673,18 +673,23 @@ def _false_positives(
 
 
 def _surface(img: _Image, camera, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The image's points (H*W, 3) back-projected with ``camera``, the pixels a false positive
-    may stand on (an object or the floor, nearer than ``FP_MAX_DEPTH``) and the raveled depth:
-    made when the first false positive is drawn, kept with the image (no random numbers)."""
-    if img.surface:
-        return img.surface[0]
+    """``false_positive_sites`` of the image, made at its first false positive, kept."""
+    if not img.surface:
+        img.surface.append(false_positive_sites(img.flat, camera, depth))
+    return img.surface[0]
+
+
+def false_positive_sites(ids, camera, depth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where a false positive may stand: the image's points (H*W, 3) back-projected with
+    ``camera``, the pixels showing an object or the floor nearer than ``FP_MAX_DEPTH`` (clutter
+    stands on surfaces, not walls) and the raveled depth (also agent.exam_views' model)."""
     d = np.asarray(depth, float)
     flat_d = d.ravel()
     ok = np.isfinite(flat_d) & (flat_d > 0) & (flat_d < FP_MAX_DEPTH)
     points = np.asarray(camera.backproject(np.where(ok.reshape(d.shape), d, 0.0))).reshape(-1, 3)
-    valid = np.flatnonzero(ok & ((img.flat >= 0) | (points[:, 2] < FLOOR_Z)))
-    img.surface.append((points, valid, flat_d))
-    return img.surface[0]
+    ids = np.asarray(ids).ravel()  # the image's instance ids
+    valid = np.flatnonzero(ok & ((ids >= 0) | (points[:, 2] < FLOOR_Z)))
+    return points, valid, flat_d
 
 
 def false_positive_score(model: DetectorModel, fp_id: int) -> float:

@@ -31,6 +31,7 @@ import numpy as np
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.clustered import ClusteredIntervals
+from ctxsearch.knowledge.corrected import CorrectedIntervals
 from ctxsearch.knowledge.errors import CtxsearchError
 
 # (y, n, alpha) -> per-pair score, vectorised like intervals.impact.
@@ -165,18 +166,24 @@ class KnowledgeBase:
         self._counts: list[_Counts | None] = [None] * self._T
         self._score_cache: dict[int, dict[object, float]] = {}  # type index -> {score fn: score}
         # The interval reads (interval, rows, mean_width): None is the paper's Wilson; else the
-        # clustered intervals on effective counts (knowledge.clustered). HIF reads raw counts.
+        # clustered intervals (knowledge.clustered), or the corrected ones. HIF reads raw counts.
         self.clustered: ClusteredIntervals | None = None
+        self.corrected: CorrectedIntervals | None = None
 
     def use_clustered(self, clustered: ClusteredIntervals | None) -> None:
         """Read intervals with ``clustered`` (its per-room counts must be this KB's evidence), or
         with Wilson again (None). The counts and the HIF choice are unchanged."""
-        self.clustered = clustered
+        self.clustered, self.corrected = clustered, None
+
+    def use_corrected(self, corrected: CorrectedIntervals | None) -> None:
+        """``use_clustered`` for the corrected intervals (knowledge.corrected) of this KB's log."""
+        self.clustered, self.corrected = None, corrected
 
     @property
     def interval_method(self) -> str:
-        """'wilson' or 'clustered': how ``interval``, ``rows`` and ``mean_width`` read."""
-        return "wilson" if self.clustered is None else "clustered"
+        """'wilson', 'clustered' or 'corrected': how ``interval``, ``rows``, ``mean_width`` read."""
+        on = self.corrected is not None
+        return "corrected" if on else ("wilson" if self.clustered is None else "clustered")
 
     def _shrink(self, ref: str, relation: str, type_names: Sequence[str]) -> np.ndarray:
         """n / n_effective of the entries (ref, relation, t) (ones under Wilson)."""
@@ -312,6 +319,8 @@ class KnowledgeBase:
         """INT(rel, B) = p0 -/+ d from the current counts; [0, 1] before any data."""
         a, _ = self._rel(relation)
         y, n = self.y(relation, type_name), int(self._n[a])
+        if self.corrected is not None:
+            return self.corrected.interval(self._names[a], relation, type_name)
         if self.clustered is not None:
             return self.clustered.interval(self._names[a], (relation, type_name), y, n)
         lo, hi = intervals.interval(y, n, self.alpha)
@@ -354,6 +363,8 @@ class KnowledgeBase:
                 yf, nf = yf / f, nf / f
             centre = np.atleast_1d(intervals.p0(yf, nf, self.alpha))
             lo, hi = (np.atleast_1d(v) for v in intervals.interval(yf, nf, self.alpha))
+            if self.corrected is not None:
+                lo, hi, centre = self.corrected.entries(names[a], r_idx, b_idx)
             out.extend(
                 IntervalRow(
                     names[a], rels[r], names[b], int(yy), n, float(cc), float(ll), float(hh)
@@ -386,6 +397,8 @@ class KnowledgeBase:
 
     def mean_width(self) -> float:
         """Mean interval width over every (A, rel, B) of the catalog (O(nonzero), not O(T^2))."""
+        if self.corrected is not None:
+            return self.corrected.mean_width()
         if self.clustered is not None:
             return self._mean_width_clustered()
         total, count = 0.0, 0
@@ -435,8 +448,10 @@ class KnowledgeBase:
         return total / count if count else 0.0
 
     def type_score_effective(self, ref_type: str, fn: ScoreFn = intervals.impact) -> float:
-        """``type_score`` with impact on the clustered intervals' effective counts (y/f, n/f)
-        (Wilson: the same as ``type_score``). Not cached: a measurement, not the HIF path."""
+        """``type_score`` with impact on the clustered intervals' effective counts (y/f, n/f) or
+        the corrected ones' (Wilson: ``type_score``). Not cached: a measurement, not HIF's path."""
+        if self.corrected and (score := self.corrected.type_score(ref_type, fn)) is not None:
+            return score  # (never examined: raw counts, as below: clustered is None then)
         if self.clustered is None:
             return self.type_score(ref_type, fn)
         a = self._idx(ref_type)

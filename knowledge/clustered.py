@@ -51,8 +51,6 @@ import numpy as np
 
 from ctxsearch.knowledge import intervals
 
-INTERVAL_METHODS = ("wilson", "clustered")
-
 
 def t_quantile(q: float, nu: int) -> float:
     """Student's t quantile: exact for nu = 1, 2; the Cornish-Fisher expansion in the normal

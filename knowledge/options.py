@@ -33,11 +33,14 @@ class PerceptionMode(StrEnum):
 
 
 class IntervalMethod(StrEnum):
-    """How counts become an interval: the paper's Wilson score interval, or Wilson on a
-    room-level effective sample size (``clustered``)."""
+    """How counts become an interval: the paper's Wilson score interval, Wilson on a
+    room-level effective sample size (``clustered``), or the score interval of a likelihood that
+    knows each examination's chance of showing a related object, clustered the same way
+    (``corrected``: knowledge.corrected)."""
 
     WILSON = "wilson"
     CLUSTERED = "clustered"
+    CORRECTED = "corrected"
 
 
 class Rank(StrEnum):

@@ -5,7 +5,7 @@ strategy) and one row per observed (relation, related type, related object id); 
 knowledge base, hence its intervals, are rebuilt from this log, so runs resume, stores from several
 robots merge (``merge_stores``), and the same evidence can be re-read with another alpha.
 
-Tables (schema version 4)::
+Tables (schema version 5)::
 
     meta          (key TEXT PRIMARY KEY, value TEXT)   app='ctxsearch', schema_version,
                                                        catalog_fingerprint, catalog_path, alpha,
@@ -19,6 +19,13 @@ Tables (schema version 4)::
                    sim_time, strategy, created)        UNIQUE (EXAM_KEY): one examination of an
                                                        object per world, day and run
     observations  (examination_id REFERENCES examinations, relation, type, related_id)
+    views         (examination_id REFERENCES examinations, relation, recall, false_rate)
+                                                       version 5: per relation of the examined
+                                                       type, what the examination's images could
+                                                       show of every catalog type (expected
+                                                       recall, false-report rate: uint16 blobs in
+                                                       catalog order; knowledge.corrected); none
+                                                       for the oracle perception
 
 The uniqueness key ``EXAM_KEY`` (run, style, room_seed, day, object_id) is what identifies an
 examination of a run: a second process learning the same run on the same store cannot add an
@@ -31,9 +38,9 @@ per day.
 Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time),
 version 2 (no uniqueness key) and version 3 (no day stamps: every examination and visit is of day
 0). Reading (``open(..., read_only=True)``: ``kb show``, ``kb stats``, search) never migrates. The
-first write to one (``record``, ``mark_room``, a merge into it) upgrades it in place to version 4
-in the same transaction as the write: the tables are rebuilt in this version's exact schema
-(older rows get day 0) and duplicate examinations (same ``EXAM_KEY``, written by two processes
+first write to one (``record``, ``mark_room``, a merge into it) upgrades it in place to version 5
+in the same transaction as the write: a version-4 store gains the empty views table; older ones
+have their tables rebuilt in this version's exact schema (older rows get day 0) and duplicate examinations (same ``EXAM_KEY``, written by two processes
 before version 3) are dropped, keeping the first; a failure anywhere rolls the whole transaction
 back, leaving the file as it was. Older ctxsearch then refuses the store with its one-line
 "newer schema" error. ``examinations()`` reads the log back, examination by examination.
@@ -65,6 +72,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
@@ -77,6 +86,7 @@ from ctxsearch.knowledge.store_schema import (
     MAX_DAY,
     ROOM_STATUSES,
     SCHEMA_VERSION,
+    VIEW_SCALE,
     _check_alpha,
     _check_catalog,
     _check_store,
@@ -107,8 +117,10 @@ __all__ = [
 @dataclass(frozen=True)
 class NewExamination:
     """An examination to append (``EvidenceStore.append``): the visit (run, style, room seed,
-    day), the object and its type, the run clock, the strategy and RELATED-OBJECTS as
-    (relation, related type, related object id)."""
+    day), the object and its type, the run clock, the strategy, RELATED-OBJECTS as
+    (relation, related type, related object id), and what its images could show (``views``:
+    (relation, expected recall per catalog type, false-report rate per catalog type), both in
+    catalog order and in [0, 1]; empty where unknown: knowledge.corrected)."""
 
     run: str
     style: str
@@ -119,6 +131,7 @@ class NewExamination:
     strategy: str
     related: tuple[tuple[str, str, int], ...]
     day: int = 0
+    views: tuple[tuple[str, Sequence[float], Sequence[float]], ...] = ()
 
 
 class EvidenceStore(EvidenceReads):
@@ -270,6 +283,7 @@ class EvidenceStore(EvidenceReads):
                 raise CtxsearchError(f"relation {rel} is not a relation of {ref_type}")
             self.catalog.type(t)
             rows.append((rel, t, _int(rid, "related object id")))
+        views = self._view_rows(ref_type, e.views)
         exam = (
             _text(run, "run"),
             _text(style, "style"),
@@ -289,6 +303,11 @@ class EvidenceStore(EvidenceReads):
                 )
                 eid = int(cur.lastrowid)
                 self._insert_observations(cur, eid, rows)
+                cur.executemany(
+                    "INSERT INTO views (examination_id, relation, recall, false_rate) "
+                    "VALUES (?, ?, ?, ?)",
+                    [(eid, *v) for v in views],
+                )
         except sqlite3.IntegrityError:
             raise StoreError(
                 f"{self.path}: object {exam[4]} of room {exam[1]}/{exam[2]} is already examined "
@@ -297,6 +316,33 @@ class EvidenceStore(EvidenceReads):
                 "(nothing was written; its evidence is kept once)"
             ) from None
         return eid
+
+    def _view_rows(
+        self, ref_type: str, views: Iterable[tuple[str, Sequence[float], Sequence[float]]]
+    ) -> list[tuple[str, bytes, bytes]]:
+        """The views of an examination of ``ref_type`` as table rows (checked: a relation of
+        the type, once each; one value in [0, 1] per catalog type)."""
+        rows, seen, n_types = [], set(), len(self.catalog.type_names)
+        for item in views:
+            try:
+                rel, recall, false_rate = item
+            except (TypeError, ValueError):
+                raise CtxsearchError(
+                    f"views must be (relation, recall per type, false rate per type), got {item!r}"
+                ) from None
+            if self.catalog.relation(rel).ref != ref_type or rel in seen:
+                raise CtxsearchError(f"view of {rel}: not a relation of {ref_type}, or given twice")
+            seen.add(rel)
+            blobs = []
+            for what, vals in (("recall", recall), ("false_rate", false_rate)):
+                arr = np.asarray(vals, float)
+                if arr.shape != (n_types,) or not np.all((arr >= 0) & (arr <= 1)):
+                    raise CtxsearchError(
+                        f"view of {rel}: {what} must be {n_types} numbers in [0, 1]"
+                    )
+                blobs.append(np.rint(arr * VIEW_SCALE).astype("<u2").tobytes())
+            rows.append((rel, *blobs))
+        return rows
 
     def _insert_observations(
         self, cur: sqlite3.Cursor, eid: int, rows: Sequence[tuple[str, str, int]]
@@ -480,6 +526,17 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                             "INSERT INTO observations (examination_id, relation, type, related_id) VALUES (?, ?, ?, ?)",
                             [(r[0] + offset, *r[1:]) for r in batch],
                         )
+                    if int(meta["schema_version"]) >= 5:
+                        rows = src.execute(
+                            "SELECT examination_id, relation, recall, false_rate FROM views "
+                            f"WHERE examination_id IN ({keep}) ORDER BY examination_id, relation"
+                        )
+                        while batch := rows.fetchmany(50_000):
+                            cur.executemany(
+                                "INSERT INTO views (examination_id, relation, recall, false_rate) "
+                                "VALUES (?, ?, ?, ?)",
+                                [(r[0] + offset, *r[1:]) for r in batch],
+                            )
                     end = "end_time" if int(meta["schema_version"]) >= 2 else "NULL"
                     day = "day" if new_in else "0"
                     cur.executemany(

@@ -12,17 +12,21 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
-from ctxsearch.knowledge.clustered import (
-    INTERVAL_METHODS,
-    ClusteredIntervals,
-    RoomCounts,
-    room_counts_from_rows,
-)
+from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts, room_counts_from_rows
+from ctxsearch.knowledge.corrected import CorrectedIntervals, ExamViews
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.options import IntervalMethod
-from ctxsearch.knowledge.store_schema import MAX_DAY, ROOM_STATUSES, _check_alpha, _one_line
+from ctxsearch.knowledge.store_schema import (
+    MAX_DAY,
+    ROOM_STATUSES,
+    VIEW_SCALE,
+    _check_alpha,
+    _one_line,
+)
 
 
 @dataclass(frozen=True)
@@ -186,15 +190,16 @@ class EvidenceReads:
                 )
         return out
 
-    def room_counts(self, run: str | None = None) -> dict[str, RoomCounts]:
-        """Per reference type, its examinations and y counts per room (of one run, or all): the
-        input of the clustered interval (knowledge.clustered). A room is (style, room seed):
-        runs that visit the same room share its cluster. Read-only."""
-        where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
+    def room_counts(self, run: str | None = None, upto: int | None = None) -> dict[str, RoomCounts]:
+        """Per reference type, its examinations and y counts per room (of one run, or all; with
+        ``upto``, of the examinations with id <= upto): the input of the clustered interval
+        (knowledge.clustered). A room is (style, room seed): runs that visit the same room share
+        its cluster. Read-only."""
+        where, args = _exam_filter(run, upto)
         obs = (
             "SELECT DISTINCT o.examination_id, e.type, e.style, e.room_seed, o.relation, o.type "
             "FROM observations o JOIN examinations e ON e.id = o.examination_id"
-            + ("" if run is None else " WHERE e.run = ?")
+            + _exam_filter(run, upto, "e.")[0]
         )
         with self._reading():
             exam_rows = [
@@ -212,6 +217,79 @@ class EvidenceReads:
                 raise self._bad(f"observation ({rel!r}, {b!r}) is not in the catalog")
         return room_counts_from_rows(exam_rows, obs_rows)
 
+    def exam_views(self, run: str | None = None, upto: int | None = None) -> dict[str, ExamViews]:
+        """Per reference type, its examinations (of one run, or all; with ``upto``, those with id
+        <= upto) in log order: what each reported and what its images could show
+        (knowledge.corrected's input). An examination without views (the oracle perception, a
+        store older than schema 5) has recall 1 and false-report rate 0. Read-only."""
+        cat = self.catalog
+        names = cat.type_names
+        t_index = {t: i for i, t in enumerate(names)}
+        where, args = _exam_filter(run, upto)
+        join = _exam_filter(run, upto, "e.")[0]
+        with self._reading():
+            exams = [
+                (self._integer(i, "examination id"), self._name(t, "type"))
+                for i, t in self.conn.execute(
+                    f"SELECT id, type FROM examinations{where} ORDER BY id", args
+                )
+            ]
+            obs = self.conn.execute(
+                "SELECT o.examination_id, o.relation, o.type, COUNT(DISTINCT o.related_id) "
+                f"FROM observations o JOIN examinations e ON e.id = o.examination_id{join} "
+                "GROUP BY o.examination_id, o.relation, o.type",
+                args,
+            ).fetchall()
+            views = (
+                self.conn.execute(
+                    "SELECT v.examination_id, v.relation, v.recall, v.false_rate FROM views v "
+                    f"JOIN examinations e ON e.id = v.examination_id{join}",
+                    args,
+                ).fetchall()
+                if self.version >= 5
+                else []
+            )
+        by_type: dict[str, list[int]] = defaultdict(list)
+        for eid, t in exams:
+            if t not in cat:
+                raise self._bad(f"examination {eid}: examined type {t!r} is not in the catalog")
+            by_type[t].append(eid)
+        out: dict[str, ExamViews] = {}
+        where_is: dict[int, tuple[str, int]] = {}
+        for t, ids in by_type.items():
+            r_n = len(cat.type(t).relations)
+            out[t] = ExamViews(
+                np.zeros((len(ids), r_n, len(names)), np.int64),
+                np.ones((len(ids), r_n, len(names))),
+                np.zeros((len(ids), r_n, len(names))),
+            )
+            where_is.update((eid, (t, k)) for k, eid in enumerate(ids))
+        for eid, rel, b, count in obs:
+            t, k = where_is[eid]
+            r = self._relation_index(t, rel, eid)
+            if b not in t_index:
+                raise self._bad(f"examination {eid}: observed type {b!r} is not in the catalog")
+            out[t].d[k, r, t_index[b]] = self._integer(count, f"examination {eid}: count")
+        for eid, rel, recall, false_rate in views:
+            t, k = where_is[eid]
+            r = self._relation_index(t, rel, eid)
+            out[t].q[k, r] = self._view(recall, len(names), f"examination {eid}: recall")
+            out[t].f[k, r] = self._view(false_rate, len(names), f"examination {eid}: false rate")
+        return out
+
+    def _relation_index(self, ref: str, rel: object, eid: int) -> int:
+        """The index of ``rel`` in RELATIONS(ref) (a damaged-store error if it is not one)."""
+        rels = self.catalog.type(ref).relation_names
+        if rel not in rels:
+            raise self._bad(f"examination {eid}: {rel!r} is not a relation of {ref} in the catalog")
+        return rels.index(rel)
+
+    def _view(self, blob: object, n_types: int, what: str) -> np.ndarray:
+        """A views blob as n_types values in [0, 1]."""
+        if not isinstance(blob, bytes) or len(blob) != 2 * n_types:
+            raise self._bad(f"{what} is not {n_types} uint16 values")
+        return np.frombuffer(blob, "<u2").astype(float) / VIEW_SCALE
+
     def knowledge_base(
         self,
         alpha: float | None = None,
@@ -222,17 +300,20 @@ class EvidenceReads:
         """The counts rebuilt from the log (of one run, or all), as a KnowledgeBase.
 
         n_A = examinations of type A; y_{rel,B} = examinations with at least one observation row
-        (rel, B). ``alpha`` defaults to the store's. ``interval``: 'wilson' (the paper's) or
-        'clustered' (its intervals on the room-level effective counts of ``room_counts``; the
-        counts and HIF are the same).
+        (rel, B). ``alpha`` defaults to the store's. ``interval``: 'wilson' (the paper's),
+        'clustered' (its intervals on the room-level effective counts of ``room_counts``) or
+        'corrected' (knowledge.corrected on ``exam_views``, clustered the same way); the counts
+        and HIF are the same.
         """
-        if interval not in INTERVAL_METHODS:
+        if interval not in tuple(IntervalMethod):
             raise CtxsearchError(
-                f"unknown interval method '{interval}' (known: {', '.join(INTERVAL_METHODS)})"
+                f"unknown interval method '{interval}' (known: {', '.join(tuple(IntervalMethod))})"
             )
         kb = KnowledgeBase(self.catalog, self.alpha if alpha is None else _check_alpha(alpha))
         if interval == IntervalMethod.CLUSTERED:
             kb.use_clustered(ClusteredIntervals(self.room_counts(run), kb.alpha))
+        elif interval == IntervalMethod.CORRECTED:
+            kb.use_corrected(self.corrected_intervals(kb.alpha, run))
         where, args = ("", ()) if run is None else (" WHERE run = ?", (run,))
         if run is None:
             sql = "SELECT relation, type, COUNT(DISTINCT examination_id) FROM observations GROUP BY relation, type"
@@ -261,6 +342,21 @@ class EvidenceReads:
             except CtxsearchError as exc:
                 raise self._bad(f"inconsistent log: {exc}") from None
         return kb
+
+    def corrected_intervals(
+        self, alpha: float | None = None, run: str | None = None, upto: int | None = None
+    ) -> CorrectedIntervals:
+        """The corrected intervals (knowledge.corrected) of the log (of one run, or all; with
+        ``upto``, of the examinations with id <= upto)."""
+        alpha = self.alpha if alpha is None else _check_alpha(alpha)
+        cat = self.catalog
+        return CorrectedIntervals(
+            self.exam_views(run, upto),
+            ClusteredIntervals(self.room_counts(run, upto), alpha),
+            {t.name: t.relation_names for t in cat.types},
+            cat.type_names,
+            alpha,
+        )
 
     # ---- internals ----------------------------------------------------------------------------
     def _bad(self, what: str) -> StoreError:
@@ -295,3 +391,17 @@ class EvidenceReads:
             raise StoreError(
                 f"{self.path}: cannot read knowledge store ({_one_line(exc)})"
             ) from None
+
+
+def _exam_filter(run: str | None, upto: int | None, prefix: str = "") -> tuple[str, tuple]:
+    """The WHERE clause (with its leading space, or empty) and arguments selecting the
+    examinations of ``run`` (None: all) with id <= ``upto`` (None: all); ``prefix`` names the
+    examinations table's alias ("e.")."""
+    conds, args = [], []
+    if run is not None:
+        conds.append(f"{prefix}run = ?")
+        args.append(run)
+    if upto is not None:
+        conds.append(f"{prefix}id <= ?")
+        args.append(int(upto))
+    return (" WHERE " + " AND ".join(conds) if conds else "", tuple(args))

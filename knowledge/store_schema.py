@@ -1,4 +1,4 @@
-"""The evidence store's schema: its tables (version 4) and the older versions it reads, the
+"""The evidence store's schema: its tables (version 5) and the older versions it reads, the
 checks a file passes before it is opened (``inspect_store``: a ctxsearch store of this catalog, the
 exact schema its version writes, sane day stamps), the upgrade of an older store inside the first
 write's transaction (``_migrate``), and the connections (read-only ones never write). The store
@@ -20,7 +20,7 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
 # What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on;
@@ -31,7 +31,7 @@ EXAM_KEY = ("run", "style", "room_seed", "day", "object_id")
 MAX_DAY = 1_000_000
 _V3_EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
-_TABLES = ("meta", "rooms", "examinations", "observations")
+_TABLES = ("meta", "rooms", "examinations", "observations", "views")
 
 _META_SQL = "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)"
 _ROOMS_SQL = """CREATE TABLE rooms (
@@ -68,6 +68,17 @@ _OBSERVATIONS_SQL = """CREATE TABLE observations (
 _OBSERVATIONS_INDEX = (
     "CREATE INDEX observations_pair ON observations (relation, type, examination_id)"
 )
+# Version 5: what the examination's images could show (knowledge.corrected): per relation of
+# the examined type, the expected recall and the false-report rate of every catalog type, in
+# catalog order, each as VIEW_SCALE-quantised little-endian uint16 (the catalog's fingerprint,
+# which every store carries, fixes the order).
+_VIEWS_SQL = """CREATE TABLE views (
+    examination_id INTEGER NOT NULL REFERENCES examinations (id),
+    relation TEXT NOT NULL,
+    recall BLOB NOT NULL, false_rate BLOB NOT NULL,
+    PRIMARY KEY (examination_id, relation)
+) WITHOUT ROWID"""
+VIEW_SCALE = 65535
 _EXAM_KEY_INDEX = f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(EXAM_KEY)})"
 # The schema this version writes, statement by statement (meta first).
 _SCHEMA_STATEMENTS = (
@@ -77,8 +88,9 @@ _SCHEMA_STATEMENTS = (
     _EXAM_KEY_INDEX,
     _OBSERVATIONS_SQL,
     _OBSERVATIONS_INDEX,
+    _VIEWS_SQL,
 )
-# The schemas of older versions, still read (and upgraded to version 4 on the first write).
+# The schemas of older versions, still read (and upgraded to version 5 on the first write).
 _OLD_ROOM_INDEX = "CREATE INDEX examinations_room ON examinations (run, style, room_seed)"
 _OLD_SCHEMAS = {
     1: (
@@ -105,6 +117,7 @@ _OLD_SCHEMAS = {
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
+    4: _SCHEMA_STATEMENTS[:-1],  # without the views table
 }
 
 _EXAM_COLS = "run, style, room_seed, day, object_id, type, sim_time, strategy, created"
@@ -232,7 +245,7 @@ def _check_store(conn: sqlite3.Connection, path: Path, *, quick_check: bool) -> 
         )
     if version < 1:
         raise _not_a_store(path, f"unknown schema version {version}")
-    missing = [t for t in _TABLES if t not in tables]
+    missing = [t for t in _TABLES if t not in tables and (t != "views" or version >= 5)]
     if missing or "catalog_fingerprint" not in meta or "alpha" not in meta:
         raise StoreError(f"{path}: damaged knowledge store (missing {missing or 'meta entries'})")
     problem = _schema_problem(conn, version)
@@ -344,8 +357,16 @@ class _Corrupt(Exception):
 
 def _migrate(cur: sqlite3.Cursor, version: int) -> int:
     """Bring a store of an older ``version`` to SCHEMA_VERSION inside the caller's transaction:
-    rebuild its tables in this version's exact schema, dropping duplicate examinations (same
-    EXAM_KEY: keep the first and its observations). Returns how many were dropped."""
+    version 4 gains the (empty) views table; older ones have their tables rebuilt in this
+    version's exact schema, dropping duplicate examinations (same EXAM_KEY: keep the first and
+    its observations). Returns how many were dropped. Examinations of older stores have no
+    views (knowledge.corrected counts them with recall 1)."""
+    if version == 4:
+        cur.execute(_VIEWS_SQL)
+        cur.execute(
+            "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
+        )
+        return 0
     end = "end_time" if version >= 2 else "NULL"
     cur.execute("DROP INDEX IF EXISTS examinations_room")
     cur.execute("DROP INDEX IF EXISTS examinations_key")

@@ -6,6 +6,8 @@ import argparse
 import math
 from pathlib import Path
 
+from ctxsearch.knowledge.options import IntervalMethod
+
 # Sane upper bounds: far beyond any run on one machine, small enough that nothing sized by a count
 # (a list of room seeds, a table of episodes) can exhaust memory before it is needed.
 MAX_COUNT = 1_000_000
@@ -137,8 +139,10 @@ DETECTOR_HELP = (
     "(default: realistic; the oracle perception has none)"
 )
 INTERVAL_HELP = (
-    "interval method: wilson (the paper's eq. 1-2, default) or clustered (Wilson on a room-level "
-    "effective sample size: examinations in one room are correlated)"
+    "interval method: wilson (the paper's eq. 1-2, default), clustered (Wilson on a room-level "
+    "effective sample size: examinations in one room are correlated) or corrected (clustered, and "
+    "each examination weighted by the chance its images would have shown a related object: the "
+    "detector's misses and false reports; stores of schema 5 learned with the camera)"
 )
 
 
@@ -185,7 +189,7 @@ def forgetting(args: argparse.Namespace):
 
 
 def add_interval_argument(p: argparse.ArgumentParser) -> None:
-    """``--interval wilson|clustered``."""
+    """``--interval wilson|clustered|corrected``."""
     p.add_argument(
-        "--interval", default="wilson", choices=("wilson", "clustered"), help=INTERVAL_HELP
+        "--interval", default="wilson", choices=tuple(IntervalMethod), help=INTERVAL_HELP
     )

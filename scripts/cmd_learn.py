@@ -15,7 +15,8 @@ from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 # bench intervals' default settings (scripts.experiments.bench_intervals.DEFAULT_SETTINGS, kept
 # here so that --help need not import the benchmark; a test checks they agree)
 INTERVAL_SETTINGS = (
-    "perfect,realistic,realistic+confirm2,realistic+score0.5,realistic+ref2,realistic+confirm2+ref2"
+    "perfect,realistic,realistic+confirm2,realistic+score0.5,realistic+ref2,realistic+confirm2+ref2,"
+    "realistic+ref2+near0.9"
 )
 
 ROOM_BUDGET_HELP = (
@@ -153,6 +154,15 @@ def _add_camera_args(p: argparse.ArgumentParser) -> None:
         "a false positive, drawn anew in every image, is almost never examined; default: 1, "
         "at once)",
     )
+    p.add_argument(
+        "--exam-recall",
+        type=argtypes.unit_interval,
+        default=None,
+        metavar="R",
+        help="camera mode: plan examinations to see: the gaze planner keeps its viewpoints within "
+        "the distance at which the catalog's object types are detected with mean single-image "
+        "recall R by the run's detector (e.g. 0.9; default: the planner's 2.5 m)",
+    )
 
 
 def _add_day_args(p: argparse.ArgumentParser) -> None:
@@ -210,6 +220,7 @@ def run_learn(args: argparse.Namespace) -> int:
             confirm=args.confirm,
             min_score=args.min_score,
             confirm_reference=args.confirm_reference,
+            exam_recall=args.exam_recall,
             days=args.days,
             reexamine=args.reexamine,
             reexamine_rate=rate,
@@ -410,12 +421,13 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
     """Add ``bench intervals``."""
     p = bench_sub.add_parser(
         "intervals",
-        help="detector (perfect, realistic) x interval (wilson, clustered) against the ground "
-        "truth: informative coverage, mean |p0 - p_true|, mean width, bias per type",
+        help="detector (perfect, realistic) x interval (wilson, clustered, corrected) against the "
+        "ground truth: informative coverage, mean |p0 - p_true|, mean width, bias per type",
         description="HIF learns in camera mode with each detector setting over the same rooms "
-        "and seeds; after the given room counts, the intervals (wilson and clustered, on the same "
-        "evidence) are measured against the ground truth. Writes DIR/intervals.json, "
-        "DIR/intervals.md and, per seed, DIR/intervals.csv and DIR/intervals_bias.csv.",
+        "and seeds; after the given room counts, the intervals (wilson, clustered and corrected, "
+        "on the same evidence) are measured against the ground truth, with each examination's "
+        "simulated seconds and expected recall. Writes DIR/intervals.json, DIR/intervals.md and, "
+        "per seed, DIR/intervals.csv and DIR/intervals_bias.csv.",
     )
     p.add_argument(
         "--styles",
@@ -432,8 +444,9 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--truth-samples",
         type=argtypes.positive_int,
-        default=200,
-        help="rooms sampled for the ground truth (default: 200)",
+        default=400,
+        help="rooms sampled for the ground truth (default: 400: the truth's own standard error, "
+        "a median 0.01 in offices, must be small against the intervals it checks)",
     )
     p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
     add_sweep_arguments(p)

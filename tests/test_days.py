@@ -131,7 +131,7 @@ def test_drift_must_be_a_list_of_tables(catalog, tmp_path):
         parse_style(doc, tmp_path / "x.toml", catalog)
 
 
-# ---- the store: schema 4 ----------------------------------------------------------------------
+# ---- the store: schema 4 (day stamps; schema 5 adds views, tests/test_corrected.py) ----------------------------------------------------------------------
 def _exam(store, oid: int, day: int = 0, related=(("ON-TOP-OF-DESK", "Cup", 9),), run="r1"):
     return store.append(
         NewExamination(run, "office", 1, oid, "Desk", 10.0 * oid, "hif", tuple(related), day)
@@ -139,7 +139,7 @@ def _exam(store, oid: int, day: int = 0, related=(("ON-TOP-OF-DESK", "Cup", 9),)
 
 
 def test_a_desk_examined_yesterday_is_a_new_trial_today_and_still_counts_once(catalog, tmp_path):
-    assert EXAM_KEY[-2:] == ("day", "object_id") and SCHEMA_VERSION == 4
+    assert EXAM_KEY[-2:] == ("day", "object_id") and SCHEMA_VERSION >= 4
     with EvidenceStore.open(tmp_path / "s.sqlite", catalog) as s:
         _exam(s, 1, day=0)
         _exam(s, 1, day=1)  # the same desk, the next day
@@ -188,9 +188,11 @@ def test_a_schema_3_store_is_read_as_day_0_and_migrated_keeping_every_row(catalo
     assert _file_digest(path) == before
     with EvidenceStore.open(path, catalog) as s:
         _exam(s, 1, day=1)  # the first write migrates, in its own transaction
-        assert s.version == 4
+        assert s.version == SCHEMA_VERSION
     conn = sqlite3.connect(path)
-    assert conn.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone() == ("4",)
+    assert conn.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone() == (
+        str(SCHEMA_VERSION),
+    )
     rows4 = conn.execute(
         "SELECT id, object_id, type, sim_time FROM examinations WHERE day = 0"
     ).fetchall()

@@ -5,6 +5,7 @@ the phantom references."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from ctxsearch.agent.learning import LearnConfig, learn
@@ -14,8 +15,12 @@ pytestmark = pytest.mark.render
 
 
 def _rows(path, catalog):
+    """Every examination, and what its images could show (the views, issue 28 point 2)."""
     with EvidenceStore.open(path, catalog, read_only=True) as st:
-        return [(e.object_id, e.type, e.related, e.sim_time) for e in st.examinations()]
+        views = st.conn.execute(
+            "SELECT examination_id, relation, recall, false_rate FROM views ORDER BY 1, 2"
+        ).fetchall()
+        return [(e.object_id, e.type, e.related, e.sim_time) for e in st.examinations()], views
 
 
 def _learn(path, catalog, rooms, k, limit=None):
@@ -31,10 +36,30 @@ def test_a_false_positive_is_examined_only_without_confirmation(tmp_path, catalo
     twice = _learn(tmp_path / "b.sqlite", catalog, 2, 2)
     assert once.run == "hif/camera+realistic/seed=0/map=built"
     assert twice.run == "hif/camera+realistic+ref2/seed=0/map=built"
-    phantoms = [r for r in _rows(tmp_path / "a.sqlite", catalog) if r[0] < 0]
+    phantoms = [r for r in _rows(tmp_path / "a.sqlite", catalog)[0] if r[0] < 0]
     assert phantoms  # the detector's false positives were examined
-    assert [r for r in _rows(tmp_path / "b.sqlite", catalog) if r[0] < 0] == []
+    assert [r for r in _rows(tmp_path / "b.sqlite", catalog)[0] if r[0] < 0] == []
     assert twice.examinations > 0
+    _views_tell_what_the_images_could_show(tmp_path / "a.sqlite", catalog)
+
+
+def _views_tell_what_the_images_could_show(path, catalog):
+    """Every examination of a camera run keeps one view per relation of its type: a pen is
+    harder to see than a chair, clutter false positives are expected of the preset's types only
+    (Cup, not Chair), and the corrected intervals read them (knowledge.corrected)."""
+    with EvidenceStore.open(path, catalog, read_only=True) as st:
+        views = st.exam_views()
+        exams = list(st.examinations())
+        kb = st.knowledge_base(interval="corrected")
+    assert sum(v.n for v in views.values()) == len(exams)
+    names = catalog.type_names
+    pen, chair, cup = names.index("Pen"), names.index("Chair"), names.index("Cup")
+    q = np.concatenate([v.q.reshape(-1, len(names)) for v in views.values()])
+    f = np.concatenate([v.f.reshape(-1, len(names)) for v in views.values()])
+    assert ((q >= 0) & (q <= 1)).all() and (q < 1).any()  # recorded, not the default of 1
+    assert q[:, pen].mean() < q[:, chair].mean() - 0.2
+    assert f[:, chair].max() == 0 and f[:, cup].max() > 0
+    assert kb.interval_method == "corrected" and 0 < kb.mean_width() < 1
 
 
 def test_a_resumed_run_with_confirmed_references_equals_an_uninterrupted_one(tmp_path, catalog):
@@ -65,3 +90,28 @@ def test_bench_intervals_counts_phantom_references(tmp_path):
         runs = list(csv.DictReader(f))
     assert {float(r["phantom_reference_share"]) > 0 for r in runs} == {True, False}
     assert "phantom references" in (out / "intervals.md").read_text()
+    for r in [*rows.values(), *runs]:  # the corrected interval, read from each run's store
+        for key in ("coverage_informative", "mean_abs_error", "mean_width", "expected_recall"):
+            assert 0 <= float(r[f"corrected_{key}" if "recall" not in key else key]) <= 1
+        assert float(r["seconds_per_examination"]) > 0
+
+
+def test_examinations_planned_to_see_see_better_at_a_cost(tmp_path, catalog):
+    """``exam_recall`` (issue 28 point 1): the gaze planner keeps to the range where the object
+    types are detected with mean recall 0.9: the examinations' expected recall of the object
+    types rises, and the robot spends more simulated seconds on them."""
+    from ctxsearch.scripts.experiments.bench_intervals import expected_recall
+
+    def run(path, recall):
+        cfg = LearnConfig("office", 1, path, perception="camera", progress=False,
+                          exam_recall=recall, max_examinations=5)  # fmt: skip
+        s = learn(cfg, catalog=catalog)
+        with EvidenceStore.open(path, catalog, read_only=True) as st:
+            exams = list(st.examinations())
+            return s.run, expected_recall(st.exam_views(), catalog), exams[-1].sim_time
+
+    key, far, far_s = run(tmp_path / "a.sqlite", None)
+    near_key, near, near_s = run(tmp_path / "b.sqlite", 0.9)
+    assert near_key == f"{key}/exam-recall=0.9"
+    assert near > far + 0.03 and near > 0.9
+    assert near_s > far_s

@@ -270,17 +270,7 @@ class SeenMap:
         """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
         ``camera``. Returns their mask."""
         depth = np.asarray(depth, float)
-        h, w = depth.shape
-        uv, z = camera.project(self.points)
-        ok = z > 0.05
-        with np.errstate(invalid="ignore"):
-            ok &= (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-        idx = np.flatnonzero(ok)
-        if len(idx):
-            col = np.clip(uv[idx, 0].astype(int), 0, w - 1)
-            row = np.clip(uv[idx, 1].astype(int), 0, h - 1)
-            vis = z[idx] <= depth[row, col] + VISIBLE_TOL
-            idx = idx[vis]
+        idx = np.flatnonzero(camera.visible(self.points, depth, VISIBLE_TOL))
         dist = np.linalg.norm(self.points[idx] - np.asarray(camera.position, float), axis=1)
         self.best[idx] = np.minimum(self.best[idx], dist)
         if self.learn_support and self.support is not None:

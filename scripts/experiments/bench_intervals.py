@@ -1,22 +1,28 @@
 """``ctxsearch bench intervals``: what detector errors and room correlation do to the intervals.
 
-For every style and every detector setting (``perfect``, ``realistic``, ``realistic`` with a
-related object counted only once two images of the room detected it, and ``realistic`` with one
-counted only once a detection of it scored a confidence of 0.5: ``SETTINGS``), HIF learns in camera
-mode over the same rooms for every seed (``learning_trace.run_trace`` with clustered intervals,
-so the paper's Wilson figures are measured beside them on the same evidence). After the last
-examination of room r for every r in ``room_marks``, against the ground truth (``envs.truth``):
+For every style and every detector setting (``SETTINGS``: ``perfect``, ``realistic``, and
+``realistic`` with a related object counted only once two images of the room detected it, only
+once a detection of it scored 0.5, with an object examined only once two images detected it, and
+with examinations planned to see), HIF learns in camera mode over the same rooms for every seed
+(``learning_trace.run_trace`` with clustered intervals, so the paper's Wilson figures are
+measured beside them on the same evidence; the corrected intervals are read from the run's store
+at the room marks, ``corrected_at``). After the last examination of room r for every r in
+``room_marks``, against the ground truth (``envs.truth``):
 
 - coverage_informative: the share of entries with n_A >= 1 and 0.02 <= p_true <= 0.98 whose
   interval holds p_true (nominal: 1 - alpha),
 - mean |p0 - p_true| over every entry with ground truth,
 - mean interval width over every entry with ground truth,
 
-for ``wilson`` and ``clustered``; and the bias per reference type: the mean of p0 - p_true over
-its informative entries (the detector's misses pull it down, its false positives and
-confusions push it up). Every cell is the median over seeds. Writes DIR/intervals.json,
+for ``wilson``, ``clustered`` and ``corrected``; the bias per reference type: the mean of
+p0 - p_true over its informative entries (the detector's misses pull it down, its false
+positives and confusions push it up), for Wilson's p0 and the corrected interval's centre; the
+simulated seconds per examination and the examinations' expected recall of the object types
+(``EXAM_CELLS``). Every cell is the median over seeds. Writes DIR/intervals.json,
 DIR/intervals.md, and the same figures per seed in DIR/intervals.csv (``RUN_COLUMNS``) and
-DIR/intervals_bias.csv (``BIAS_COLUMNS``).
+DIR/intervals_bias.csv (``BIAS_COLUMNS``). The ground truth's own noise counts against coverage:
+its default of 400 rooms keeps its standard error (a median 0.01 in offices) small against the
+intervals' half-widths.
 """
 
 from __future__ import annotations
@@ -36,21 +42,33 @@ from ctxsearch.envs.truth import ground_truth
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.options import IntervalMethod
+from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
-from ctxsearch.scripts.experiments.learning_trace import LearningBenchConfig, Trace, run_trace
+from ctxsearch.scripts.experiments.learning_trace import (
+    LearningBenchConfig,
+    Trace,
+    informative,
+    interval_metrics,
+    run_trace,
+)
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units
 
-# (label, detector preset, confirm, min score, confirm reference): the detector settings
-# compared. ``confirm2`` counts a related object once two images detected it; ``score0.5`` once a
-# detection of it scored 0.5; ``ref2`` examines an object once two images detected it (issue 28).
-SETTINGS = (("perfect", "perfect", 1, 0.0, 1), ("realistic", "realistic", 1, 0.0, 1),
-            ("realistic+confirm2", "realistic", 2, 0.0, 1),
-            ("realistic+score0.5", "realistic", 1, 0.5, 1),
-            ("realistic+ref2", "realistic", 1, 0.0, 2),
-            ("realistic+confirm2+ref2", "realistic", 2, 0.0, 2))  # fmt: skip
+# (label, detector preset, confirm, min score, confirm reference, exam recall): the detector
+# settings compared. ``confirm2`` counts a related object once two images detected it;
+# ``score0.5`` once a detection of it scored 0.5; ``ref2`` examines an object once two images
+# detected it; ``near0.9`` plans examinations to see (``learn --exam-recall 0.9``; issue 28).
+SETTINGS = (("perfect", "perfect", 1, 0.0, 1, None), ("realistic", "realistic", 1, 0.0, 1, None),
+            ("realistic+confirm2", "realistic", 2, 0.0, 1, None),
+            ("realistic+score0.5", "realistic", 1, 0.5, 1, None),
+            ("realistic+ref2", "realistic", 1, 0.0, 2, None),
+            ("realistic+confirm2+ref2", "realistic", 2, 0.0, 2, None),
+            ("realistic+ref2+near0.9", "realistic", 1, 0.0, 2, 0.9))  # fmt: skip
 DEFAULT_SETTINGS = ("perfect", "realistic", "realistic+confirm2", "realistic+score0.5",
-                    "realistic+ref2", "realistic+confirm2+ref2")  # fmt: skip
+                    "realistic+ref2", "realistic+confirm2+ref2", "realistic+ref2+near0.9")  # fmt: skip
+# What an examination cost and could see: simulated seconds per examination (exploring
+# included) and the mean expected recall of the object types (``expected_recall``).
+EXAM_CELLS = ("seconds_per_examination", "expected_recall")
 CELLS = (
     ("coverage_informative", "wilson_coverage_informative"),
     ("mean_abs_error", "wilson_mean_abs_error"),
@@ -65,28 +83,78 @@ class IntervalsBenchConfig:
     styles: tuple[str, ...] = ("office", "apartment")
     room_marks: tuple[int, ...] = (10, 30)
     seeds: int = 3
-    truth_samples: int = 200
+    truth_samples: int = 400
     alpha: float = 0.10
     settings: tuple[str, ...] = DEFAULT_SETTINGS
 
 
-def _run(
-    rooms: int, truths: dict, alpha: float, unit: tuple[str, tuple[str, str, int, float], int]
-) -> Trace:
-    """One sweep unit: the HIF camera run of (style, setting, seed); its trace."""
+def _run(marks: tuple[int, ...], truths: dict, alpha: float, unit: tuple[str, tuple, int]) -> Trace:
+    """One sweep unit: the HIF camera run of (style, setting, seed) over max(marks) rooms; its
+    trace, with the corrected intervals' figures at the room marks (``corrected_at``)."""
+    rooms = max(marks)
     style, setting, seed = unit
     truth = truths[style]
     catalog = load_catalog()
-    _, detector, confirm, min_score, confirm_reference = setting
+    _, detector, confirm, min_score, confirm_reference, exam_recall = setting
     config = LearningBenchConfig(
         style, rooms, 1, ("hif",), perception="camera", alpha=alpha, detector=detector,
         interval="clustered", confirm=confirm, min_score=min_score,
-        confirm_reference=confirm_reference,
+        confirm_reference=confirm_reference, exam_recall=exam_recall,
     )  # fmt: skip
     shm = Path("/dev/shm")
     tmp_root = str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
     with tempfile.TemporaryDirectory(prefix="ctxsearch-intervals-", dir=tmp_root) as tmp:
-        return run_trace(config, seed, "hif", truth, catalog, Path(tmp), keep_counts=True)
+        tr = run_trace(config, seed, "hif", truth, catalog, Path(tmp), keep_counts=True)
+        store = Path(tmp) / f"hif-{seed}.sqlite"
+        tr.corrected = corrected_at(store, tr, [_at_room(tr, m) for m in marks], alpha)
+        return tr
+
+
+def corrected_at(store_path: Path, tr: Trace, ks: list[int], alpha: float) -> dict[int, dict]:
+    """The corrected intervals (knowledge.corrected, read from the run's store) after each
+    examination count k in ``ks``, against the trace's truth entries: {k: the metrics of
+    ``interval_metrics`` and ``bias`` (mean estimate - p_true per reference type over its
+    informative entries; the estimate is the interval's midpoint, as Wilson's p0 is)}."""
+    catalog = load_catalog()
+    p = np.array([e["p"] for e in tr.entries])
+    refs = [e["ref"] for e in tr.entries]
+    out: dict[int, dict] = {}
+    with EvidenceStore.open(store_path, catalog, read_only=True) as store:
+        ids = [e.id for e in store.examinations()]
+        for k in sorted(set(ks)):
+            if not k:
+                continue
+            ci = store.corrected_intervals(alpha, upto=ids[k - 1])
+            lo, hi = np.array(
+                [ci.interval(e["ref"], e["relation"], e["type"]) for e in tr.entries]
+            ).T
+            centre = (lo + hi) / 2
+            n = tr.counts[k - 1][1]
+            row = interval_metrics(lo, hi, centre, p, n)
+            inf = informative(p, n)
+            row["bias"] = {
+                r: float(np.mean(centre[m] - p[m]))
+                for r in sorted(set(refs))
+                if (m := inf & (np.array(refs) == r)).any()
+            }
+            row["expected_recall"] = expected_recall(store.exam_views(upto=ids[k - 1]), catalog)
+            row["seconds_per_examination"] = float(tr.sim_s[k - 1]) / k
+            out[k] = row
+    return out
+
+
+def expected_recall(views: dict, catalog) -> float:
+    """The mean, over examinations, of the expected recall of the catalog's object (not
+    furniture) types averaged over the examination's relation volumes (agent.exam_views; NaN
+    without views)."""
+    objects = [i for i, t in enumerate(catalog.types) if not t.is_furniture]
+    per_exam = [v.q[:, :, objects].mean(axis=(1, 2)) for v in views.values() if v.n]
+    return float(np.mean(np.concatenate(per_exam))) if per_exam else math.nan
+
+
+def _corrected(tr: Trace, k: int, metric: str) -> float:
+    """The corrected intervals' ``metric`` after examination k (NaN if not measured)."""
+    return float(tr.corrected.get(k, {}).get(metric, math.nan))
 
 
 def _at_room(tr: Trace, room: int) -> int:
@@ -128,7 +196,6 @@ def bench_intervals(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     settings = [s for s in SETTINGS if s[0] in config.settings]
-    rooms = max(config.room_marks)
     doc: dict = {
         "alpha": config.alpha,
         "seeds": config.seeds,
@@ -144,7 +211,7 @@ def bench_intervals(
     ]
     t0 = time.perf_counter()
     done = run_units(
-        functools.partial(_run, rooms, truths, config.alpha),
+        functools.partial(_run, tuple(config.room_marks), truths, config.alpha),
         units,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
@@ -169,6 +236,20 @@ def bench_intervals(
                     for name, key in (("clustered", clustered_key), ("wilson", wilson_key)):
                         vals = [t.at_exam(k, key) for t, k in zip(traces, ks, strict=True)]
                         row[f"{name}_{clustered_key}"] = float(np.nanmedian(vals))
+                    vals = [
+                        _corrected(t, k, clustered_key) for t, k in zip(traces, ks, strict=True)
+                    ]
+                    row[f"corrected_{clustered_key}"] = float(np.nanmedian(vals))
+                for key in EXAM_CELLS:
+                    vals = [_corrected(t, k, key) for t, k in zip(traces, ks, strict=True)]
+                    row[key] = float(np.nanmedian(vals))
+                cbias = [
+                    t.corrected.get(k, {}).get("bias", {}) for t, k in zip(traces, ks, strict=True)
+                ]
+                row["bias_by_type_corrected"] = {
+                    r: float(np.median([b[r] for b in cbias if r in b]))
+                    for r in sorted({r for b in cbias for r in b})
+                }
                 biases = [
                     _bias(t, k, truth_p, refs, config.alpha)
                     for t, k in zip(traces, ks, strict=True)
@@ -195,11 +276,14 @@ RUN_COLUMNS = (
     "seed",
     "rooms",  # the room mark: figures after this many rooms
     "examinations",
-    *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson")),
+    *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson", "corrected")),
     "phantom_reference_share",
+    *EXAM_CELLS,
 )
-# intervals_bias.csv: mean p0 - p_true over a reference type's informative entries, per seed.
-BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type", "bias")
+# intervals_bias.csv: mean p0 - p_true over a reference type's informative entries, per seed
+# (Wilson's p0; ``bias_corrected``: the corrected interval's centre).
+BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type", "bias",
+                "bias_corrected")  # fmt: skip
 
 
 def _seed_rows(
@@ -221,9 +305,13 @@ def _seed_rows(
             for ck, wk in CELLS
             for name in ("clustered", "wilson")
         }
+        cells.update({f"corrected_{ck}": _corrected(tr, k, ck) for ck, _ in CELLS})
+        cells.update({key: _corrected(tr, k, key) for key in EXAM_CELLS})
         runs.append({**key, **cells, "phantom_reference_share": phantom_share(tr, k)})
+        cbias = tr.corrected.get(k, {}).get("bias", {})
         for ref, b in _bias(tr, k, truth_p, refs, alpha).items():
-            biases.append({**key, "ref_type": ref, "bias": b})
+            biases.append({**key, "ref_type": ref, "bias": b,
+                           "bias_corrected": cbias.get(ref, math.nan)})  # fmt: skip
 
 
 def markdown(doc: dict) -> str:
@@ -236,20 +324,32 @@ def markdown(doc: dict) -> str:
         "Coverage is over the informative entries (n_A >= 1, 0.02 <= p_true <= 0.98); error and "
         "width over every entry with ground truth. Phantom references: the share of "
         "examinations whose reference the room does not hold under the type it was examined as "
-        "(false positives, look-alikes).",
+        "(false positives, look-alikes). Corrected: the recall-aware interval (knowledge.corrected, "
+        "read from each run's store). s per exam: simulated seconds per examination, exploring "
+        "included; expected recall: the mean over examinations of the object types' expected "
+        "recall in the relation volumes (agent.exam_views).",
         "",
         "| style | detector | rooms | exams | coverage_informative wilson | clustered | "
-        "mean abs(p0 - p_true) wilson | clustered | mean width wilson | clustered | "
-        "phantom references |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "corrected | mean abs(p0 - p_true) wilson | clustered | corrected | mean width wilson | "
+        "clustered | corrected | phantom references | s per exam | expected recall |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in doc["rows"]:
+        cells = [
+            f"{r.get(f'{m}_{key}', math.nan):{fmt}}"
+            for key, fmt in (
+                ("coverage_informative", ".3f"),
+                ("mean_abs_error", ".4f"),
+                ("mean_width", ".3f"),
+            )  # fmt: skip
+            for m in ("wilson", "clustered", "corrected")
+        ]
         lines.append(
             f"| {r['style']} | {r['detector']} | {r['rooms']} | {r['examinations']:.0f} | "
-            f"{r['wilson_coverage_informative']:.3f} | {r['clustered_coverage_informative']:.3f} | "
-            f"{r['wilson_mean_abs_error']:.4f} | {r['clustered_mean_abs_error']:.4f} | "
-            f"{r['wilson_mean_width']:.3f} | {r['clustered_mean_width']:.3f} | "
-            f"{r.get('phantom_reference_share', math.nan):.3f} |"
+            + " | ".join(cells)
+            + f" | {r.get('phantom_reference_share', math.nan):.3f}"
+            + f" | {r.get('seconds_per_examination', math.nan):.1f}"
+            + f" | {r.get('expected_recall', math.nan):.3f} |"
         )
     lines += ["", "## Bias of p0 (Wilson centre) per reference type: mean p0 - p_true over its "
               "informative entries, at the last room mark", ""]  # fmt: skip
@@ -260,5 +360,13 @@ def markdown(doc: dict) -> str:
     lines.append("|---" * (2 + len(types)) + "|")
     for r in rows:
         cells = [f"{r['bias_by_type'][t]:+.3f}" if t in r["bias_by_type"] else "-" for t in types]
+        lines.append(f"| {r['style']} | {r['detector']} | " + " | ".join(cells) + " |")
+    lines += ["", "## Bias of the corrected interval's centre per reference type: mean centre - "
+              "p_true over the same entries",
+              "", "| style | detector | " + " | ".join(types) + " |",
+              "|---" * (2 + len(types)) + "|"]  # fmt: skip
+    for r in rows:
+        b = r.get("bias_by_type_corrected", {})
+        cells = [f"{b[t]:+.3f}" if t in b else "-" for t in types]
         lines.append(f"| {r['style']} | {r['detector']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

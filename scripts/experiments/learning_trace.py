@@ -176,6 +176,9 @@ class Trace:
     # Per examination: was its reference a phantom, an object the room does not hold under the
     # type it was examined as (a false positive, or a look-alike reported as another type)?
     phantom: list[bool] = field(default_factory=list)
+    # bench intervals: the corrected intervals' metrics after examination k, read from the run's
+    # store (scripts.experiments.bench_intervals.corrected_at).
+    corrected: dict[int, dict] = field(default_factory=dict)
 
     def at_exam(self, k: int, metric: str) -> float:
         """The metric after examination k (1-based), or NaN past the end."""
@@ -229,6 +232,7 @@ class LearningBenchConfig:
     interval: str = "wilson"  # the intervals measured: wilson or clustered
     confirm: int = 1  # camera mode: images that must detect a related object
     confirm_reference: int = 1  # camera mode: images that must detect a reference
+    exam_recall: float | None = None  # camera mode: examinations planned to see (agent.exam_views)
     min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
 
     @property
@@ -341,6 +345,7 @@ def run_trace(
             detector=config.detector,
             confirm=config.confirm,
             confirm_reference=config.confirm_reference,
+            exam_recall=config.exam_recall,
             min_score=config.min_score,
         ),
         catalog=catalog,
