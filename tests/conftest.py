@@ -83,6 +83,7 @@ SLOW_FILES_FIRST = (
     "test_cli_search.py",
     "test_acquisition.py",
     "test_mapping.py",
+    "test_references.py",
 )
 
 
