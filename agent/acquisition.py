@@ -88,6 +88,10 @@ from ctxsearch.knowledge.options import MapMode, Reexamine
 from ctxsearch.knowledge.store import NewExamination
 
 Related = list[tuple[str, ObjectInstance]]
+EXAM_RECALL_NEEDS_A_DETECTOR = (
+    "--exam-recall needs the camera perception with the simulated detector (the robot plans "
+    "with its detector's recall curve)"
+)
 
 
 class RoomLearner:
@@ -458,10 +462,7 @@ def exam_options(run: Run, model: ViewModel | None, body: Body) -> GazePlanOptio
     if recall is None:
         return None
     if model is None:
-        raise CtxsearchError(
-            "--exam-recall needs the camera perception with the simulated detector (the robot "
-            "plans with its detector's recall curve)"
-        )
+        raise CtxsearchError(EXAM_RECALL_NEEDS_A_DETECTOR)
     spec = run.settings.config.spec
     w, h = body.width, body.height
     return GazePlanOptions(

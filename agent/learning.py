@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ctxsearch.agent import strategies as strat
-from ctxsearch.agent.acquisition import RoomLearner
+from ctxsearch.agent.acquisition import EXAM_RECALL_NEEDS_A_DETECTOR, RoomLearner
 from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.perception_modes import perception_label
 from ctxsearch.agent.resume import RunHistory
@@ -208,6 +208,8 @@ def learn(
         style, layouts = style_layouts(style, catalog)
     map_mode = config.map_used
     detector = config.detector_model(catalog) if perceive is None else None
+    if config.exam_recall is not None and detector is None:  # refused before the store opens
+        raise CtxsearchError(EXAM_RECALL_NEEDS_A_DETECTOR)
     label = perception_label(
         config.perception, detector, config.confirm, config.min_score, config.confirm_reference
     )

@@ -243,6 +243,7 @@ def test_planning_to_see_needs_a_model_of_the_detector(tmp_path, capsys):
     args = ["learn", "--style", "office", "--rooms", "1", "--kb", str(out)]
     assert main([*args, "--perception", "oracle", "--exam-recall", "0.9"]) == 2
     assert "--exam-recall needs the camera perception" in capsys.readouterr().err
+    assert not out.exists()  # refused before the store is created
     with pytest.raises(SystemExit) as e:
         main([*args, "--exam-recall", "1.5"])
     assert e.value.code == 2
