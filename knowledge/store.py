@@ -499,56 +499,7 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                 src = _connect_ro(p)
                 try:
                     src.execute("BEGIN")  # one snapshot of the input, even if a robot is writing it
-                    offset = int(
-                        cur.execute("SELECT COALESCE(MAX(id), 0) FROM examinations").fetchone()[0]
-                    )
-                    new_in = int(meta["schema_version"]) >= 4
-                    # Duplicates within an input (older than version 3) are read once, the first.
-                    key = EXAM_KEY if new_in else _V3_EXAM_KEY
-                    keep = f"SELECT MIN(id) FROM examinations GROUP BY {', '.join(key)}"
-                    cols = _EXAM_COLS if new_in else _OLD_EXAM_COLS
-                    rows = src.execute(
-                        f"SELECT id, {cols} FROM examinations WHERE id IN ({keep}) ORDER BY id"
-                    )
-                    while batch := rows.fetchmany(10_000):
-                        cur.executemany(
-                            f"INSERT INTO examinations (id, {_EXAM_COLS}) "
-                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                            [(r[0] + offset, *r[1:]) for r in batch],
-                        )
-                        appended += len(batch)
-                    rows = src.execute(
-                        "SELECT examination_id, relation, type, related_id FROM observations "
-                        f"WHERE examination_id IN ({keep}) ORDER BY rowid"
-                    )
-                    while batch := rows.fetchmany(50_000):
-                        cur.executemany(
-                            "INSERT INTO observations (examination_id, relation, type, related_id) VALUES (?, ?, ?, ?)",
-                            [(r[0] + offset, *r[1:]) for r in batch],
-                        )
-                    if int(meta["schema_version"]) >= 5:
-                        rows = src.execute(
-                            "SELECT examination_id, relation, recall, false_rate FROM views "
-                            f"WHERE examination_id IN ({keep}) ORDER BY examination_id, relation"
-                        )
-                        while batch := rows.fetchmany(50_000):
-                            cur.executemany(
-                                "INSERT INTO views (examination_id, relation, recall, false_rate) "
-                                "VALUES (?, ?, ?, ?)",
-                                [(r[0] + offset, *r[1:]) for r in batch],
-                            )
-                    end = "end_time" if int(meta["schema_version"]) >= 2 else "NULL"
-                    day = "day" if new_in else "0"
-                    cur.executemany(
-                        "INSERT INTO rooms (run, style, seed, day, status, end_time) "
-                        "VALUES (?, ?, ?, ?, ?, ?) "
-                        "ON CONFLICT (run, style, seed, day) DO UPDATE SET status = "
-                        "CASE WHEN rooms.status = 'done' OR excluded.status = 'done' THEN 'done' ELSE 'started' END, "
-                        "end_time = COALESCE(rooms.end_time, excluded.end_time)",
-                        src.execute(
-                            f"SELECT run, style, seed, {day}, status, {end} FROM rooms"
-                        ).fetchall(),
-                    )
+                    appended += _append_log(cur, src, int(meta["schema_version"]))
                 except sqlite3.IntegrityError:
                     raise StoreError(
                         f"{p}: holds examinations already in {out_path} (same run, room and "
@@ -564,6 +515,57 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
                 out_path.unlink()
         raise
     return appended
+
+
+def _append_log(cur: sqlite3.Cursor, src: sqlite3.Connection, version: int) -> int:
+    """Append the log of ``src`` (a store of schema ``version``) in ``cur``'s transaction: its
+    examinations renumbered after the output's, their observations and views, its rooms (a
+    room 'done' in either is 'done', the first end time kept). Returns the examinations
+    appended. Duplicates within an input (older than version 3) are read once, the first."""
+    offset = int(cur.execute("SELECT COALESCE(MAX(id), 0) FROM examinations").fetchone()[0])
+    new_in = version >= 4
+    key = EXAM_KEY if new_in else _V3_EXAM_KEY
+    keep = f"SELECT MIN(id) FROM examinations GROUP BY {', '.join(key)}"
+    cols = _EXAM_COLS if new_in else _OLD_EXAM_COLS
+    exams = src.execute(f"SELECT id, {cols} FROM examinations WHERE id IN ({keep}) ORDER BY id")
+    appended = _copy_shifted(cur, exams, "examinations", f"id, {_EXAM_COLS}", offset, 10_000)
+    obs_cols = "examination_id, relation, type, related_id"
+    obs = src.execute(
+        f"SELECT {obs_cols} FROM observations WHERE examination_id IN ({keep}) ORDER BY rowid"
+    )
+    _copy_shifted(cur, obs, "observations", obs_cols, offset, 50_000)
+    if version >= 5:
+        view_cols = "examination_id, relation, recall, false_rate"
+        views = src.execute(f"SELECT {view_cols} FROM views WHERE examination_id IN ({keep}) "
+                            "ORDER BY examination_id, relation")  # fmt: skip
+        _copy_shifted(cur, views, "views", view_cols, offset, 50_000)
+    end = "end_time" if version >= 2 else "NULL"
+    day = "day" if new_in else "0"
+    cur.executemany(
+        "INSERT INTO rooms (run, style, seed, day, status, end_time) "
+        "VALUES (?, ?, ?, ?, ?, ?) "
+        "ON CONFLICT (run, style, seed, day) DO UPDATE SET status = "
+        "CASE WHEN rooms.status = 'done' OR excluded.status = 'done' THEN 'done' ELSE 'started' END, "
+        "end_time = COALESCE(rooms.end_time, excluded.end_time)",
+        src.execute(f"SELECT run, style, seed, {day}, status, {end} FROM rooms").fetchall(),
+    )
+    return appended
+
+
+def _copy_shifted(
+    cur: sqlite3.Cursor, rows: sqlite3.Cursor, table: str, cols: str, offset: int, batch: int
+) -> int:
+    """Insert ``rows`` (examination id first, shifted by ``offset``) into ``table`` (``cols``),
+    ``batch`` at a time; how many."""
+    marks = ", ".join("?" * len(cols.split(",")))
+    n = 0
+    while chunk := rows.fetchmany(batch):
+        cur.executemany(
+            f"INSERT INTO {table} ({cols}) VALUES ({marks})",
+            [(r[0] + offset, *r[1:]) for r in chunk],
+        )
+        n += len(chunk)
+    return n
 
 
 def _text(v: object, what: str) -> str:

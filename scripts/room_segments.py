@@ -68,11 +68,10 @@ def explore_and_segment(layout: RoomLayout, catalog: Catalog) -> Segmented:
         built = BuiltMap.for_layout(layout, spec, start)
         ex = explore_world(world, built, tm)
     mask = built_mask(built.floor, built.occupied, built.top_z)
-    grid = built.refresh()
-    truth = plan_labels(layout, grid)
+    walls = wall_mask(layout, built.resolution)  # the built map's cells (the layout's footprint)
+    truth = plan_labels(layout, walls)
     labels = segment_rooms(mask, built.resolution)
-    space = wall_mask(layout, built.resolution).free
-    return Segmented(labels, truth, mask, space, room_iou(labels, truth, mask), ex.sim_s)
+    return Segmented(labels, truth, mask, walls.free, room_iou(labels, truth, mask), ex.sim_s)
 
 
 def seen_share(seg: Segmented) -> dict[int, float]:

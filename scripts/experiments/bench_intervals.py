@@ -41,7 +41,6 @@ import numpy as np
 from ctxsearch.envs.truth import ground_truth
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import load_catalog
-from ctxsearch.knowledge.options import IntervalMethod
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
 from ctxsearch.scripts.experiments.learning_trace import (
@@ -172,7 +171,7 @@ def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float)
     """Mean p0 - p_true per reference type over its informative entries after examination k."""
     y, n = tr.counts[k - 1]
     p0 = intervals.p0(y, n, alpha)
-    inf = (n >= 1) & (truth_p >= 0.02) & (truth_p <= 0.98)
+    inf = informative(truth_p, n)
     out = {}
     for r in sorted(set(refs)):
         m = inf & (np.array(refs) == r)
@@ -224,42 +223,9 @@ def bench_intervals(
     for style in config.styles:
         for setting in settings:
             traces = [by_unit[(style, setting, s)] for s in range(config.seeds)]
-            refs = [e["ref"] for e in traces[0].entries]
-            truth_p = np.array([e["p"] for e in traces[0].entries])
             for mark in config.room_marks:
-                ks = [_at_room(t, mark) for t in traces]
-                row = {"style": style, "detector": setting[0], "rooms": mark,
-                       "examinations": float(np.median(ks)),
-                       "phantom_reference_share": float(np.nanmedian(
-                           [phantom_share(t, k) for t, k in zip(traces, ks, strict=True)]))}  # fmt: skip
-                for clustered_key, wilson_key in CELLS:
-                    for name, key in (("clustered", clustered_key), ("wilson", wilson_key)):
-                        vals = [t.at_exam(k, key) for t, k in zip(traces, ks, strict=True)]
-                        row[f"{name}_{clustered_key}"] = float(np.nanmedian(vals))
-                    vals = [
-                        _corrected(t, k, clustered_key) for t, k in zip(traces, ks, strict=True)
-                    ]
-                    row[f"corrected_{clustered_key}"] = float(np.nanmedian(vals))
-                for key in EXAM_CELLS:
-                    vals = [_corrected(t, k, key) for t, k in zip(traces, ks, strict=True)]
-                    row[key] = float(np.nanmedian(vals))
-                cbias = [
-                    t.corrected.get(k, {}).get("bias", {}) for t, k in zip(traces, ks, strict=True)
-                ]
-                row["bias_by_type_corrected"] = {
-                    r: float(np.median([b[r] for b in cbias if r in b]))
-                    for r in sorted({r for b in cbias for r in b})
-                }
-                biases = [
-                    _bias(t, k, truth_p, refs, config.alpha)
-                    for t, k in zip(traces, ks, strict=True)
-                ]
-                types = sorted({r for b in biases for r in b})
-                row["bias_by_type"] = {
-                    r: float(np.median([b[r] for b in biases if r in b])) for r in types
-                }
-                doc["rows"].append(row)
-                _seed_rows(runs, bias_rows, row, traces, ks, truth_p, refs, config.alpha)
+                head = {"style": style, "detector": setting[0], "rooms": mark}
+                doc["rows"].append(_mark_row(head, traces, config.alpha, runs, bias_rows))
     if progress:
         print(f"bench intervals: {time.perf_counter() - t0:.0f} s wall", flush=True)
     (out / "intervals.json").write_text(json.dumps(doc, indent=1) + "\n")
@@ -286,32 +252,47 @@ BIAS_COLUMNS = ("style", "detector", "seed", "rooms", "examinations", "ref_type"
                 "bias_corrected")  # fmt: skip
 
 
-def _seed_rows(
-    runs: list[dict],
-    biases: list[dict],
-    row: dict,
-    traces: list[Trace],
-    ks: list[int],
-    truth_p: np.ndarray,
-    refs: list[str],
-    alpha: float,
-) -> None:
-    """Append each seed's figures at ``row``'s room mark to ``runs`` and ``biases``."""
-    for seed, (tr, k) in enumerate(zip(traces, ks, strict=True)):
-        key = {"style": row["style"], "detector": row["detector"], "seed": seed,
-               "rooms": row["rooms"], "examinations": k}  # fmt: skip
-        cells = {
-            f"{name}_{ck}": float(tr.at_exam(k, wk if name == IntervalMethod.WILSON else ck))
-            for ck, wk in CELLS
-            for name in ("clustered", "wilson")
-        }
-        cells.update({f"corrected_{ck}": _corrected(tr, k, ck) for ck, _ in CELLS})
-        cells.update({key: _corrected(tr, k, key) for key in EXAM_CELLS})
-        runs.append({**key, **cells, "phantom_reference_share": phantom_share(tr, k)})
-        cbias = tr.corrected.get(k, {}).get("bias", {})
-        for ref, b in _bias(tr, k, truth_p, refs, alpha).items():
-            biases.append({**key, "ref_type": ref, "bias": b,
-                           "bias_corrected": cbias.get(ref, math.nan)})  # fmt: skip
+def _seed_cells(tr: Trace, k: int) -> dict[str, float]:
+    """One seed's figures after examination k: the phantom share, each cell under the clustered,
+    Wilson and corrected intervals, and ``EXAM_CELLS``."""
+    cells = {"phantom_reference_share": phantom_share(tr, k)}
+    for ck, wk in CELLS:
+        cells[f"clustered_{ck}"] = float(tr.at_exam(k, ck))
+        cells[f"wilson_{ck}"] = float(tr.at_exam(k, wk))
+        cells[f"corrected_{ck}"] = _corrected(tr, k, ck)
+    cells.update({name: _corrected(tr, k, name) for name in EXAM_CELLS})
+    return cells
+
+
+def _median_by_type(biases: list[dict[str, float]]) -> dict[str, float]:
+    """Per reference type, the median over seeds of the biases that have it."""
+    types = sorted({r for b in biases for r in b})
+    return {r: float(np.median([b[r] for b in biases if r in b])) for r in types}
+
+
+def _mark_row(
+    head: dict, traces: list[Trace], alpha: float, runs: list[dict], bias_rows: list[dict]
+) -> dict:
+    """intervals.json's row of one (style, setting, room mark) ``head``: every cell the median
+    over the seeds' ``traces``; each seed's figures appended to ``runs`` (intervals.csv) and its
+    bias per type to ``bias_rows`` (intervals_bias.csv)."""
+    refs = [e["ref"] for e in traces[0].entries]
+    truth_p = np.array([e["p"] for e in traces[0].entries])
+    ks = [_at_room(t, head["rooms"]) for t in traces]
+    seeds = [_seed_cells(t, k) for t, k in zip(traces, ks, strict=True)]
+    biases = [_bias(t, k, truth_p, refs, alpha) for t, k in zip(traces, ks, strict=True)]
+    cbias = [t.corrected.get(k, {}).get("bias", {}) for t, k in zip(traces, ks, strict=True)]
+    row = {**head, "examinations": float(np.median(ks))}
+    row.update({name: float(np.nanmedian([c[name] for c in seeds])) for name in seeds[0]})
+    row["bias_by_type_corrected"] = _median_by_type(cbias)
+    row["bias_by_type"] = _median_by_type(biases)
+    for seed, (k, cells, bias, cb) in enumerate(zip(ks, seeds, biases, cbias, strict=True)):
+        key = {"style": head["style"], "detector": head["detector"], "seed": seed,
+               "rooms": head["rooms"], "examinations": k}  # fmt: skip
+        runs.append({**key, **cells})
+        bias_rows.extend({**key, "ref_type": ref, "bias": b,
+                          "bias_corrected": cb.get(ref, math.nan)} for ref, b in bias.items())  # fmt: skip
+    return row
 
 
 def markdown(doc: dict) -> str:
