@@ -200,6 +200,7 @@ class CorrectedIntervals:
         alpha: float = intervals.DEFAULT_ALPHA,
     ):
         self.alpha, self.types = float(alpha), tuple(types)
+        self.relations = dict(relations)  # RELATIONS(A) per reference type, catalog order
         self._by_ref: dict[str, _TypeIntervals] = {}
         for ref, v in views.items():
             if v.n == 0:
@@ -235,6 +236,15 @@ class CorrectedIntervals:
             return 0.0, 1.0
         ti, r, b = at
         return float(ti.low[r, b]), float(ti.high[r, b])
+
+    def effective(self, ref: str, relation: str, type_name: str) -> tuple[float, float] | None:
+        """(y', n') of (A, rel, B): the effective counts eq. 3 reads (module docstring; the
+        backoff's, knowledge.pooling); None where A was never examined."""
+        at = self._at(ref, relation, type_name)
+        if at is None:
+            return None
+        ti, r, b = at
+        return float(ti.y_eff[r, b]), float(ti.n_eff[r, b])
 
     def arrays(self, ref: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """(low, high, estimate), each (R, T), of reference type ``ref`` (the estimate: the

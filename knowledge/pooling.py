@@ -22,6 +22,19 @@ kappa pseudo-examinations (a never-seen Workbench does not start from [0, 1]), a
 members of a class differ, the less a member borrows. Backoff goes one level up (to the parent
 class's pooled counts), not recursively. Entries whose relation maps onto nothing, and types in
 no class, keep the paper's interval.
+
+On the corrected intervals (``--backoff --interval corrected``; knowledge.corrected, issue 28):
+the same, on effective counts. A type's own (y, n) become the corrected interval's (y', n') of
+the entry (the examinations that could have shown a B, over the room clustering's shrink, and
+the corrected estimate times that), and p_C the class's other members' pooled effective counts,
+sum y' / sum n' (a member examined but without a relation that maps onto R adds its n
+examinations and no y, as in the pooled counts). kappa's rho is still measured on the raw
+pooled counts (misses shrink every member's rate alike, so their spread is read where it is
+counted); kappa's cap is the rest's sum n'. A class's own rows are Wilson on its members'
+pooled effective counts. With full recall, no false reports and one examination per room
+(shrink 1) every figure equals the Wilson backoff's (tested); with shrink > 1 it is the backoff
+of the clustered interval. Related *classes* have no corrected counts (a view is per type):
+with corrected intervals only concrete related types have rows.
 """
 
 from __future__ import annotations
@@ -35,6 +48,8 @@ import numpy as np
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.base import IntervalRow, KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.corrected import CorrectedIntervals
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.hierarchy import Hierarchy
 from ctxsearch.knowledge.store import EvidenceStore
 
@@ -153,8 +168,15 @@ class BackoffEstimate:
 class Backoff:
     """Empirical-Bayes backoff of types toward their classes (see the module docstring)."""
 
-    def __init__(self, pooled: PooledCounts, alpha: float = intervals.DEFAULT_ALPHA):
-        self.pooled, self.alpha = pooled, float(alpha)
+    def __init__(
+        self,
+        pooled: PooledCounts,
+        alpha: float = intervals.DEFAULT_ALPHA,
+        corrected: CorrectedIntervals | None = None,
+    ):
+        """``corrected``: back off on the corrected intervals' effective counts (module
+        docstring), which must come from the same log as ``pooled``."""
+        self.pooled, self.alpha, self.corrected = pooled, float(alpha), corrected
         self._rho: dict[str, float | None] = {}
 
     def rho(self, cname: str) -> float:
@@ -197,22 +219,76 @@ class Backoff:
     ) -> tuple[float, float, float, float | None]:
         """(y_eff, n_eff, kappa, p_class) of entry (ref_type, relation, related): the type's own
         counts plus kappa pseudo-examinations at its class's leave-one-out rate."""
-        pc, h = self.pooled, self.pooled.hierarchy
-        y = pc.y.get((ref_type, relation, related), 0)
-        n = pc.n.get(ref_type, 0)
+        h = self.pooled.hierarchy
+        y, n = self._own(ref_type, relation, related)
         cname, crel = h.parent(ref_type), h.lift(relation)
         kappa, p_class = 0.0, None
         if cname is not None and crel is not None:
-            n_rest = pc.n.get(cname, 0) - n
+            y_rest, n_rest = self._rest(cname, crel, related, ref_type)
             if n_rest > 0:
-                y_rest = pc.y.get((cname, crel, related), 0) - pc.via.get(
-                    (cname, ref_type, crel, related), 0
-                )
                 p_class = y_rest / n_rest
                 rho = self.rho(cname)
                 kappa = KAPPA_MAX if rho <= 0 else min(KAPPA_MAX, 1.0 / rho - 1.0)
                 kappa = max(0.0, min(kappa, float(n_rest)))
         return y + kappa * (p_class or 0.0), n + kappa, kappa, p_class
+
+    def _own(self, ref_type: str, relation: str, related: str) -> tuple[float, float]:
+        """A type's own (y, n) of an entry: its counts, or its effective counts."""
+        pc = self.pooled
+        if self.corrected is None:
+            return pc.y.get((ref_type, relation, related), 0), pc.n.get(ref_type, 0)
+        self._concrete(related)
+        return self.corrected.effective(ref_type, relation, related) or (0.0, 0.0)
+
+    def _rest(
+        self, cname: str, crel: str, related: str, leave_out: str | None
+    ) -> tuple[float, float]:
+        """(y, n) of class ``cname``'s relation ``crel`` and ``related`` over its examinations
+        except those of its direct member ``leave_out``: pooled counts, or the members' summed
+        effective counts (module docstring)."""
+        pc, h = self.pooled, self.pooled.hierarchy
+        if self.corrected is None:
+            y = pc.y.get((cname, crel, related), 0)
+            n = pc.n.get(cname, 0)
+            if leave_out is not None:
+                y -= pc.via.get((cname, leave_out, crel, related), 0)
+                n -= pc.n.get(leave_out, 0)
+            return y, n
+        self._concrete(related)
+        skip = set(h.members(leave_out)) if leave_out is not None else set()
+        y_sum = n_sum = 0.0
+        for t in h.members(cname):
+            if t in skip or pc.n.get(t, 0) == 0:
+                continue
+            rel = self._mapped(t, crel)
+            eff = self.corrected.effective(t, rel, related) if rel is not None else None
+            y_t, n_t = eff if eff is not None else (0.0, float(pc.n[t]))
+            y_sum, n_sum = y_sum + y_t, n_sum + n_t
+        return y_sum, n_sum
+
+    def _mapped(self, type_name: str, crel: str) -> str | None:
+        """The relation of ``type_name`` that maps (through its classes) onto ``crel``."""
+        h = self.pooled.hierarchy
+        for rel in self.corrected.relations.get(type_name, ()):
+            r = rel
+            while r is not None and r != crel:
+                r = h.lift(r)
+            if r == crel:
+                return rel
+        return None
+
+    def _concrete(self, related: str) -> None:
+        if related in self.pooled.hierarchy:
+            raise CtxsearchError(
+                f"the corrected intervals count concrete related types, not the class {related}"
+            )
+
+    def class_interval(self, cname: str, crel: str, related: str) -> tuple[float, float, float]:
+        """(p0, low, high) of a class's own entry: the pooled counts' interval, or, on the
+        corrected intervals, Wilson on the members' pooled effective counts."""
+        y, n = self._rest(cname, crel, related, None)
+        lo, hi = intervals.interval(y, n, self.alpha)
+        return float(intervals.p0(y, n, self.alpha)), float(lo), float(hi)
 
     def estimate(self, ref_type: str, relation: str, related: str) -> BackoffEstimate:
         """The backed-off interval of entry (ref_type, relation, related)."""
@@ -236,30 +312,54 @@ def interval_rows(
     related: str | None = None,
     include_zero: bool = False,
     backoff: bool = False,
+    corrected: CorrectedIntervals | None = None,
 ) -> list[IntervalRow]:
     """Interval rows over types and classes, both sides: of reference ``ref`` (a type or a class;
     default every one with relations) and related ``related`` (default every type and class),
     sorted by lower bound like ``KnowledgeBase.rows``. With ``backoff``, a concrete type's rows
     are its backed-off estimates (``Backoff``; y and n stay its own counts); rows with y = 0 are
-    kept where ``include_zero`` or where backoff gives them a lower bound above 0."""
+    kept where ``include_zero`` or where backoff gives them a lower bound above 0. With
+    ``corrected`` (from the same log), every interval is read on the corrected intervals (a
+    type's own, a class's pooled effective counts, the backoff's; module docstring) and only
+    concrete related types have rows."""
     h = catalog.hierarchy
     names = (*catalog.type_names, *(c.name for c in h.classes))
     owners = [ref] if ref else [o for o in names if _relations_of(catalog, o)]
-    targets = [related] if related else list(names)
-    bo = Backoff(pooled, alpha) if backoff else None
+    targets = [related] if related else list(catalog.type_names if corrected else names)
+    bo = Backoff(pooled, alpha, corrected) if backoff or corrected is not None else None
     out = []
     for owner in owners:
         n = pooled.n.get(owner, 0)
         for rel in _relations_of(catalog, owner):
             for b in targets:
                 y = pooled.y.get((owner, rel, b), 0)
-                if bo is not None and owner not in h:
-                    e = bo.estimate(owner, rel, b)
-                    p0, lo, hi = e.p, e.low, e.high
-                else:
-                    p0 = float(intervals.p0(y, n, alpha))
-                    lo, hi = (float(v) for v in intervals.interval(y, n, alpha))
+                p0, lo, hi = _row_interval(bo, (owner, rel, b), backoff, (y, n), alpha)
                 if y > 0 or include_zero or lo > 0:
                     out.append(IntervalRow(owner, rel, b, y, n, p0, lo, hi))
     out.sort(key=lambda r: (-r.low, r.relation, r.type))
     return out
+
+
+def _row_interval(
+    bo: Backoff | None,
+    entry: tuple[str, str, str],
+    backoff: bool,
+    counts: tuple[int, int],
+    alpha: float,
+) -> tuple[float, float, float]:
+    """(p0, low, high) of one row (owner, relation, related) ``entry`` of ``interval_rows``, whose
+    pooled counts are ``counts`` (y, n)."""
+    owner, rel, b = entry
+    is_class = bo is not None and owner in bo.pooled.hierarchy
+    if bo is not None and backoff and not is_class:
+        e = bo.estimate(owner, rel, b)
+        return e.p, e.low, e.high
+    if bo is not None and bo.corrected is not None:
+        if is_class:
+            return bo.class_interval(owner, rel, b)
+        bo._concrete(b)
+        lo, hi = bo.corrected.interval(owner, rel, b)
+        return (lo + hi) / 2, lo, hi
+    y, n = counts
+    lo, hi = (float(v) for v in intervals.interval(y, n, alpha))
+    return float(intervals.p0(y, n, alpha)), lo, hi

@@ -155,7 +155,7 @@ class BackoffProbabilities(KBProbabilities):
         super().__init__(kb, rank, rooms)
         if min_evidence < 0:
             raise CtxsearchError(f"min_evidence must be >= 0, got {min_evidence}")
-        self.backoff = Backoff(pooled, kb.alpha)
+        self.backoff = Backoff(pooled, kb.alpha, kb.corrected)  # corrected: on its counts
         self.min_evidence = int(min_evidence)
         self.name = f"backoff-{rank}"
 

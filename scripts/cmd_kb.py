@@ -121,7 +121,8 @@ def _register_show(kb_sub: argparse._SubParsersAction) -> None:
         "--backoff",
         action="store_true",
         help="types' intervals backed off to their class (knowledge/pooling.py): a type with "
-        "little or no evidence borrows from its class instead of starting from [0, 1]",
+        "little or no evidence borrows from its class instead of starting from [0, 1]; with "
+        "--interval corrected, on the corrected intervals' effective counts",
     )
     show.add_argument("--all", action="store_true", help="also the rows with y = 0")
     show.add_argument("--json", action="store_true", help="print a JSON list of rows instead")
@@ -342,10 +343,14 @@ def run_show(args: argparse.Namespace) -> int:
             f"--forget {args.forget} reads types' own evidence: it does not combine with classes "
             "or --backoff"
         )
-    if pooled and args.interval != IntervalMethod.WILSON:
+    if pooled and args.interval == IntervalMethod.CLUSTERED:
         raise CtxsearchError(
-            f"--interval {args.interval} reads types' own evidence: it does not combine with "
-            "classes or --backoff"
+            "--interval clustered reads types' own evidence: it does not combine with classes "
+            "or --backoff (--interval corrected does: it is clustered too)"
+        )
+    if args.interval == IntervalMethod.CORRECTED and args.related in classes:
+        raise CtxsearchError(
+            f"--interval corrected counts concrete related types, not the class {args.related}"
         )
     info, kb, pc = _open_kb(args, pooled=pooled)
     if pooled:
@@ -357,6 +362,7 @@ def run_show(args: argparse.Namespace) -> int:
             related=args.related,
             include_zero=args.all,
             backoff=args.backoff,
+            corrected=kb.corrected,
         )
     else:
         rows = kb.rows(args.ref_type, include_zero=args.all)

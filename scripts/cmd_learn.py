@@ -425,7 +425,8 @@ def register_intervals(bench_sub: argparse._SubParsersAction) -> None:
         "ground truth: informative coverage, mean |p0 - p_true|, mean width, bias per type",
         description="HIF learns in camera mode with each detector setting over the same rooms "
         "and seeds; after the given room counts, the intervals (wilson, clustered and corrected, "
-        "on the same evidence) are measured against the ground truth, with each examination's "
+        "on the same evidence, and the type hierarchy's backoff on the wilson and on the "
+        "corrected ones) are measured against the ground truth, with each examination's "
         "simulated seconds and expected recall. Writes DIR/intervals.json, DIR/intervals.md and, "
         "per seed, DIR/intervals.csv and DIR/intervals_bias.csv.",
     )

@@ -20,6 +20,7 @@ from ctxsearch.knowledge.corrected import (
     score_intervals,
 )
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts, interval_rows
 from ctxsearch.knowledge.store import SCHEMA_VERSION, EvidenceStore, NewExamination, merge_stores
 from ctxsearch.scripts.cli import main
 from tests.old_stores import as_version
@@ -247,3 +248,73 @@ def test_planning_to_see_needs_a_model_of_the_detector(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main([*args, "--exam-recall", "1.5"])
     assert e.value.code == 2
+
+
+# ---- the backoff on the corrected intervals (knowledge.pooling) --------------------------------
+def _surfaces(path, catalog, recall=None):
+    """Desks (20) and tables (4), one examination per room, a cup on a third of them; views of
+    ``recall`` (none: no views, recall 1)."""
+    with EvidenceStore.open(path, catalog) as s:
+        for oid in range(1, 25):
+            ref = "Desk" if oid <= 20 else "Table"
+            rel = f"ON-TOP-OF-{ref.upper()}"
+            cup = ((rel, "Cup", 100 + oid),) if oid % 3 == 0 else ()
+            views = () if recall is None else _views(catalog, ref, recall, 0.0)
+            s.append(NewExamination("r", "office", oid, oid, ref, float(oid), "hif", cup, 0, views))
+    return path
+
+
+def _backoffs(path, catalog):
+    with EvidenceStore.open(path, catalog, read_only=True) as s:
+        pooled = PooledCounts.from_store(s)
+        return Backoff(pooled, 0.1), Backoff(pooled, 0.1, s.corrected_intervals(0.1)), pooled
+
+
+def test_with_full_recall_and_a_room_per_examination_the_corrected_backoff_is_the_backoff(
+    tmp_path, catalog
+):
+    plain, corr, pooled = _backoffs(_surfaces(tmp_path / "s.sqlite", catalog), catalog)
+    for ref in ("Desk", "Table"):
+        for rel in catalog.type(ref).relation_names:
+            for b in ("Cup", "Pen", "Monitor"):
+                assert corr.pseudo_counts(ref, rel, b) == pytest.approx(
+                    plain.pseudo_counts(ref, rel, b), abs=1e-9
+                )
+    kw = {"ref": "Table", "backoff": True, "include_zero": True}
+    a = interval_rows(pooled, catalog, 0.1, **kw)
+    b = interval_rows(pooled, catalog, 0.1, corrected=corr.corrected, **kw)
+    a = [r for r in a if r.type in catalog]  # a class on the related side has no corrected rows
+    assert [(r.relation, r.type) for r in a] == [(r.relation, r.type) for r in b]
+    assert np.array([[r.low, r.high] for r in a]) == pytest.approx(
+        np.array([[r.low, r.high] for r in b]), abs=1e-9
+    )
+    ws = interval_rows(
+        pooled, catalog, 0.1, ref="WorkSurface", related="Cup", corrected=corr.corrected
+    )
+    assert ws[0].low == pytest.approx(intervals.interval(8, 24, 0.1)[0], abs=1e-9)
+
+
+def test_the_corrected_backoff_reads_the_misses_of_type_and_class(tmp_path, catalog):
+    plain, corr, _ = _backoffs(_surfaces(tmp_path / "s.sqlite", catalog, recall=0.4), catalog)
+    key = ("Table", "ON-TOP-OF-TABLE", "Cup")
+    y, n, kappa, p_class = plain.pseudo_counts(*key)
+    yc, nc, kc, pc = corr.pseudo_counts(*key)
+    assert pc > p_class + 0.3  # cups were seen on a third of the desks with recall 0.4
+    assert corr.estimate(*key).p > plain.estimate(*key).p + 0.2
+    assert nc < n and 0 < kc <= kappa  # a look with recall 0.4 is 0.4 of an examination
+    with pytest.raises(CtxsearchError, match="concrete related types"):
+        corr.pseudo_counts("Table", "ON-TOP-OF-TABLE", "Container")
+
+
+def test_kb_show_backs_off_on_the_corrected_intervals(tmp_path, catalog, capsys):
+    path = str(_surfaces(tmp_path / "s.sqlite", catalog, recall=0.4))
+    assert (
+        main(["kb", "show", path, "--type", "Table", "--backoff", "--interval", "corrected"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "corrected intervals" in out and "ON-TOP-OF-TABLE" in out and "Container" not in out
+    for bad in (["--related", "Container", "--interval", "corrected"],
+                ["--backoff", "--interval", "clustered"]):  # fmt: skip
+        assert main(["kb", "show", path, *bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err

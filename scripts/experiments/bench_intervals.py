@@ -14,7 +14,10 @@ at the room marks, ``corrected_at``). After the last examination of room r for e
 - mean |p0 - p_true| over every entry with ground truth,
 - mean interval width over every entry with ground truth,
 
-for ``wilson``, ``clustered`` and ``corrected``; the bias per reference type: the mean of
+for ``wilson``, ``clustered`` and ``corrected``, and for the type hierarchy's backoff on the
+Wilson and on the corrected intervals (``backoff``, ``backoff_corrected``: knowledge.pooling;
+types in a class back off for the relations that map onto the class's); the bias per reference
+type: the mean of
 p0 - p_true over its informative entries (the detector's misses pull it down, its false
 positives and confusions push it up), for Wilson's p0 and the corrected interval's centre; the
 simulated seconds per examination and the examinations' expected recall of the object types
@@ -41,6 +44,7 @@ import numpy as np
 from ctxsearch.envs.truth import ground_truth
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
 from ctxsearch.scripts.experiments.learning_trace import (
@@ -73,6 +77,9 @@ CELLS = (
     ("mean_abs_error", "wilson_mean_abs_error"),
     ("mean_width", "wilson_mean_width"),
 )
+# The type hierarchy's backoff (knowledge.pooling) on the Wilson and on the corrected intervals,
+# from the same store at the same marks (``backoff_intervals``).
+BACKOFFS = ("backoff", "backoff_corrected")
 
 
 @dataclass(frozen=True)
@@ -119,7 +126,8 @@ def corrected_at(store_path: Path, tr: Trace, ks: list[int], alpha: float) -> di
     refs = [e["ref"] for e in tr.entries]
     out: dict[int, dict] = {}
     with EvidenceStore.open(store_path, catalog, read_only=True) as store:
-        ids = [e.id for e in store.examinations()]
+        exams = [(e.id, e.type, [(r, t) for r, t, _ in e.related]) for e in store.examinations()]
+        ids = [e[0] for e in exams]
         for k in sorted(set(ks)):
             if not k:
                 continue
@@ -136,10 +144,42 @@ def corrected_at(store_path: Path, tr: Trace, ks: list[int], alpha: float) -> di
                 for r in sorted(set(refs))
                 if (m := inf & (np.array(refs) == r)).any()
             }
+            pooled = PooledCounts.from_examinations(
+                catalog.hierarchy, ((t, pairs) for _, t, pairs in exams[:k])
+            )
+            for name, bo in (("backoff", Backoff(pooled, alpha)),
+                             ("backoff_corrected", Backoff(pooled, alpha, ci))):  # fmt: skip
+                lo, hi, centre = backoff_intervals(bo, tr.entries, catalog)
+                row.update({f"{name}_{key}": v
+                            for key, v in interval_metrics(lo, hi, centre, p, n).items()})  # fmt: skip
             row["expected_recall"] = expected_recall(store.exam_views(upto=ids[k - 1]), catalog)
             row["seconds_per_examination"] = float(tr.sim_s[k - 1]) / k
             out[k] = row
     return out
+
+
+def backoff_intervals(
+    bo: Backoff, entries: list[dict], catalog
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(low, high, estimate) of every truth entry under the backoff ``bo`` (on the Wilson or the
+    corrected intervals): a type in a class whose relation maps onto the class's reads its
+    backed-off interval (estimate: its Wilson centre), every other entry its own interval
+    (Wilson's p0, or the corrected interval's midpoint)."""
+    h, out = catalog.hierarchy, []
+    for e in entries:
+        ref, rel, b = e["ref"], e["relation"], e["type"]
+        if h.parent(ref) is not None and h.lift(rel) is not None:
+            est = bo.estimate(ref, rel, b)
+            out.append((est.low, est.high, (est.low + est.high) / 2))
+        elif bo.corrected is not None:
+            lo, hi = bo.corrected.interval(ref, rel, b)
+            out.append((lo, hi, (lo + hi) / 2))
+        else:
+            y, n = bo.pooled.y.get((ref, rel, b), 0), bo.pooled.n.get(ref, 0)
+            lo, hi = intervals.interval(y, n, bo.alpha)
+            out.append((float(lo), float(hi), float(intervals.p0(y, n, bo.alpha))))
+    lo, hi, centre = np.array(out, float).T
+    return lo, hi, centre
 
 
 def expected_recall(views: dict, catalog) -> float:
@@ -243,6 +283,7 @@ RUN_COLUMNS = (
     "rooms",  # the room mark: figures after this many rooms
     "examinations",
     *(f"{name}_{key}" for key, _ in CELLS for name in ("clustered", "wilson", "corrected")),
+    *(f"{name}_{key}" for key, _ in CELLS for name in BACKOFFS),
     "phantom_reference_share",
     *EXAM_CELLS,
 )
@@ -260,6 +301,7 @@ def _seed_cells(tr: Trace, k: int) -> dict[str, float]:
         cells[f"clustered_{ck}"] = float(tr.at_exam(k, ck))
         cells[f"wilson_{ck}"] = float(tr.at_exam(k, wk))
         cells[f"corrected_{ck}"] = _corrected(tr, k, ck)
+        cells.update({f"{b}_{ck}": _corrected(tr, k, f"{b}_{ck}") for b in BACKOFFS})
     cells.update({name: _corrected(tr, k, name) for name in EXAM_CELLS})
     return cells
 
@@ -331,6 +373,20 @@ def markdown(doc: dict) -> str:
             + f" | {r.get('phantom_reference_share', math.nan):.3f}"
             + f" | {r.get('seconds_per_examination', math.nan):.1f}"
             + f" | {r.get('expected_recall', math.nan):.3f} |"
+        )
+    lines += ["", "## The type hierarchy's backoff, on the Wilson and on the corrected intervals",
+              "", "Types in a class read their backed-off interval for the relations that map "
+              "onto the class's (knowledge.pooling; every type keeps all its evidence), every "
+              "other entry its own interval.", "",
+              "| style | detector | rooms | coverage_informative backoff | backoff corrected | "
+              "mean abs(p0 - p_true) backoff | backoff corrected | mean width backoff | "
+              "backoff corrected |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in doc["rows"]:
+        cells = [f"{r.get(f'{b}_{key}', math.nan):{fmt}}"
+                 for key, fmt in (("coverage_informative", ".3f"), ("mean_abs_error", ".4f"),
+                                  ("mean_width", ".3f")) for b in BACKOFFS]  # fmt: skip
+        lines.append(
+            f"| {r['style']} | {r['detector']} | {r['rooms']} | " + " | ".join(cells) + " |"
         )
     lines += ["", "## Bias of p0 (Wilson centre) per reference type: mean p0 - p_true over its "
               "informative entries, at the last room mark", ""]  # fmt: skip
