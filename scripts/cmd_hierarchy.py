@@ -44,9 +44,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--episodes",
-        type=argtypes.positive_int,
+        type=argtypes.non_negative_int,
         default=40,
-        help="paired search episodes (default: 40)",
+        help="paired search episodes (default: 40; 0: the estimates only, no search)",
     )
     p.add_argument(
         "--truth-samples",

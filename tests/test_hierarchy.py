@@ -137,6 +137,34 @@ def test_members_that_differ_borrow_less(catalog):
     assert k_unlike < k_alike
 
 
+def test_an_entry_whose_members_differ_borrows_less_than_its_class_average(catalog):
+    """Cups on work surfaces differ by member, pens do not: the pen entry borrows the class's
+    average amount, the cup entry less (rho = max(rho_C, rho_e))."""
+    rng = np.random.default_rng(3)
+    rates = {
+        "Desk": (0.05, 0.5),
+        "Table": (0.5, 0.5),
+        "Counter": (0.95, 0.5),
+        "LabBench": (0.5, 0.5),
+    }
+    exams = []
+    for t, n in {"Desk": 40, "Table": 40, "Counter": 40, "LabBench": 2}.items():
+        rel = f"ON-TOP-OF-{t.upper()}"
+        for _ in range(n):
+            exams.append((t, [(rel, b) for b, p in zip(("Cup", "Pen"), rates[t], strict=True)
+                              if rng.random() < p]))  # fmt: skip
+    bo = Backoff(PooledCounts.from_examinations(catalog.hierarchy, exams))
+    cup = bo.entry_rho("WorkSurface", "ON-TOP-OF-WORKSURFACE", "Cup")
+    pen = bo.entry_rho("WorkSurface", "ON-TOP-OF-WORKSURFACE", "Pen")
+    assert pen < bo.rho("WorkSurface") < cup  # the class's rho is their mean
+    k_cup = bo.estimate("LabBench", "ON-TOP-OF-LABBENCH", "Cup").kappa
+    k_pen = bo.estimate("LabBench", "ON-TOP-OF-LABBENCH", "Pen").kappa
+    assert k_cup == pytest.approx(1 / cup - 1) and k_pen == pytest.approx(
+        1 / bo.rho("WorkSurface") - 1
+    )
+    assert k_cup < k_pen
+
+
 def test_backoff_beats_flat_for_rare_types(catalog):
     """Members' p drawn around a class mean (0.2 +- 0.05): with k <= 3 examinations of the rare
     member, backoff's estimate is closer to its truth than the flat Wilson centre p0."""

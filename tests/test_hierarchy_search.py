@@ -196,3 +196,16 @@ def test_bad_flags_are_one_line_errors(argv, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err and err[-1].startswith("ctxsearch") and "error: " in err[-1]
     assert "Traceback" not in "".join(err)
+
+
+def test_bench_hierarchy_with_no_episodes_measures_the_estimates_only(tmp_path):
+    from ctxsearch.scripts.cli import main
+
+    out = tmp_path / "h"
+    args = ["bench", "hierarchy", "--out", str(out), "--rooms", "3", "--episodes", "0"]
+    assert main([*args, "--truth-samples", "20", "--ks", "0,1", "--draws", "1"]) == 0
+    doc = json.loads((out / "hierarchy.json").read_text())
+    assert "search" not in doc and len(doc["coverage_backoff"]) == 2
+    md = (out / "hierarchy.md").read_text()
+    assert "| k |" in md and "Search with" not in md
+    assert not (out / "hierarchy_search.csv").read_text().strip().split("\n")[1:]  # header only

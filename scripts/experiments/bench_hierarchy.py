@@ -417,10 +417,11 @@ def bench_hierarchy(
             "same": agree.same,
             "share_same": agree.same / agree.choices if agree.choices else math.nan,
         }
-        doc["search"] = paired_search(config, variant, catalog, kb_path, progress)
-        doc["search"]["modelled_on"] = model
-        # The control: the styles the robot learned in, no new type (what backoff costs there).
-        doc["search_control"] = paired_search(config, style, catalog, kb_path, progress)
+        if config.episodes > 0:
+            doc["search"] = paired_search(config, variant, catalog, kb_path, progress)
+            doc["search"]["modelled_on"] = model
+            # The control: the styles the robot learned in, no new type (what backoff costs there).
+            doc["search_control"] = paired_search(config, style, catalog, kb_path, progress)
     doc["wall_s"] = round(time.perf_counter() - t0, 1)
     return _write(doc, out)
 
@@ -457,6 +458,10 @@ def format_markdown(doc: dict) -> str:
         "",
         f"HIF with backoff (`hif-backoff`): at {a['same']} of the {a['choices']} choices of the "
         f"hif run ({_f(a['share_same'] * 100, 1)}%) it would have chosen the same type.",
+    ]
+    if "search" not in doc:  # --episodes 0
+        return "\n".join(lines)
+    lines += [
         "",
         *_search_lines(
             doc["search"],
@@ -513,7 +518,7 @@ def plot(doc: dict, path: Path) -> None:
     ax2.set_ylim(0, 1.05)
     ax1.legend()
     ax2.legend()
-    eps = doc["search"]["episode_list"]
+    eps = doc["search"]["episode_list"] if "search" in doc else []
     if eps:
         f = [e["flat_s"] for e in eps]
         b = [e["backoff_s"] for e in eps]
@@ -523,7 +528,7 @@ def plot(doc: dict, path: Path) -> None:
     ax3.set(
         xlabel="flat: seconds to find",
         ylabel="backoff: seconds to find",
-        title=f"never-seen {doc['search']['new_type']}",
+        title=f"never-seen {doc['search']['new_type']}" if "search" in doc else "no search",
     )
     fig.suptitle(f"type hierarchy ({doc['style']})")
     fig.tight_layout()
