@@ -156,6 +156,10 @@ def test_bench_hierarchy_writes_its_files(tmp_path):
     assert doc["abs_error_backoff"][0] < doc["abs_error_flat"][0]
     s = doc["search"]
     assert s["new_type"] == "Workbench" and s["episodes"] == 2 and len(s["episode_list"]) == 2
+    assert (
+        s["paired_stats"]["flat"]["n"] == 2
+        and "geometric mean" in (out / "hierarchy.md").read_text()
+    )
     assert doc["hif_backoff_agreement"]["choices"] > 0
     assert "| k |" in (out / "hierarchy.md").read_text()
     assert (out / "hierarchy.png").stat().st_size > 1000

@@ -226,3 +226,13 @@ def paired_stats(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> 
         float(a.mean() / max(b.mean(), TIE_S)), rom_ci, p, wins, losses, n - wins - losses, n,
         need,
     )  # fmt: skip
+
+
+def geo_cell(r: dict) -> str:
+    """A Markdown cell of a ``PairedStats.to_json`` entry: the geometric mean [interval],
+    wins/losses/ties and the signed-rank p ("-" where there is no estimate)."""
+    if r["geo_mean"] is None:
+        return "-"
+    lo, hi = r["geo_mean_ci"]
+    return (f"{r['geo_mean']:.2f} [{lo:.2f}, {hi:.2f}] {r['wins']}/{r['losses']}/{r['ties']} "
+            f"p={r['wilcoxon_p']:.3f}")  # fmt: skip

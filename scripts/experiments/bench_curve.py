@@ -29,6 +29,7 @@ from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn
 from ctxsearch.agent.search.draw import remembered_draws
+from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.agent.search.priors import store_seeds
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
@@ -265,15 +266,6 @@ def format_table(doc: dict) -> str:
     return "\n".join(lines)
 
 
-def _geo(r: dict) -> str:
-    """A geometric mean cell: mean [interval] wins/losses/ties p."""
-    if r["geo_mean"] is None:
-        return "-"
-    lo, hi = r["geo_mean_ci"]
-    return (f"{r['geo_mean']:.2f} [{lo:.2f}, {hi:.2f}] {r['wins']}/{r['losses']}/{r['ties']} "
-            f"p={r['wilcoxon_p']:.3f}")  # fmt: skip
-
-
 def _paired_table(doc: dict, names: list[str]) -> list[str]:
     """curve.md's first table: by k, the geometric mean of the paired time ratio of the context
     policy to the baseline and to itself at k = 0, with the ties and the signed-rank test."""
@@ -287,7 +279,7 @@ def _paired_table(doc: dict, names: list[str]) -> list[str]:
         cells = []
         for n in names:
             pr = e["scenarios"][n]["paired"]
-            cells += [_geo(pr["context_to_baseline"]), _geo(pr["context_to_k0"])]
+            cells += [geo_cell(pr["context_to_baseline"]), geo_cell(pr["context_to_k0"])]
         lines.append(f"| {e['k']} | " + " | ".join(cells) + " |")
     lines += [
         "",

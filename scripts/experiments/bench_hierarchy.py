@@ -30,8 +30,11 @@ Two questions, on one style (``--style S``):
    paired and seeded): with the flat intervals (a Workbench's lower bounds are 0, so its
    volumes are never candidates) and with ``--estimate backoff`` (types with fewer than
    ``min_evidence`` examinations read their class's backoff). Reported: success, median / mean
-   simulated seconds (failures at the budget), the paired differences (flat - backoff) with a
-   bootstrap 95% interval of their mean, and how many episodes each was faster. The control
+   simulated seconds (failures at the budget), the search benchmark's paired statistics of
+   backoff against flat (``paired_stats``: the geometric mean of the time ratio with its
+   interval, wins/losses/ties, the signed-rank test, the episodes for 80% power), the paired
+   differences (flat - backoff) with a bootstrap 95% interval of their mean, and how many
+   episodes each was faster. ``--episodes 0`` skips the search. The control
    (``search_control``): the same pair on held-out rooms of S itself, where no type is new.
 
 Also measured, along the way: at every choice of the ``hif`` learning run, whether
@@ -62,7 +65,7 @@ from ctxsearch.agent.learning import LearnConfig, learn
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
 from ctxsearch.agent.search.episode import DEFAULT_BUDGET_S, SearchResult
-from ctxsearch.agent.search.measures import bootstrap_ci
+from ctxsearch.agent.search.measures import bootstrap_ci, geo_cell, paired_stats
 from ctxsearch.agent.search.runner import RoomRuns, SearchConfig, load_priors, search_room
 from ctxsearch.agent.strategies import BackoffHIF, Choice
 from ctxsearch.envs.houses import resolve_style
@@ -340,6 +343,8 @@ def _search_doc(config, variant: Style, eps, results) -> dict:
         "budget_s": config.budget_s,
         "flat": stats["flat"].to_json(),
         "backoff": stats["backoff"].to_json(),
+        # The search benchmark's statistics (agent.search.measures): backoff against flat.
+        "paired_stats": {"flat": paired_stats(t["backoff"], t["flat"], config.seed).to_json()},
         "paired": {
             "mean_diff_s": float(diff.mean()) if len(diff) else math.nan,
             "mean_diff_ci95": [float(lo), float(hi)],
@@ -494,7 +499,12 @@ def _search_lines(s: dict, title: str) -> list[str]:
             f"| {m} | {_f(st['success_rate'], 2)} | {_f(st['median_s'], 1)} | "
             f"{_f(st['mean_s'], 1)} |"
         )
+    ps = s["paired_stats"]["flat"]
     return lines + [
+        "",
+        f"Backoff / flat, the geometric mean of the paired time ratio [95% bootstrap interval] "
+        f"wins/losses/ties and the signed-rank p: {geo_cell(ps)}; an effect this size needs "
+        f"{ps['episodes_for_power'] or '-'} episodes for 80% power.",
         "",
         f"Paired: mean (flat - backoff) {_f(pr['mean_diff_s'], 1)} s (95% CI "
         f"{_f(pr['mean_diff_ci95'][0], 1)} .. {_f(pr['mean_diff_ci95'][1], 1)}), ratio of means "
