@@ -189,6 +189,11 @@ def test_transfer_table_is_learned_in_by_searched_in(transfer_dir):
     assert len(rows) == 2 * 2 + 2 * 2 * 2 * 2  # baseline per style; context per cell x interval
     md = (transfer_dir / "transfer.md").read_text()
     assert "| learned in \\ searched in | office | biology_lab |" in md
+    assert "the geometric mean over episodes" in md and " p=" in md  # it leads, as in bench search
+    from ctxsearch.scripts.experiments.bench_transfer import format_tables
+
+    old = {k: v for k, v in doc.items() if k != "paired"}  # a transfer.json from before the grid
+    assert "the median over episodes" in format_tables(old)
 
 
 @pytest.mark.parametrize(

@@ -35,6 +35,7 @@ from pathlib import Path
 
 from ctxsearch.agent.learning import LearnConfig, learn
 from ctxsearch.agent.search.draw import remembered_draws
+from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import load_catalog
@@ -328,12 +329,15 @@ def format_tables(doc: dict) -> str:
     then the mismatch measures."""
     styles = doc["styles"]
     lines = []
+    # The geometric mean leads (the search benchmark's statistics); a document written before
+    # transfer.json had its ``paired`` grid shows the medians.
+    key, cell = ("paired", geo_cell) if "paired" in doc else ("paired_ratio", _fmt)
     for name, sc in doc["scenarios"].items():
-        for m, grid in doc["paired_ratio"][name].items():
+        for m, grid in doc[key][name].items():
             lines += [f"### {name} map, {m} intervals: {sc['context']} / {sc['baseline']}", ""]
             lines += ["| learned in \\ searched in | " + " | ".join(styles) + " |"]
             lines += ["|---|" + "---|" * len(styles)]
-            lines += [f"| {x} | " + " | ".join(_fmt(grid[x][y]) for y in styles) + " |"
+            lines += [f"| {x} | " + " | ".join(cell(grid[x][y]) for y in styles) + " |"
                       for x in styles]  # fmt: skip
             lines.append("")
     if doc["noticing"]:
@@ -348,9 +352,15 @@ def format_tables(doc: dict) -> str:
                         f"{d['entries']}) | {d['disjoint_share']} | {d['unknown_type_share']} |"
                     )
         lines.append("")
+    what = (
+        "the geometric mean over episodes of t_context / t_baseline [95% bootstrap interval] "
+        "wins/losses/ties and the signed-rank p (the medians: transfer.json's paired_ratio)"
+        if key == "paired"
+        else "the median over episodes of t_context / t_baseline [95% bootstrap interval] "
+        "(episodes won / lost)"
+    )
     lines.append(
-        f"{doc['episodes']} paired episodes per searched-in style; cells: the median over episodes "
-        "of t_context / t_baseline [95% bootstrap interval] (episodes won / lost); a failure "
+        f"{doc['episodes']} paired episodes per searched-in style; cells: {what}; a failure "
         f"counted at the budget ({doc['budget_s']:.0f} s)."
     )
     return "\n".join(lines)
