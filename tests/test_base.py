@@ -342,3 +342,31 @@ def test_clear_cache_forces_recomputation(cat):
     assert kb.type_impact("Desk") == -1.0
     kb.clear_cache()
     assert kb.type_impact("Desk") == s
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_choice_scores_its_candidates_at_once_bit_for_bit(seed):
+    """``choose`` computes the uncached candidates' d_A in one numpy pass (``_impact_batch``):
+    every score equals the one-type computation exactly, on both of its paths (few distinct
+    counts, and many), for unseen types and types without relations."""
+    rng = np.random.default_rng(seed)
+    spec = {f"T{i}": ["ON", "NEAR"][: int(rng.integers(0, 3))] for i in range(40)}
+    cat = make_catalog(spec)
+    kb = KnowledgeBase(cat)
+    names = cat.type_names
+    for _ in range(300):
+        ref = names[int(rng.integers(0, 25))]  # the last 15 types stay unseen
+        rels = cat.type(ref).relation_names
+        pairs = [(rels[int(rng.integers(0, len(rels)))], names[int(rng.integers(0, 40))])
+                 for _ in range(int(rng.integers(0, 6)))] if rels else []  # fmt: skip
+        kb.record_examination(ref, pairs)
+    heavy = next(t for t in names if cat.type(t).relation_names)
+    for _ in range(400):  # n_A far above its nonzero counts: the other path
+        kb.record_examination(heavy, [])
+    assert kb.n(heavy) > 4 * len(kb.nonzero(heavy)) + 64
+    kb.choose(names)  # batch: fills the cache
+    batch = {t: kb.type_impact(t) for t in names}
+    kb.clear_cache()
+    single = {t: kb.type_impact(t) for t in names}  # one type at a time
+    assert batch == single
+    assert kb.choose(names) == max(names, key=lambda t: (single[t], -names.index(t)))
