@@ -548,7 +548,7 @@ class KnowledgeBase:
             raise CtxsearchError("no candidate types to choose from")
         names = self._names
         if fn is intervals.impact:
-            self._score_impacts(cands)
+            _cache_impacts(self, cands)
         scores = [self.type_score(names[a], fn) for a in cands]
         return names[cands[int(np.argmax(scores))]]
 
@@ -570,20 +570,6 @@ class KnowledgeBase:
             vals = np.broadcast_to(np.asarray(fn(k, float(n), self.alpha), float), k.shape)
         return float(w @ vals) / m
 
-    def _score_impacts(self, types: Sequence[int]) -> None:
-        """Cache the paper's d_A of several types at once (``_impact_batch``: one numpy pass for
-        all of them, the same values as ``_compute_score`` bit for bit)."""
-        todo = [a for a in types if intervals.impact not in self._score_cache.get(a, {})]
-        terms = []
-        for a in todo:
-            m, c = int(self._n_rel[a]) * self._T, self._counts[a]
-            n = int(self._n[a])
-            terms.append(
-                (m, n, *_score_terms(c.ys if c is not None else None, m, n)) if m else None
-            )
-        for a, score in zip(todo, _impact_batch(terms, self.alpha), strict=True):
-            self._score_cache.setdefault(a, {})[intervals.impact] = score
-
     def _idx(self, name: str) -> int:
         """The catalog index of type ``name`` (CatalogError naming the known types if unknown)."""
         i = self._order.get(name)
@@ -600,3 +586,16 @@ class KnowledgeBase:
 
     def _invalidate(self, a: int) -> None:
         self._score_cache.pop(a, None)
+
+
+def _cache_impacts(kb: KnowledgeBase, types: Sequence[int]) -> None:
+    """Cache the paper's d_A of several types of ``kb`` at once (``_impact_batch``: one numpy
+    pass for all of them, the same values as ``KnowledgeBase._compute_score`` bit for bit)."""
+    cache = kb._score_cache
+    todo = [a for a in types if intervals.impact not in cache.get(a, {})]
+    terms = []
+    for a in todo:
+        m, c, n = int(kb._n_rel[a]) * kb._T, kb._counts[a], int(kb._n[a])
+        terms.append((m, n, *_score_terms(c.ys if c is not None else None, m, n)) if m else None)
+    for a, score in zip(todo, _impact_batch(terms, kb.alpha), strict=True):
+        cache.setdefault(a, {})[intervals.impact] = score
