@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import gymnasium
@@ -16,7 +17,7 @@ from gymnasium.utils.env_checker import check_env
 import ctxsearch.agent.gym_env as G
 from ctxsearch.agent.search import episode as S
 from ctxsearch.agent.search import oracle as O
-from ctxsearch.agent.search.draw import DrawSpec, make_episodes
+from ctxsearch.agent.search.draw import DrawSpec, make_episodes, remembered_draws
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.robot_spec import TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
@@ -44,21 +45,33 @@ def test_registered_on_import_and_passes_gymnasiums_checker():
     env.close()  # twice is fine
 
 
+def _benchmarks(style, n, seed, catalog, **kw):
+    """The benchmark's draw of ``n`` episodes, asking only whether the target can be found (the
+    same worlds, starts and drops as the full draw: test_search_protocol)."""
+    return make_episodes(replace(DrawSpec.make(style, n, seed, catalog, **kw), first_view=False),
+                         catalog)  # fmt: skip
+
+
 def test_reset_draws_the_benchmarks_episodes(catalog):
+    """Inside ``remembered_draws`` the task's draw is the benchmark's reference draw made again
+    exactly when the task's spec is the benchmark's (else it draws its own and differs)."""
     style = resolve_style("office", catalog)
     env = make()
-    for seed, index in ((0, 0), (7, 0), (3, 1)):
-        want = make_episodes(DrawSpec.make(style, index + 1, seed, catalog), catalog)[index]
-        _, info = env.reset(seed=seed, options={"index": index})
-        ep = env.unwrapped.episode
-        assert (ep.room_seed, ep.target, ep.start) == (want.room_seed, want.target, want.start)
-        assert info["room_seed"] == want.room_seed and info["target"] == want.target
-        pose = env.unwrapped.world.pose()
-        assert (pose.x, pose.y) == pytest.approx((want.start.x, want.start.y), abs=1e-3)
-    env.close()
-    learned = {S.held_out_seed(0, 0), S.held_out_seed(0, 2)}  # rooms a store learned in
-    want = make_episodes(DrawSpec.make(style, 2, 0, catalog, exclude_seeds=learned), catalog)
-    got = [G.draw_episode(style, 0, catalog, index=i, exclude_seeds=learned)[0] for i in range(2)]
+    G._DRAWS.clear()  # the task's own memo: every draw below goes through draw_episodes
+    with remembered_draws():
+        for seed, index in ((0, 0), (7, 0), (3, 1)):
+            want = _benchmarks(style, index + 1, seed, catalog)[index]
+            _, info = env.reset(seed=seed, options={"index": index})
+            ep = env.unwrapped.episode
+            assert (ep.room_seed, ep.target, ep.start) == (want.room_seed, want.target, want.start)
+            assert info["room_seed"] == want.room_seed and info["target"] == want.target
+            pose = env.unwrapped.world.pose()
+            assert (pose.x, pose.y) == pytest.approx((want.start.x, want.start.y), abs=1e-3)
+        env.close()
+        learned = {S.held_out_seed(0, 0), S.held_out_seed(0, 2)}  # rooms a store learned in
+        want = _benchmarks(style, 2, 0, catalog, exclude_seeds=learned)
+        got = [G.draw_episode(style, 0, catalog, index=i, exclude_seeds=learned)[0]
+               for i in range(2)]  # fmt: skip
     assert got == want and not learned & {e.room_seed for e in got}
 
 
