@@ -272,12 +272,7 @@ class EvidenceStore(EvidenceReads):
         day = _day(e.day)
         rows = []
         for item in related:
-            try:
-                rel, t, rid = item
-            except (TypeError, ValueError):
-                raise CtxsearchError(
-                    f"related entries must be (relation, type, object id), got {item!r}"
-                ) from None
+            rel, t, rid = _triple(item, "related entries must be (relation, type, object id)")
             spec = self.catalog.relation(rel)
             if spec.ref != ref_type:
                 raise CtxsearchError(f"relation {rel} is not a relation of {ref_type}")
@@ -324,12 +319,9 @@ class EvidenceStore(EvidenceReads):
         the type, once each; one value in [0, 1] per catalog type)."""
         rows, seen, n_types = [], set(), len(self.catalog.type_names)
         for item in views:
-            try:
-                rel, recall, false_rate = item
-            except (TypeError, ValueError):
-                raise CtxsearchError(
-                    f"views must be (relation, recall per type, false rate per type), got {item!r}"
-                ) from None
+            rel, recall, false_rate = _triple(
+                item, "views must be (relation, recall per type, false rate per type)"
+            )
             if self.catalog.relation(rel).ref != ref_type or rel in seen:
                 raise CtxsearchError(f"view of {rel}: not a relation of {ref_type}, or given twice")
             seen.add(rel)
@@ -566,6 +558,15 @@ def _copy_shifted(
         )
         n += len(chunk)
     return n
+
+
+def _triple(item: object, what: str) -> tuple:
+    """``item`` unpacked as three values, or a CtxsearchError: ``what``, got ``item``."""
+    try:
+        a, b, c = item  # type: ignore[misc]
+    except (TypeError, ValueError):
+        raise CtxsearchError(f"{what}, got {item!r}") from None
+    return a, b, c
 
 
 def _text(v: object, what: str) -> str:
