@@ -153,10 +153,14 @@ class PinholeCamera:
             ok[idx] = z[idx] <= depth[row, col] + tol
         return ok
 
-    def _local_rays(self) -> np.ndarray:
+    def _local_rays(self, rows: np.ndarray | None = None, cols: np.ndarray | None = None):
+        """(H, W, 3) camera-frame rays through the pixel centres, scaled to z = -1 (only the
+        pixels of ``rows`` x ``cols`` if given)."""
         f = self.focal
-        x = (np.arange(self.width) + 0.5 - self.width / 2) / f
-        y = -(np.arange(self.height) + 0.5 - self.height / 2) / f
+        u = np.arange(self.width) if cols is None else np.asarray(cols)
+        v = np.arange(self.height) if rows is None else np.asarray(rows)
+        x = (u + 0.5 - self.width / 2) / f
+        y = -(v + 0.5 - self.height / 2) / f
         return np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), axis=-1)
 
     def pixel_rays(self) -> np.ndarray:
@@ -165,10 +169,17 @@ class PinholeCamera:
         local /= np.linalg.norm(local, axis=-1, keepdims=True)
         return local @ self.xmat.T
 
-    def backproject(self, depth: np.ndarray) -> np.ndarray:
-        """(H, W, 3) world points of a depth image (distance along the optical axis)."""
-        local = self._local_rays()
-        return self.position + (local * np.asarray(depth, float)[..., None]) @ self.xmat.T
+    def backproject(
+        self, depth: np.ndarray, rows: np.ndarray | None = None, cols: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(H, W, 3) world points of a depth image (distance along the optical axis); with
+        ``rows`` and ``cols`` (sorted pixel indices) only the pixels of ``rows`` x ``cols``, the
+        same numbers as the whole image's at those pixels."""
+        local = self._local_rays(rows, cols)
+        d = np.asarray(depth, float)
+        if rows is not None:
+            d = d[np.ix_(np.asarray(rows), np.asarray(cols))]
+        return self.position + (local * d[..., None]) @ self.xmat.T
 
 
 @dataclass(frozen=True)

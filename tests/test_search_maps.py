@@ -304,3 +304,72 @@ def test_expected_mass_sums_the_volumes_over_a_worlds_objects(catalog):
     )
     assert ss.expected_mass(catalog, probs, "Pen") == pytest.approx(2.0 * 0.5 + 1.0 * 0.25)
     assert ss.expected_mass(catalog, ss.TableProbabilities({}), "Pen") is None
+
+
+# ===================================== exact shortcuts (issue 23: the same numbers, less work)
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.diag(r))
+
+
+def test_backprojecting_some_pixels_gives_the_whole_images_numbers_there():
+    """SeenMap's support marking back-projects only the strided pixels and their neighbours."""
+    from ctxsearch.envs.camera import PinholeCamera
+
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        cam = PinholeCamera(rng.normal(size=3), _rotation(rng), 58.0, 320, 240)
+        depth = rng.uniform(0.2, 8.0, size=(240, 320))
+        depth[rng.random(depth.shape) < 0.05] = np.inf  # no return
+        rows = np.sort(rng.choice(240, 60, replace=False))
+        cols = np.sort(rng.choice(320, 80, replace=False))
+        with np.errstate(invalid="ignore"):  # inf depth: NaN points, in both
+            whole = cam.backproject(depth)[np.ix_(rows, cols)]
+            part = cam.backproject(depth, rows, cols)
+        assert np.array_equal(whole, part, equal_nan=True)
+
+
+def test_the_cost_models_reach_test_finds_the_cells_every_cell_would():
+    """CostModel.seconds looks only at the cells in a square around the box first."""
+    from ctxsearch.agent.navigation import OccupancyGrid
+    from ctxsearch.knowledge.geometry import Box
+
+    rng = np.random.default_rng(1)
+    grid = OccupancyGrid(rng.random((80, 100)) < 0.7, -2.5, -2.0, 0.05)
+    field_ = rng.uniform(0.0, 9.0, size=grid.free.size)
+    for vd in (0.3, 1.2, 3.0):
+        cm = ss.CostModel(grid, TimeModel(), view_distance=vd)
+        for _ in range(30):
+            c = np.array([*rng.uniform(-3.0, 3.0, 2), 0.4])
+            box = Box(c, float(rng.uniform(-3, 3)), np.array([*rng.uniform(0.05, 1.0, 2), 0.3]))
+            near = cm._free & (box.footprint_distance(cm._cells) <= vd)
+            d = float(field_[near].min()) if near.any() else math.inf
+            if not math.isfinite(d):
+                d = float(np.hypot(*(box.center[:2] - np.zeros(2))))
+            tm = TimeModel()
+            want = tm.leg_estimate(d) + tm.looks_estimate(cm.images(box), cm.head_s)
+            assert cm.seconds(box, np.zeros(2), field_) == want
+
+
+def test_viewpoint_bounds_sum_the_found_mass_as_over_every_point():
+    """The bounds' P(found) is computed for the points within range only; the sums are the
+    same numbers as with every point's."""
+
+    class _Map:
+        x0, y0 = -6.0, -6.0
+
+    rng = np.random.default_rng(2)
+    spec = RobotSpec()
+    pts = rng.uniform(-6.0, 6.0, size=(5000, 3)) * np.array([1.0, 1.0, 0.2])
+    scorer = sx.ViewpointScorer(_Map(), pts, spec, TimeModel())
+    cand = rng.uniform(-6.0, 6.0, size=(40, 2))
+    w = rng.random(len(pts))
+    sight = sx.Sight(3.5, lambda d: 1.0 / (1.0 + np.exp(2.0 * (d - 2.0))))
+    upper, mass = scorer._bounds(cand, pts, sight, w, [-1] * len(cand))
+    cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
+    d2 = ((pts[None, :, :] - cams[:, None, :]) ** 2).sum(-1)
+    near = d2 <= 3.5**2
+    assert np.array_equal(upper, near.sum(1))
+    for k in range(0, len(cand), 16):  # the reference: P(found) at every point, batch by batch
+        s = slice(k, k + 16)
+        assert np.array_equal(mass[s], (near[s] * sight.found(np.sqrt(d2[s])) * w).sum(1))

@@ -231,14 +231,20 @@ class SeenMap:
         about 25 degrees of vertical, up to the lattice's top): each supports the lattice point of
         its column whose height is within one step above it. Walls and the sides of furniture
         support nothing."""
-        pts = camera.backproject(depth)
-        n = np.cross(pts[:-1, 1:] - pts[:-1, :-1], pts[1:, :-1] - pts[:-1, :-1])
+        # only the strided pixels and their right and lower neighbours (the same numbers)
+        s = SUPPORT_STRIDE
+        h, w = np.shape(depth)
+        r0, c0 = np.arange(0, h - 1, s), np.arange(0, w - 1, s)
+        rows = np.column_stack([r0, r0 + 1]).ravel()
+        cols = np.column_stack([c0, c0 + 1]).ravel()
+        pts = camera.backproject(depth, rows, cols)
+        p = pts[0::2, 0::2]
+        n = np.cross(pts[0::2, 1::2] - p, pts[1::2, 0::2] - p)
         with np.errstate(invalid="ignore", divide="ignore"):
             level = np.abs(n[..., 2]) > 0.9 * np.linalg.norm(n, axis=-1)
-        s = SUPPORT_STRIDE
-        hits = pts[:-1:s, :-1:s].reshape(-1, 3)
+        hits = p.reshape(-1, 3)
         z0, z1, dz = LATTICE_Z
-        ok = level[::s, ::s].ravel() & np.isfinite(hits).all(axis=1)
+        ok = level.ravel() & np.isfinite(hits).all(axis=1)
         ok &= (hits[:, 2] > 0.02) & (hits[:, 2] < z1)
         hits = hits[ok]
         if len(hits) == 0:
@@ -477,8 +483,16 @@ class CostModel:
         distance field from ``xy``, flattened, if already computed)."""
         if field_ is None:
             field_ = self.grid.distances_from(xy).ravel()
-        near = self._free & (box.footprint_distance(self._cells) <= self.view_distance)
-        d = float(field_[near].min()) if near.any() else math.inf
+        # free cells within reach: first the square around the box's circumscribed circle
+        r = self.view_distance + float(np.hypot(box.half[0], box.half[1])) + 1e-6
+        c = self._cells
+        idx = np.flatnonzero(
+            self._free
+            & (np.abs(c[:, 0] - box.center[0]) <= r)
+            & (np.abs(c[:, 1] - box.center[1]) <= r)
+        )
+        idx = idx[box.footprint_distance(c[idx]) <= self.view_distance]
+        d = float(field_[idx].min()) if len(idx) else math.inf
         if not math.isfinite(d):
             d = float(np.hypot(*(np.asarray(box.center[:2]) - np.asarray(xy))))
         tm = self.time_model

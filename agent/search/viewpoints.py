@@ -272,16 +272,21 @@ class ViewpointScorer:
         new = np.flatnonzero(upper < 0)
         view2 = min(sight.range, MAX_VIEW) ** 2
         cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
+        x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
         for k in range(0, len(new), 16):  # the todo points within range of each camera
-            d2 = ((pts[None, :, :] - cams[k : k + 16, None, :]) ** 2).sum(-1)
+            c = cams[k : k + 16, :, None]
+            # the squared distances, summed in the order a sum over the last axis takes
+            d2 = (x - c[:, 0]) ** 2 + (y - c[:, 1]) ** 2 + (z - c[:, 2]) ** 2
             near = d2 <= view2
             upper[new[k : k + 16]] = near.sum(1)
             if w is None:
                 mass[new[k : k + 16]] = near.sum(1)
             elif sight.found is None:
                 mass[new[k : k + 16]] = (near * w).sum(1)  # not BLAS: thread-independent
-            else:
-                mass[new[k : k + 16]] = (near * sight.found(np.sqrt(d2)) * w).sum(1)
+            else:  # P(found) where it counts only: 0 elsewhere, as near times any value was
+                f = np.zeros_like(d2)
+                f[near] = sight.found(np.sqrt(d2[near]))
+                mass[new[k : k + 16]] = (near * f * w).sum(1)
         return upper, mass
 
     def _gain(self, blocked, xy, sight: Sight, sub, pts, weights=None) -> tuple[int, float]:
@@ -289,8 +294,10 @@ class ViewpointScorer:
         weight (``weights`` over ``sub``, times ``sight.found`` at their distance; None: the
         count)."""
         rng = min(sight.range, MAX_VIEW)
-        cam = np.array([xy[0], xy[1], self.spec.camera_height])
-        dist = np.linalg.norm(pts - cam, axis=1)
+        # the norm of pts - cam, summed in the order np.linalg.norm takes (the same numbers)
+        dx, dy = pts[:, 0] - xy[0], pts[:, 1] - xy[1]
+        dz = pts[:, 2] - self.spec.camera_height
+        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
         near = np.flatnonzero(dist <= rng)
         if len(near) < MIN_GAIN:
             return 0, 0.0
