@@ -39,8 +39,9 @@ the corrected estimate times that), and p_C the class's other members' pooled ef
 sum y' / sum n' (a member examined but without a relation that maps onto R adds its n
 examinations and no y, as in the pooled counts). kappa's rho is still measured on the raw
 pooled counts (misses shrink every member's rate alike, so their spread is read where it is
-counted); kappa's cap is the rest's sum n'. A class's own rows are Wilson on its members'
-pooled effective counts. With full recall, no false reports and one examination per room
+counted); kappa's cap is the rest's sum n'. An entry that borrows nothing (kappa = 0) keeps
+the corrected interval itself. A class's own rows are Wilson on its members' pooled effective
+counts. With full recall, no false reports and one examination per room
 (shrink 1) every figure equals the Wilson backoff's (tested); with shrink > 1 it is the backoff
 of the clustered interval. Related *classes* have no corrected counts (a view is per type):
 with corrected intervals only concrete related types have rows.
@@ -312,10 +313,17 @@ class Backoff:
         return float(intervals.p0(y, n, self.alpha)), float(lo), float(hi)
 
     def estimate(self, ref_type: str, relation: str, related: str) -> BackoffEstimate:
-        """The backed-off interval of entry (ref_type, relation, related)."""
+        """The backed-off interval of entry (ref_type, relation, related). An entry that borrows
+        nothing (no class, no other examined member, or members too different: kappa = 0) reads
+        its own interval: Wilson on its counts, or on the corrected intervals the corrected
+        interval itself (estimate: its midpoint), not Wilson on the effective counts."""
         y_eff, n_eff, kappa, p_class = self.pseudo_counts(ref_type, relation, related)
-        lo, hi = intervals.interval(y_eff, n_eff, self.alpha)
-        p = y_eff / n_eff if n_eff > 0 else 0.5
+        if self.corrected is not None and kappa == 0.0:
+            lo, hi = self.corrected.interval(ref_type, relation, related)
+            p = (lo + hi) / 2
+        else:
+            lo, hi = intervals.interval(y_eff, n_eff, self.alpha)
+            p = y_eff / n_eff if n_eff > 0 else 0.5
         return BackoffEstimate(float(lo), float(hi), float(p), y_eff, n_eff, kappa, p_class)
 
 

@@ -251,11 +251,11 @@ def test_planning_to_see_needs_a_model_of_the_detector(tmp_path, capsys):
 
 
 # ---- the backoff on the corrected intervals (knowledge.pooling) --------------------------------
-def _surfaces(path, catalog, recall=None):
-    """Desks (20) and tables (4), one examination per room, a cup on a third of them; views of
-    ``recall`` (none: no views, recall 1)."""
+def _surfaces(path, catalog, recall=None, tables=4):
+    """Desks (20) and ``tables`` tables, one examination per room, a cup on a third of them;
+    views of ``recall`` (none: no views, recall 1)."""
     with EvidenceStore.open(path, catalog) as s:
-        for oid in range(1, 25):
+        for oid in range(1, 21 + tables):
             ref = "Desk" if oid <= 20 else "Table"
             rel = f"ON-TOP-OF-{ref.upper()}"
             cup = ((rel, "Cup", 100 + oid),) if oid % 3 == 0 else ()
@@ -304,6 +304,23 @@ def test_the_corrected_backoff_reads_the_misses_of_type_and_class(tmp_path, cata
     assert nc < n and 0 < kc <= kappa  # a look with recall 0.4 is 0.4 of an examination
     with pytest.raises(CtxsearchError, match="concrete related types"):
         corr.pseudo_counts("Table", "ON-TOP-OF-TABLE", "Container")
+
+
+def test_an_entry_that_borrows_nothing_reads_its_corrected_interval(tmp_path, catalog):
+    """No other work surface was examined: the desk's entries borrow nothing, and the backoff
+    on the corrected intervals is the corrected interval, not Wilson on the effective counts."""
+    path = _surfaces(tmp_path / "s.sqlite", catalog, recall=0.4, tables=0)
+    _, corr, _ = _backoffs(path, catalog)
+    key = ("Desk", "ON-TOP-OF-DESK", "Cup")
+    est = corr.estimate(*key)
+    assert est.kappa == 0.0 and est.p_class is None
+    lo, hi = corr.corrected.interval(*key)
+    assert (est.low, est.high, est.p) == (lo, hi, (lo + hi) / 2)
+    wilson = intervals.interval(est.y_eff, est.n_eff, 0.1)
+    assert abs(wilson[0] - lo) + abs(wilson[1] - hi) > 1e-3  # what it read before
+    row = interval_rows(corr.pooled, catalog, 0.1, ref="Desk", related="Cup", backoff=True,
+                        corrected=corr.corrected)  # fmt: skip
+    assert {(r.low, r.high) for r in row if r.relation == key[1]} == {(lo, hi)}
 
 
 def test_kb_show_backs_off_on_the_corrected_intervals(tmp_path, catalog, capsys):
