@@ -1,0 +1,174 @@
+"""Where the online search's belief holds its mass when it decides (issue 26's diagnosis):
+
+    python -m ctxsearch.scripts.experiments.belief_shares --kb K --style apartment \\
+        --map built --episodes 20 --policies frontier,oracle-prior-indirect
+
+Draws the benchmark's episodes (``bench search``'s draw, same seed, same episodes) and runs each
+policy on them; at every decision of the online search (``agent.search.online``) it reads the
+belief (prior times miss field, normalised over the points still worth a look) and records its
+share in the known objects' relation volumes (what context can point at), its share in points
+not yet seen from within the built map's depth range (what only exploring can reach), and the
+share the chosen option expects to find (the first two overlap where a volume is not yet
+surveyed; a policy without knowledge has no volumes). Prints, per policy, the decisions' medians and
+quartiles of those shares and the episodes' median time to find; ``--csv FILE`` writes one row
+per decision. Nothing is written into tracked files.
+
+The belief is read through the online search's own ``belief()`` and its options (wrapped for the
+run, nothing in the behaviour changes: the episodes' times are the benchmark's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from contextlib import ExitStack
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+
+from ctxsearch.agent.search import online as on
+from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.draw import DrawSpec, draw_episodes
+from ctxsearch.agent.search.runner import EpisodeSet, load_priors, run_episode
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import MapMode, parse
+from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig
+
+FIELDS = ("policy", "episode", "target", "t_s", "kind", "volumes", "unexplored", "expects")
+
+
+def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float]:
+    """The belief's share in the known relation volumes and in the points not yet surveyed."""
+    w = b.weights
+    if w is None:
+        return float("nan"), float("nan")
+    vols = float("nan")  # a policy without knowledge has no volumes
+    if search.builder is not None:
+        vols = 0.0
+        every = search.builder.regions(search.known_objects())
+        if every:
+            vols = float(w[np.unique(np.concatenate([r.points for r in every]))].sum())
+    return vols, float(w[search.ctx.seen.unseen(sx.MAX_VIEW)].sum())
+
+
+def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[dict], dict]:
+    """(one row per decision, policy -> times to find) over ``config``'s episodes."""
+    catalog = load_catalog()
+    style = resolve_style(config.style, catalog)
+    priors = load_priors(config, style, catalog, kb_path=config.kb)
+    detector = config.detector_model(catalog)
+    spec = DrawSpec.make(
+        style, config.episodes, config.seed, catalog, config.budget_s, priors.learned,
+        detector=detector,
+    )  # fmt: skip
+    eps = draw_episodes(spec, catalog).episodes
+    rows: list[dict] = []
+    state: dict = {}
+    real_belief, real_run = on.OnlineSearch.belief, on.OnlineSearch.run
+
+    def belief(self: on.OnlineSearch) -> on.Belief:
+        b = real_belief(self)
+        state["shares"] = _shares(self, b)
+        return b
+
+    def note(ctx, text: str, real_note) -> None:
+        real_note(text)
+        if "/s, time x" in text and "shares" in state:  # a decision (OnlineSearch.run's note)
+            vols, unexplored = state["shares"]
+            kind = "region" if text.startswith("look into") else "via"
+            kind = "explore" if text.startswith("explore") else kind
+            expects = "nan"  # a look for an intermediate type states none
+            for mark in ("P(find)=", "P="):
+                if mark in text:
+                    expects = text.split(mark)[1]
+                    break
+            rows.append({
+                "policy": ctx.policy, "episode": state["episode"], "target": ctx.target,
+                "t_s": round(ctx.elapsed, 1), "kind": kind, "volumes": round(vols, 4),
+                "unexplored": round(unexplored, 4), "expects": float(expects.split(",")[0]),
+            })  # fmt: skip
+
+    def run(self: on.OnlineSearch) -> None:
+        real_note = self.ctx.note
+        with mock.patch.object(self.ctx, "note", lambda text: note(self.ctx, text, real_note)):
+            real_run(self)
+
+    times: dict[str, list[float]] = {p: [] for p in policies}
+    what = EpisodeSet(style, policies, priors.for_policy, detector, config.map)
+    with ExitStack() as stack:
+        stack.enter_context(mock.patch.object(on.OnlineSearch, "belief", belief))
+        stack.enter_context(mock.patch.object(on.OnlineSearch, "run", run))
+        for ep in eps:
+            state["episode"] = ep.index
+            for res in run_episode(ep, catalog, what):
+                times[res.policy].append(float(res.time_to_find))
+    return rows, times
+
+
+def _quartiles(rows: list[dict], key: str) -> str:
+    """The median [first, third quartile] of ``key`` over ``rows`` (its finite values)."""
+    v = np.array([r[key] for r in rows], float)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return "-"
+    a, m, b = np.percentile(v, [25, 50, 75])
+    return f"{m:.3f} [{a:.3f}, {b:.3f}]"
+
+
+def summary(rows: list[dict], times: dict[str, list[float]]) -> list[str]:
+    """One line per policy: decisions, the shares' medians and quartiles, median time."""
+    out = []
+    for p, ts in times.items():
+        mine = [r for r in rows if r["policy"] == p]
+        if not mine:
+            out.append(f"{p}: no online decisions (not an online policy)")
+            continue
+
+        region = sum(r["kind"] == "region" for r in mine)
+        out.append(
+            f"{p}: {len(mine)} decisions ({region} looks into volumes); belief in known volumes "
+            f"{_quartiles(mine, 'volumes')}, in unexplored space {_quartiles(mine, 'unexplored')}; the chosen option expects "
+            f"{_quartiles(mine, 'expects')} (median [quartiles]); median time to find {np.median(ts):.1f} s "
+            f"over {len(ts)} episodes"
+        )
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kb", type=Path, required=True, help="knowledge store (ctxsearch learn)")
+    ap.add_argument("--style", default="apartment", help="house or room style (default: apartment)")
+    ap.add_argument("--map", default="built", help="map scenario: built or given (default: built)")
+    ap.add_argument("--episodes", type=int, default=20, help="episodes (default: 20)")
+    ap.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    ap.add_argument("--policies", default="frontier,oracle-prior-indirect",
+                    help="comma-separated online policies (default: frontier,oracle-prior-indirect)")  # fmt: skip
+    ap.add_argument("--csv", type=Path, help="write one row per decision to this file")
+    a = ap.parse_args(argv)
+    try:
+        if a.episodes < 1:
+            raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
+        policies = tuple(p for p in a.policies.split(",") if p)
+        config = SearchBenchConfig(
+            style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, policies=policies,
+            map=parse(MapMode, a.map),
+        )  # fmt: skip
+        rows, times = measure(config, policies)
+    except CtxsearchError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print("\n".join(summary(rows, times)))
+    if a.csv is not None:
+        with open(a.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=FIELDS)
+            w.writeheader()
+            w.writerows(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,37 @@
+"""scripts.experiments.belief_shares: where the online search's belief holds its mass when it
+decides, without changing what the search does."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ctxsearch.scripts.experiments.belief_shares import main, measure
+from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+
+
+@pytest.mark.render
+def test_the_shares_are_read_at_every_decision_and_the_times_are_the_benchmarks(
+    tmp_path, desk_cup_store, capsys
+):
+    kb = desk_cup_store(tmp_path / "kb.sqlite")
+    pols = ("uniform", "location")
+    config = SearchBenchConfig(
+        style="office", map="given", policies=pols, seed=3, budget_s=20.0, kb=kb, episodes=1
+    )
+    rows, times = measure(config, pols)
+    bench = bench_search(config, tmp_path / "b", progress=None, bar=False)
+    for p in pols:  # wrapped for reading only: the benchmark's times
+        assert times[p] == [r.time_to_find for r in bench.results[p]]
+    assert {r["policy"] for r in rows} == set(pols)
+    for r in rows:
+        assert 0.0 <= r["unexplored"] <= 1.0 + 1e-9
+        if r["policy"] == "uniform":
+            assert math.isnan(r["volumes"])  # no knowledge, no volumes
+        else:
+            assert 0.0 <= r["volumes"] <= 1.0 + 1e-9
+    argv = ["--kb", str(kb), "--style", "office", "--map", "given", "--episodes", "0"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--episodes" in err
