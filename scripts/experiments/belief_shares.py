@@ -129,11 +129,12 @@ def summary(rows: list[dict], times: dict[str, list[float]]) -> list[str]:
             continue
 
         region = sum(r["kind"] == "region" for r in mine)
+        vols, away = _quartiles(mine, "volumes"), _quartiles(mine, "unexplored")
         out.append(
             f"{p}: {len(mine)} decisions ({region} looks into volumes); belief in known volumes "
-            f"{_quartiles(mine, 'volumes')}, in unexplored space {_quartiles(mine, 'unexplored')}; the chosen option expects "
-            f"{_quartiles(mine, 'expects')} (median [quartiles]); median time to find {np.median(ts):.1f} s "
-            f"over {len(ts)} episodes"
+            f"{vols}, in unexplored space {away}; the chosen option expects "
+            f"{_quartiles(mine, 'expects')} (median [quartiles]); median time to find "
+            f"{np.median(ts):.1f} s over {len(ts)} episodes"
         )
     return out
 
@@ -145,8 +146,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--map", default="built", help="map scenario: built or given (default: built)")
     ap.add_argument("--episodes", type=int, default=20, help="episodes (default: 20)")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
-    ap.add_argument("--policies", default="frontier,oracle-prior-indirect",
-                    help="comma-separated online policies (default: frontier,oracle-prior-indirect)")  # fmt: skip
+    ap.add_argument(
+        "--policies",
+        default="frontier,oracle-prior-indirect",
+        help="comma-separated online policies (default: %(default)s)",
+    )
     ap.add_argument("--csv", type=Path, help="write one row per decision to this file")
     a = ap.parse_args(argv)
     try:
