@@ -3,18 +3,20 @@
     python -m ctxsearch.scripts.experiments.belief_shares --kb K --style apartment \\
         --map built --episodes 20 --policies frontier,oracle-prior-indirect
 
-Draws the benchmark's episodes (``bench search``'s draw, same seed, same episodes) and runs each
-policy on them; at every decision of the online search (``agent.search.online``) it reads the
+Runs ``bench search`` itself (serially; same seed, same episodes, its files in a temporary
+directory); at every decision of the online search (``agent.search.online``) it reads the
 belief (prior times miss field, normalised over the points still worth a look) and records its
 share in the known objects' relation volumes (what context can point at), its share in points
 not yet seen from within the built map's depth range (what only exploring can reach), and the
 share the chosen option expects to find (the first two overlap where a volume is not yet
-surveyed; a policy without knowledge has no volumes). Prints, per policy, the decisions' medians and
-quartiles of those shares and the episodes' median time to find; ``--csv FILE`` writes one row
-per decision. Nothing is written into tracked files.
+surveyed; a policy without knowledge has no volumes). Prints, per policy, the decisions'
+medians and quartiles of those shares and the episodes' median time to find; ``--csv FILE``
+writes one row per decision. Nothing is written into tracked files.
 
 The belief is read through the online search's own ``belief()`` and its options (wrapped for the
-run, nothing in the behaviour changes: the episodes' times are the benchmark's).
+run; nothing in the behaviour changes: the episodes' times are the benchmark's). The share an
+option expects is its rate times its seconds (P(find) of a sweep, the planned gazes' share of a
+look into a volume); a detour for an intermediate type states none.
 """
 
 from __future__ import annotations
@@ -22,7 +24,9 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
+import tempfile
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from unittest import mock
 
@@ -30,13 +34,9 @@ import numpy as np
 
 from ctxsearch.agent.search import online as on
 from ctxsearch.agent.search import viewpoints as sx
-from ctxsearch.agent.search.draw import DrawSpec, draw_episodes
-from ctxsearch.agent.search.runner import EpisodeSet, load_priors, run_episode
-from ctxsearch.envs.houses import resolve_style
-from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode, parse
-from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig
+from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
 
 FIELDS = ("policy", "episode", "target", "t_s", "kind", "volumes", "unexplored", "expects")
 
@@ -56,56 +56,46 @@ def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float]:
 
 
 def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[dict], dict]:
-    """(one row per decision, policy -> times to find) over ``config``'s episodes."""
-    catalog = load_catalog()
-    style = resolve_style(config.style, catalog)
-    priors = load_priors(config, style, catalog, kb_path=config.kb)
-    detector = config.detector_model(catalog)
-    spec = DrawSpec.make(
-        style, config.episodes, config.seed, catalog, config.budget_s, priors.learned,
-        detector=detector,
-    )  # fmt: skip
-    eps = draw_episodes(spec, catalog).episodes
+    """(one row per decision, policy -> times to find): ``bench search`` itself, serially, its
+    files in a temporary directory, with the online search's belief and options wrapped for
+    reading (each decision's row is written when the chosen option acts)."""
     rows: list[dict] = []
-    state: dict = {}
-    real_belief, real_run = on.OnlineSearch.belief, on.OnlineSearch.run
+    shares: dict[int, tuple[float, float]] = {}  # the search (by id): its last belief's shares
+    real_belief = on.OnlineSearch.belief
 
     def belief(self: on.OnlineSearch) -> on.Belief:
         b = real_belief(self)
-        state["shares"] = _shares(self, b)
+        shares[id(self)] = _shares(self, b)
         return b
 
-    def note(ctx, text: str, real_note) -> None:
-        real_note(text)
-        if "/s, time x" in text and "shares" in state:  # a decision (OnlineSearch.run's note)
-            vols, unexplored = state["shares"]
-            kind = "region" if text.startswith("look into") else "via"
-            kind = "explore" if text.startswith("explore") else kind
-            expects = "nan"  # a look for an intermediate type states none
-            for mark in ("P(find)=", "P="):
-                if mark in text:
-                    expects = text.split(mark)[1]
-                    break
-            rows.append({
-                "policy": ctx.policy, "episode": state["episode"], "target": ctx.target,
-                "t_s": round(ctx.elapsed, 1), "kind": kind, "volumes": round(vols, 4),
-                "unexplored": round(unexplored, 4), "expects": float(expects.split(",")[0]),
-            })  # fmt: skip
+    def recorded(build):
+        def option(self: on.OnlineSearch, *args) -> on.Option | None:
+            o = build(self, *args)
+            if o is None:
+                return None
 
-    def run(self: on.OnlineSearch) -> None:
-        real_note = self.ctx.note
-        with mock.patch.object(self.ctx, "note", lambda text: note(self.ctx, text, real_note)):
-            real_run(self)
+            def act() -> None:
+                ctx, (vols, unexplored) = self.ctx, shares[id(self)]
+                # P(find) of a sweep or a look (rate times its seconds); a detour states none
+                expects = o.rate * o.seconds if o.kind != "via" else float("nan")
+                rows.append({
+                    "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
+                    "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
+                    "unexplored": round(unexplored, 4), "expects": round(expects, 4),
+                })  # fmt: skip
+                o.act()
 
-    times: dict[str, list[float]] = {p: [] for p in policies}
-    what = EpisodeSet(style, policies, priors.for_policy, detector, config.map)
-    with ExitStack() as stack:
+            return replace(o, act=act)
+
+        return option
+
+    with ExitStack() as stack, tempfile.TemporaryDirectory() as out:
         stack.enter_context(mock.patch.object(on.OnlineSearch, "belief", belief))
-        stack.enter_context(mock.patch.object(on.OnlineSearch, "run", run))
-        for ep in eps:
-            state["episode"] = ep.index
-            for res in run_episode(ep, catalog, what):
-                times[res.policy].append(float(res.time_to_find))
+        for name in ("direct_option", "region_option", "via_option"):
+            build = getattr(on.OnlineSearch, name)
+            stack.enter_context(mock.patch.object(on.OnlineSearch, name, recorded(build)))
+        res = bench_search(replace(config, policies=policies), out, progress=None, bar=False)
+    times = {p: [float(r.time_to_find) for r in res.results[p]] for p in policies}
     return rows, times
 
 

@@ -163,17 +163,15 @@ def backoff_intervals(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(low, high, estimate) of every truth entry under the backoff ``bo`` (on the Wilson or the
     corrected intervals): a type in a class whose relation maps onto the class's reads its
-    backed-off interval (estimate: its Wilson centre), every other entry its own interval
-    (Wilson's p0, or the corrected interval's midpoint)."""
+    backed-off interval (estimate: its midpoint), every other entry its own interval: on the
+    corrected intervals ``bo.estimate`` gives it (an entry that borrows nothing keeps its
+    corrected interval), on Wilson's the interval with its centre p0."""
     h, out = catalog.hierarchy, []
     for e in entries:
         ref, rel, b = e["ref"], e["relation"], e["type"]
-        if h.parent(ref) is not None and h.lift(rel) is not None:
+        if bo.corrected is not None or (h.parent(ref) is not None and h.lift(rel) is not None):
             est = bo.estimate(ref, rel, b)
             out.append((est.low, est.high, (est.low + est.high) / 2))
-        elif bo.corrected is not None:
-            lo, hi = bo.corrected.interval(ref, rel, b)
-            out.append((lo, hi, (lo + hi) / 2))
         else:
             y, n = bo.pooled.y.get((ref, rel, b), 0), bo.pooled.n.get(ref, 0)
             lo, hi = intervals.interval(y, n, bo.alpha)
