@@ -30,9 +30,12 @@ with the segment that overlaps it most, over the mask's cells.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
+from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.envs.floorplan import wall_obstacles
 from ctxsearch.envs.layout import RoomLayout
@@ -173,3 +176,37 @@ def room_iou(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> dict[int,
         seg = mask & (pred == segs[int(np.argmax(counts))])
         out[int(r)] = float((room & seg).sum() / (room | seg).sum())
     return out
+
+
+@dataclass(frozen=True)
+class RoomLabels:
+    """Rooms on a grid of cells: ``labels`` (H, W) (-1: no room), the grid's lower-left corner
+    (``x0``, ``y0``) and cell size (m)."""
+
+    labels: np.ndarray
+    x0: float
+    y0: float
+    resolution: float
+
+    def at(self, xy: np.ndarray) -> np.ndarray:
+        """The room of each point (M, 2+) (x, y first): -1 outside the grid or any room."""
+        xy = np.asarray(xy, float).reshape(-1, np.shape(xy)[-1])
+        h, w = self.labels.shape
+        col = np.floor((xy[:, 0] - self.x0) / self.resolution).astype(np.int64)
+        row = np.floor((xy[:, 1] - self.y0) / self.resolution).astype(np.int64)
+        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        out = np.full(len(xy), -1, np.int64)
+        out[inside] = self.labels[row[inside], col[inside]]
+        return out
+
+    @classmethod
+    def of_plan(cls, layout: RoomLayout, resolution: float = 0.05) -> RoomLabels:
+        """The plan's rooms (the given map's: ``plan_labels`` on the layout's footprint)."""
+        grid = wall_mask(layout, resolution)
+        return cls(plan_labels(layout, grid), grid.x0, grid.y0, grid.resolution)
+
+    @classmethod
+    def of_built(cls, built: BuiltMap) -> RoomLabels:
+        """The rooms of the robot's own map as it stands (``segment_rooms`` of ``built_mask``)."""
+        mask = built_mask(built.floor, built.occupied, built.top_z)
+        return cls(segment_rooms(mask, built.resolution), built.x0, built.y0, built.resolution)

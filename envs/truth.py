@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -177,6 +178,54 @@ def truth_document(
     if isinstance(style, HouseStyle):
         out["rooms"] = len(rooms)
     return out
+
+
+@dataclass(frozen=True)
+class RoomTruth:
+    """Room context from the true plans (issue 27): ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
+    the share of the instances of furniture type F whose room holds at least one T (itself
+    excluded), and ``room_share[T]`` = the share of the plans' rooms holding at least one T (what
+    a room the robot knows nothing about holds). Counted over every room of ``houses`` houses
+    (a single-room style's room is its world)."""
+
+    same_room: dict[tuple[str, str], float]
+    room_share: dict[str, float]
+    houses: int
+
+
+def room_truth(
+    style: Style | HouseStyle | str, samples: int, catalog: Catalog, seed: int = 0
+) -> RoomTruth:
+    """``RoomTruth`` over the worlds of ``style`` of seeds seed .. seed + samples - 1 (the same
+    worlds ``ground_truth`` counts)."""
+    if not isinstance(style, Style | HouseStyle):
+        style = resolve_style(style, catalog)
+    n_ref: dict[str, int] = {}
+    y: dict[tuple[str, str], int] = {}
+    rooms, holding = 0, {}
+    for s in range(int(seed), int(seed) + int(samples)):
+        layout = generate_layout(style, s, catalog)
+        by_room: dict[int, list[ObjectInstance]] = {}
+        for o in layout.objects:
+            by_room.setdefault(layout.room_of.get(o.id, 0), []).append(o)
+        rooms += max(len(layout.rooms), 1)
+        for objs in by_room.values():
+            types = [o.type for o in objs]
+            for t in set(types):
+                holding[t] = holding.get(t, 0) + 1
+            for a in objs:
+                if not catalog.type(a.type).is_furniture:
+                    continue
+                n_ref[a.type] = n_ref.get(a.type, 0) + 1
+                others = set(types) if types.count(a.type) > 1 else set(types) - {a.type}
+                for t in others:
+                    y[(a.type, t)] = y.get((a.type, t), 0) + 1
+    same = {k: v / n_ref[k[0]] for k, v in y.items()}
+    for f in n_ref:  # a pair never seen together is a measured 0, not unknown
+        for t in catalog.type_names:
+            same.setdefault((f, t), 0.0)
+    share = {t: holding.get(t, 0) / rooms for t in catalog.type_names}
+    return RoomTruth(same, share, int(samples))
 
 
 def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:

@@ -53,6 +53,17 @@ class ProbabilitySource:
         """Expected instances of ``type_name`` per room, or None if unknown."""
         return None
 
+    def same_room(self, ref_type: str, type_name: str) -> float | None:
+        """P(SAME-ROOM-AS-ref(T)): the probability that the room of an instance of furniture
+        type ``ref_type`` holds an instance of ``type_name`` (issue 27's room context); None
+        where this source knows no room context."""
+        return None
+
+    def room_share(self, type_name: str) -> float | None:
+        """P(a room holds an instance of ``type_name``), over all rooms: what a room nothing is
+        known about holds; None where this source knows no room context."""
+        return None
+
 
 class UniformProbabilities(ProbabilitySource):
     """No probabilities: every relation counts the same (``map-only`` search, the value of the
@@ -109,6 +120,16 @@ class TableProbabilities(ProbabilitySource):
         self.table = {k: float(v) for k, v in table.items()}
         self.name = name
         self.per_room = dict(per_room) if per_room is not None else None
+        self.rooms: tuple[dict[tuple[str, str], float], dict[str, float]] | None = None
+
+    def with_rooms(
+        self, same_room: Mapping[tuple[str, str], float], room_share: Mapping[str, float]
+    ) -> TableProbabilities:
+        """A copy that also knows room context: P(SAME-ROOM-AS-F(T)) per (F, T) and the share
+        of rooms holding each type (``same_room``, ``room_share``)."""
+        out = TableProbabilities(self.table, self.name, self.per_room)
+        out.rooms = (dict(same_room), dict(room_share))
+        return out
 
     @classmethod
     def from_truth(cls, doc: Mapping) -> TableProbabilities:
@@ -135,6 +156,16 @@ class TableProbabilities(ProbabilitySource):
         if self.per_room is None:
             return None
         return self.per_room.get(type_name, 0.0)
+
+    def same_room(self, ref_type: str, type_name: str) -> float | None:
+        if self.rooms is None:
+            return None
+        return self.rooms[0].get((ref_type, type_name))
+
+    def room_share(self, type_name: str) -> float | None:
+        if self.rooms is None:
+            return None
+        return self.rooms[1].get(type_name)
 
 
 class BackoffProbabilities(KBProbabilities):

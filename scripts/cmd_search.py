@@ -87,6 +87,14 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         help="rooms sampled for the ground truth when --truth is not given (default: 200)",
     )
     p.add_argument(
+        "--room-context",
+        action="store_true",
+        help="the oracle-prior policies also use room context: the true P(SAME-ROOM-AS-F(T)) "
+        "over the --truth-samples worlds, on the rooms of the map (the plan's on the given map, "
+        "the robot's segmentation of its own on the built map); the learned policies have none "
+        "yet",
+    )
+    p.add_argument(
         "--targets",
         choices=values(Targets),
         default=Targets.TYPE.value,
@@ -173,6 +181,7 @@ def _config_fields(args: argparse.Namespace) -> dict:
         "detector": args.detector,
         "interval": args.interval,
         "targets": args.targets,
+        "rooms": args.room_context,
     }
 
 

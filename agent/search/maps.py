@@ -20,6 +20,7 @@ import numpy as np
 
 from ctxsearch.agent.mapping import TALL_M, BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, obstacle_boxes
+from ctxsearch.agent.room_segmentation import RoomLabels
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.envs.detector import DetectorModel
@@ -74,6 +75,7 @@ class RoomMaps:
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     top: float = 3.0
     occluders: Occluders | None = None  # what blocks the view on the given map
+    rooms: RoomLabels | None = None  # the given map's rooms (the plan's); None on the built map
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
         """An empty map of the robot's own over the footprint (``built``), None on a given map."""
@@ -121,7 +123,7 @@ class RoomMaps:
         seen = ss.SeenMap.for_room(layout, catalog)
         return cls(
             grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height,
-            Occluders.from_layout(layout, spec),
+            Occluders.from_layout(layout, spec), RoomLabels.of_plan(layout),
         )  # fmt: skip
 
     @classmethod

@@ -38,6 +38,7 @@ from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.context import BELIEF_ENTITY, SearchContext
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
+from ctxsearch.agent.search.room_prior import RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
 
 # The calibration of each option kind's expected seconds starts at 1 (estimates taken as they
@@ -103,6 +104,10 @@ class OnlineSearch:
         self.ctx, self.probs, self.vias = ctx, probs, list(vias)
         self.explorer = Explorer(ctx)
         self.builder = ss.RegionBuilder(ctx.catalog, probs, ctx.seen, ctx.target) if probs else None
+        # room context, where the knowledge source has it (agent.search.room_prior)
+        self.rooms = RoomPrior.for_search(
+            probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.rooms
+        )
         self.gains = {v.type: v.gain for v in self.vias}
         self.via_spent: dict[str, float] = {}  # seconds spent looking for each intermediate type
         # the total a whole world is expected to hold (P(rel(T)) units), or 1
@@ -161,8 +166,9 @@ class OnlineSearch:
     def belief(self) -> Belief:
         """Where the target may be (``Belief``): the prior (the known objects' relation volumes
         with this search's P(rel(T)), ``space.target_density``; every point alike without
-        knowledge or before a known volume has any) times the miss field, normalised over the
-        points still worth a look (agent.search.belief)."""
+        knowledge or before a known volume has any; times the room factor where the knowledge
+        has room context) times the miss field, normalised over the points still worth a look
+        (agent.search.belief)."""
         ctx = self.ctx
         todo = self.explorer.target_todo()
         keep = ~self.explorer.given_up()
@@ -175,6 +181,9 @@ class OnlineSearch:
             regions = [r for r in every if r.key not in skip]
             dens = ss.target_density(every, ~ctx.seen.unseen(sx.MAX_VIEW), stand)
         prior = stand if dens is None else dens
+        f = self.rooms.factor(self.known_objects(), ctx.built) if self.rooms else None
+        if f is not None:  # the rooms of known furniture (agent.search.room_prior)
+            prior = prior * f
         miss = ctx.misses.miss
         weights = belief.belief_weights(prior, miss, todo)
         ctx.belief_now = lambda: belief.belief_weights(prior, ctx.misses.miss, todo)

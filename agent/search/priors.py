@@ -12,7 +12,7 @@ from pathlib import Path
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.registry import check_scenario, info, split_name
 from ctxsearch.envs.houses import WorldStyle
-from ctxsearch.envs.truth import ground_truth, load_truth
+from ctxsearch.envs.truth import ground_truth, load_truth, room_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -79,15 +79,22 @@ def truth_probabilities(
     seed: int = 0,
     path: str | Path | None = None,
     progress: bool = False,
+    rooms: bool = False,
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
     at ``path`` if given, else estimated over ``samples`` generated rooms of ``style`` (a
-    progress bar on stderr with ``progress``)."""
+    progress bar on stderr with ``progress``). With ``rooms``, also the room context of the
+    same ``samples`` worlds (``envs.truth.room_truth``; counted from the plans, also when the
+    relations come from ``path``)."""
     if path is not None:
         doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
-        return ss.TableProbabilities.from_truth(doc)
-    doc = ground_truth(style, samples, seed, catalog, progress=progress)
-    return ss.TableProbabilities.from_truth(doc)
+    else:
+        doc = ground_truth(style, samples, seed, catalog, progress=progress)
+    table = ss.TableProbabilities.from_truth(doc)
+    if rooms:
+        rt = room_truth(style, samples, catalog, seed)
+        table = table.with_rooms(rt.same_room, rt.room_share)
+    return table
 
 
 @dataclass(frozen=True)
@@ -102,6 +109,7 @@ class PriorSettings:
     interval: IntervalMethod = IntervalMethod.WILSON
     truth: Path | None = None  # ground-truth JSON of `ctxsearch truth`
     truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
+    rooms: bool = False  # the ground truth knows room context too (room_truth, issue 27)
 
 
 @dataclass(frozen=True)
@@ -179,8 +187,9 @@ def make_priors(
     truth = None
     if any(info(split_name(n)[0]).needs is Needs.TRUTH for n in policies):
         truth = truth_probabilities(
-            style, catalog, settings.truth_samples, path=settings.truth, progress=progress
-        )
+            style, catalog, settings.truth_samples, path=settings.truth, progress=progress,
+            rooms=settings.rooms,
+        )  # fmt: skip
     rank = parse(Rank, settings.rank)
     priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence)
     priors.check(policies)

@@ -90,6 +90,9 @@ class SearchConfig:
     map: MapMode = MapMode.BUILT
     # type: any instance of the target type ends a search; instance: the world keeps one
     targets: Targets = Targets.TYPE
+    # Room context (issue 27) for the oracle-prior policies: the true P(SAME-ROOM-AS-F(T)) on
+    # the rooms of the robot's map (agent.search.room_prior); the learned policies have none yet
+    rooms: bool = False
 
     def __post_init__(self) -> None:
         # the modes parsed once, here (a one-line error for an unknown one)
@@ -107,7 +110,7 @@ class SearchConfig:
         """How the priors are read (agent.search.priors)."""
         return PriorSettings(
             self.rank, self.estimate, self.min_evidence, self.interval, self.truth,
-            self.truth_samples,
+            self.truth_samples, self.rooms,
         )  # fmt: skip
 
 

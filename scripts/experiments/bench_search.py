@@ -596,6 +596,7 @@ def _write_files(
         "interval": config.interval,
         "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
         "targets": config.targets,  # type: any instance ends a search; instance: one kept
+        "room_context": config.rooms,  # the oracle-prior policies' room context (issue 27)
         "kb": str(config.kb) if config.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
