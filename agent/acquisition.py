@@ -72,6 +72,7 @@ from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, drive_along, nearest_free
 from ctxsearch.agent.resume import ReplayBody, replayed_related, resume_error
+from ctxsearch.agent.room_segmentation import Recognized, RoomLabels, segment_contents
 from ctxsearch.agent.run_state import ExamResult, Run, StoredExam, room_rng
 from ctxsearch.agent.strategies import Choice, EuclideanCosts
 from ctxsearch.agent.viewplan import Gaze, GazePlanOptions, execute_gaze, plan_gazes
@@ -146,6 +147,10 @@ class RoomLearner:
         self.last_exam_clock = self.clock  # the run clock after the room's last examination
         self.new_since = self.clock  # the run clock when the replay (if any) was over
         self.left_early = False  # the budget ended the room (objects may be left unexamined)
+        # what the examinations recognized (replays included): what the visit's rooms held
+        det = run.settings.detector
+        fp = det is not None and not det.perfect and det.fp_per_image > 0
+        self.recognized = Recognized(det.fp_max_score if fp else 0.0)
 
     def _remember(self, known: Sequence[ObjectInstance]) -> int:
         """Lines 1-2 on a later day (see the module docstring): each known object goes into
@@ -241,6 +246,7 @@ class RoomLearner:
                 continue
             stored = self._stored_next(choice.obj)  # a replay: the store's examination
             related = self.examine(choice.obj, stored, gazes)  # lines 15-16
+            self.recognized.add(choice.obj, related)
             self._record(choice, related, stored)  # lines 17-20
             for _, o in related:  # line 21 (a related object a reference only once confirmed)
                 ref = self.reference(o) if o.id not in self.examined else None
@@ -363,11 +369,22 @@ class RoomLearner:
             self.log.robot(self)
             if need_images:
                 objs = self.perception.see(frame)
+                self.recognized.scores(self.perception.last_detections)
                 seen.update((o.id, o) for o in objs)
                 self.log.frame(self, frame, objs, purpose="examine")
                 frames.append(frame)
         self._views = () if self.view_model is None else self.view_model.views(obj, frames)
         return self.perception.related(obj, list(seen.values()))
+
+    def room_contents(self) -> list[tuple[int, str, int]]:
+        """What the rooms of the robot's map held at the end of a house visit done to the end
+        (knowledge.room_context): the recognized objects per segment of its map (the plan's
+        rooms on a given map); none in a single room or a visit the budget ended early."""
+        if not self.layout.is_house or self.left_early:
+            return []
+        b = self.built
+        labels = RoomLabels.of_built(b) if b is not None else RoomLabels.of_plan(self.layout)
+        return segment_contents(labels, self.recognized.objects(), self.catalog)
 
     def _replays_by_images(self) -> bool:
         """A detector that errs reports poses and objects (false positives, look-alikes) the
@@ -388,6 +405,7 @@ class RoomLearner:
             frame = execute_gaze(self.body, self.grid, gaze, rgb=self.log.recording, depth=True)
             self._mapped(frame)  # the built map learns from these images as it did the first time
             seen.update((o.id, o) for o in self.perception.see(frame))
+            self.recognized.scores(self.perception.last_detections)
         related = self.perception.related(obj, list(seen.values()))
         if sorted({(r, o.type, o.id) for r, o in related}) != sorted(set(stored.related)):
             raise resume_error(self.layout, f"examination of object {obj.id} saw other objects")

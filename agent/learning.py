@@ -312,6 +312,7 @@ class _Rooms:
                     stopped = True
                     break
             self.log.end_room(L, L.n_room)
+            contents = [] if stopped else L.room_contents()
         finally:
             L.close()
             release_memory()
@@ -320,8 +321,9 @@ class _Rooms:
         if stopped:
             return False
         store.mark_room(
-            run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day
-        )
+            run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day,
+            contents=contents,
+        )  # fmt: skip
         run.counters.clock_offset = L.clock
         summary.rooms += int(day == 0)
         summary.rooms_done_now += 1

@@ -184,9 +184,10 @@ def truth_document(
 class RoomTruth:
     """Room context from the true plans (issue 27): ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
     the share of the instances of furniture type F whose room holds at least one T (itself
-    excluded), and ``room_share[T]`` = the share of the plans' rooms holding at least one T (what
-    a room the robot knows nothing about holds). Counted over every room of ``houses`` houses
-    (a single-room style's room is its world)."""
+    excluded), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at
+    least one T (what a furnished room holds; knowledge.room_context counts the robot's own the
+    same way). Counted over the rooms of ``houses`` houses (a single-room style's room is its
+    world)."""
 
     same_room: dict[tuple[str, str], float]
     room_share: dict[str, float]
@@ -202,15 +203,17 @@ def room_truth(
         style = resolve_style(style, catalog)
     n_ref: dict[str, int] = {}
     y: dict[tuple[str, str], int] = {}
-    rooms, holding = 0, {}
+    rooms, holding = 0, {}  # furnished rooms, and those holding each type
     for s in range(int(seed), int(seed) + int(samples)):
         layout = generate_layout(style, s, catalog)
         by_room: dict[int, list[ObjectInstance]] = {}
         for o in layout.objects:
             by_room.setdefault(layout.room_of.get(o.id, 0), []).append(o)
-        rooms += max(len(layout.rooms), 1)
         for objs in by_room.values():
             types = [o.type for o in objs]
+            if not any(catalog.type(t).is_furniture for t in types):
+                continue
+            rooms += 1
             for t in set(types):
                 holding[t] = holding.get(t, 0) + 1
             for a in objs:
@@ -224,7 +227,7 @@ def room_truth(
     for f in n_ref:  # a pair never seen together is a measured 0, not unknown
         for t in catalog.type_names:
             same.setdefault((f, t), 0.0)
-    share = {t: holding.get(t, 0) / rooms for t in catalog.type_names}
+    share = {t: holding.get(t, 0) / max(rooms, 1) for t in catalog.type_names}
     return RoomTruth(same, share, int(samples))
 
 

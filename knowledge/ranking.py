@@ -26,6 +26,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import Box, ObjectInstance, relation_volume
 from ctxsearch.knowledge.options import Rank
 from ctxsearch.knowledge.pooling import Backoff, PooledCounts
+from ctxsearch.knowledge.room_context import RoomContext
 
 RANK_MODES = ("low", "p0", "high")
 # The lower bound was best or tied on three stores of different sizes (measured; README, Search).
@@ -85,6 +86,22 @@ class KBProbabilities(ProbabilitySource):
         self.kb, self.rank, self.rooms = kb, rank, rooms
         self.name = f"kb-{rank}"
         self._cache: dict[tuple[str, str], float] = {}
+        self.room_context: RoomContext | None = None  # learned room context, if given
+
+    def with_room_context(self, rooms: RoomContext | None) -> KBProbabilities:
+        """This source, also reading the learned room context ``rooms`` (by the same rank)."""
+        self.room_context = rooms
+        return self
+
+    def same_room(self, ref_type: str, type_name: str) -> float | None:
+        if self.room_context is None:
+            return None
+        return self.room_context.same_room(ref_type, type_name, Rank(self.rank))
+
+    def room_share(self, type_name: str) -> float | None:
+        if self.room_context is None:
+            return None
+        return self.room_context.room_share(type_name)
 
     def instances(self, type_name: str) -> float | None:
         """n_T / rooms learned in: examined instances per room (None without a room count)."""

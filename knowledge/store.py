@@ -352,15 +352,35 @@ class EvidenceStore(EvidenceReads):
         status: str,
         end_time: float | None = None,
         day: int = 0,
+        contents: Iterable[tuple[int, str, int]] = (),
     ) -> None:
         """Set the status of a room's visit on ``day``: 'started' when the robot enters it (a
         visit already done stays done), 'done' when it is finished; ``end_time`` (the run's
-        simulated clock when it was done) replaces the stored one."""
+        simulated clock when it was done) replaces the stored one. ``contents`` (with 'done'
+        only): what the visit's rooms held, (segment, type, instances) rows
+        (knowledge.room_context), written in the same transaction; a visit keeps the contents
+        it was first given (a second 'done' adds none: nothing counts twice)."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
         key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), _day(day), status)
         end = None if end_time is None else _float(end_time, "end_time")
+        rows = self._content_rows(key[:4], contents)
+        if rows and status != "done":
+            raise CtxsearchError("room contents are recorded only with a visit marked 'done'")
         with self._transaction() as cur:
+            if (
+                rows
+                and not cur.execute(
+                    "SELECT 1 FROM room_contents WHERE run = ? AND style = ? AND room_seed = ? "
+                    "AND day = ? LIMIT 1",
+                    key[:4],
+                ).fetchone()
+            ):
+                cur.executemany(
+                    "INSERT INTO room_contents (run, style, room_seed, day, segment, type, "
+                    "instances) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    rows,
+                )
             if end is not None:
                 cur.execute(
                     "INSERT INTO rooms (run, style, seed, day, status, end_time) "
@@ -376,6 +396,22 @@ class EvidenceStore(EvidenceReads):
                     "WHERE rooms.status != 'done'",
                     key,
                 )
+
+    def _content_rows(self, visit: tuple, contents: Iterable[tuple[int, str, int]]) -> list[tuple]:
+        """``mark_room``'s contents as rows, checked against the catalog (CtxsearchError)."""
+        rows, keys = [], set()
+        for segment, typ, instances in contents:
+            seg, n = _int(segment, "segment"), _int(instances, "instances")
+            if typ not in self.catalog or seg < 0 or n < 1:
+                raise CtxsearchError(
+                    f"room contents: bad row (segment {segment!r}, type {typ!r}, "
+                    f"instances {instances!r})"
+                )
+            if (seg, typ) in keys:
+                raise CtxsearchError(f"room contents: segment {seg} lists {typ} twice")
+            keys.add((seg, typ))
+            rows.append((*visit, seg, typ, n))
+        return rows
 
     # ---- reading ------------------------------------------------------------------------------
     def _visit(self, day: int) -> tuple[str, tuple]:
@@ -531,6 +567,8 @@ def _append_log(cur: sqlite3.Cursor, src: sqlite3.Connection, version: int) -> i
         views = src.execute(f"SELECT {view_cols} FROM views WHERE examination_id IN ({keep}) "
                             "ORDER BY examination_id, relation")  # fmt: skip
         _copy_shifted(cur, views, "views", view_cols, offset, 50_000)
+    if version >= 6:
+        _append_contents(cur, src)
     end = "end_time" if version >= 2 else "NULL"
     day = "day" if new_in else "0"
     cur.executemany(
@@ -542,6 +580,25 @@ def _append_log(cur: sqlite3.Cursor, src: sqlite3.Connection, version: int) -> i
         src.execute(f"SELECT run, style, seed, {day}, status, {end} FROM rooms").fetchall(),
     )
     return appended
+
+
+def _append_contents(cur: sqlite3.Cursor, src: sqlite3.Connection) -> None:
+    """Copy ``src``'s room contents: a visit keeps the contents it was first given (as it keeps
+    its first end time), so a visit already holding some in the output takes none from ``src``."""
+    cols = "run, style, room_seed, day, segment, type, instances"
+    by_visit: dict[tuple, list[tuple]] = {}
+    for row in src.execute(f"SELECT {cols} FROM room_contents ORDER BY {cols}"):
+        by_visit.setdefault(tuple(row[:4]), []).append(tuple(row))
+    for visit, rows in by_visit.items():
+        held = cur.execute(
+            "SELECT 1 FROM room_contents WHERE run = ? AND style = ? AND room_seed = ? AND day = ? "
+            "LIMIT 1",
+            visit,
+        ).fetchone()
+        if not held:
+            cur.executemany(
+                f"INSERT INTO room_contents ({cols}) VALUES (?, ?, ?, ?, ?, ?, ?)", rows
+            )
 
 
 def _copy_shifted(

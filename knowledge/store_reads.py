@@ -20,6 +20,7 @@ from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts, room_c
 from ctxsearch.knowledge.corrected import CorrectedIntervals, ExamViews
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.options import IntervalMethod
+from ctxsearch.knowledge.room_context import RoomContext
 from ctxsearch.knowledge.store_schema import (
     MAX_DAY,
     ROOM_STATUSES,
@@ -216,6 +217,29 @@ class EvidenceReads:
             if not self.catalog.has_relation(rel) or b not in self.catalog:
                 raise self._bad(f"observation ({rel!r}, {b!r}) is not in the catalog")
         return room_counts_from_rows(exam_rows, obs_rows)
+
+    def room_context(self, run: str | None = None) -> RoomContext:
+        """The room context learned (knowledge.room_context) from the visits' room contents (of
+        one run, or all); empty in a store older than version 6. Read-only."""
+        if self.version < 6:
+            return RoomContext.from_rows((), self.catalog, self.alpha)
+        where, args = (" WHERE run = ?", (run,)) if run is not None else ("", ())
+        cols = "run, style, room_seed, day, segment, type, instances"
+        rows = []
+        with self._reading():
+            for r in self.conn.execute(
+                f"SELECT {cols} FROM room_contents{where} ORDER BY {cols}", args
+            ):
+                typ = self._name(r[5], "room contents type")
+                if typ not in self.catalog:
+                    raise self._bad(f"room contents type {typ!r} is not in the catalog")
+                seg = self._integer(r[4], "room contents segment")
+                k = self._integer(r[6], "room contents instances")
+                if seg < 0 or k < 1:
+                    raise self._bad(f"room contents row {tuple(r)!r} is out of range")
+                rows.append((str(r[0]), str(r[1]), self._integer(r[2], "room seed"),
+                             self._day_stamp(r[3], "room contents day"), seg, typ, k))  # fmt: skip
+        return RoomContext.from_rows(rows, self.catalog, self.alpha)
 
     def exam_views(self, run: str | None = None, upto: int | None = None) -> dict[str, ExamViews]:
         """Per reference type, its examinations (of one run, or all; with ``upto``, those with id

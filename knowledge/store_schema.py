@@ -1,4 +1,4 @@
-"""The evidence store's schema: its tables (version 5) and the older versions it reads, the
+"""The evidence store's schema: its tables (version 6) and the older versions it reads, the
 checks a file passes before it is opened (``inspect_store``: a ctxsearch store of this catalog, the
 exact schema its version writes, sane day stamps), the upgrade of an older store inside the first
 write's transaction (``_migrate``), and the connections (read-only ones never write). The store
@@ -20,7 +20,7 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
 # What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on;
@@ -31,7 +31,9 @@ EXAM_KEY = ("run", "style", "room_seed", "day", "object_id")
 MAX_DAY = 1_000_000
 _V3_EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
-_TABLES = ("meta", "rooms", "examinations", "observations", "views")
+_TABLES = ("meta", "rooms", "examinations", "observations", "views", "room_contents")
+# The first version holding each table that not every version has.
+_TABLE_SINCE = {"views": 5, "room_contents": 6}
 
 _META_SQL = "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)"
 _ROOMS_SQL = """CREATE TABLE rooms (
@@ -79,6 +81,16 @@ _VIEWS_SQL = """CREATE TABLE views (
     PRIMARY KEY (examination_id, relation)
 ) WITHOUT ROWID"""
 VIEW_SCALE = 65535
+# Version 6: what a house visit's rooms held (issue 27, knowledge.room_context): per segment of
+# the robot's map at the end of a visit done to the end, how many instances of each type it
+# recognized there (a segment is listed only with its types; only segments holding furniture).
+_ROOM_CONTENTS_SQL = """CREATE TABLE room_contents (
+    run TEXT NOT NULL, style TEXT NOT NULL, room_seed INTEGER NOT NULL,
+    day INTEGER NOT NULL CHECK (day >= 0),
+    segment INTEGER NOT NULL CHECK (segment >= 0), type TEXT NOT NULL,
+    instances INTEGER NOT NULL CHECK (instances >= 1),
+    PRIMARY KEY (run, style, room_seed, day, segment, type)
+) WITHOUT ROWID"""
 _EXAM_KEY_INDEX = f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(EXAM_KEY)})"
 # The schema this version writes, statement by statement (meta first).
 _SCHEMA_STATEMENTS = (
@@ -89,8 +101,9 @@ _SCHEMA_STATEMENTS = (
     _OBSERVATIONS_SQL,
     _OBSERVATIONS_INDEX,
     _VIEWS_SQL,
+    _ROOM_CONTENTS_SQL,
 )
-# The schemas of older versions, still read (and upgraded to version 5 on the first write).
+# The schemas of older versions, still read (and upgraded to version 6 on the first write).
 _OLD_ROOM_INDEX = "CREATE INDEX examinations_room ON examinations (run, style, room_seed)"
 _OLD_SCHEMAS = {
     1: (
@@ -117,7 +130,8 @@ _OLD_SCHEMAS = {
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
-    4: _SCHEMA_STATEMENTS[:-1],  # without the views table
+    4: _SCHEMA_STATEMENTS[:-2],  # without the views table
+    5: _SCHEMA_STATEMENTS[:-1],  # without the room_contents table
 }
 
 _EXAM_COLS = "run, style, room_seed, day, object_id, type, sim_time, strategy, created"
@@ -245,7 +259,7 @@ def _check_store(conn: sqlite3.Connection, path: Path, *, quick_check: bool) -> 
         )
     if version < 1:
         raise _not_a_store(path, f"unknown schema version {version}")
-    missing = [t for t in _TABLES if t not in tables and (t != "views" or version >= 5)]
+    missing = [t for t in _TABLES if t not in tables and version >= _TABLE_SINCE.get(t, 1)]
     if missing or "catalog_fingerprint" not in meta or "alpha" not in meta:
         raise StoreError(f"{path}: damaged knowledge store (missing {missing or 'meta entries'})")
     problem = _schema_problem(conn, version)
@@ -283,6 +297,15 @@ def _bad_day(conn: sqlite3.Connection) -> str | None:
     row = conn.execute(f"SELECT style, seed, day FROM rooms WHERE {bad} LIMIT 1").fetchone()
     if row is not None:
         return f"room {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in [0, {MAX_DAY}]"
+    tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if "room_contents" in tables:
+        q = f"SELECT style, room_seed, day FROM room_contents WHERE {bad} LIMIT 1"
+        row = conn.execute(q).fetchone()
+        if row is not None:
+            return (
+                f"room contents of {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in "
+                f"[0, {MAX_DAY}]"
+            )
     return None
 
 
@@ -357,12 +380,15 @@ class _Corrupt(Exception):
 
 def _migrate(cur: sqlite3.Cursor, version: int) -> int:
     """Bring a store of an older ``version`` to SCHEMA_VERSION inside the caller's transaction:
-    version 4 gains the (empty) views table; older ones have their tables rebuilt in this
-    version's exact schema, dropping duplicate examinations (same EXAM_KEY: keep the first and
-    its observations). Returns how many were dropped. Examinations of older stores have no
-    views (knowledge.corrected counts them with recall 1)."""
-    if version == 4:
-        cur.execute(_VIEWS_SQL)
+    version 5 gains the (empty) room_contents table, version 4 that and the (empty) views table;
+    older ones have their tables rebuilt in this version's exact schema, dropping duplicate
+    examinations (same EXAM_KEY: keep the first and its observations). Returns how many were
+    dropped. Examinations of older stores have no views (knowledge.corrected counts them with
+    recall 1), and their visits no room contents (no room context learned from them)."""
+    if version in (4, 5):
+        if version == 4:
+            cur.execute(_VIEWS_SQL)
+        cur.execute(_ROOM_CONTENTS_SQL)
         cur.execute(
             "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
         )

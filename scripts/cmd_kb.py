@@ -8,13 +8,15 @@ import os
 import sqlite3
 import sys
 import textwrap
+from dataclasses import dataclass
 from pathlib import Path
 
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
 from ctxsearch.knowledge.errors import CatalogError, CtxsearchError, StoreError
-from ctxsearch.knowledge.options import Forget, IntervalMethod
+from ctxsearch.knowledge.options import Forget, IntervalMethod, Rank
 from ctxsearch.knowledge.pooling import PooledCounts, interval_rows
+from ctxsearch.knowledge.room_context import RoomContext, relation_name
 from ctxsearch.knowledge.store import EvidenceStore, merge_stores
 from ctxsearch.scripts import argtypes
 
@@ -266,6 +268,7 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
                 "catalog_fingerprint": store.fingerprint,
                 "catalog": str(catalog.path),
                 "created": store.meta.get("created", ""),
+                "room_context": store.room_context(),
             }
     except sqlite3.DatabaseError as exc:  # damage found past the checks of open()
         raise StoreError(
@@ -326,6 +329,38 @@ def format_rows(rows) -> str:
     return "\n".join([line(head), *(line(b) for b in body)])
 
 
+@dataclass(frozen=True)
+class RoomRow:
+    """One SAME-ROOM-AS-F interval, printed like a relation's (knowledge.room_context)."""
+
+    ref: str
+    relation: str
+    type: str
+    y: int
+    n: int
+    p0: float
+    low: float
+    high: float
+
+
+def room_rows(rc: RoomContext, catalog, ref: str | None, related: str | None, everything: bool):
+    """The learned SAME-ROOM-AS-F intervals of furniture type ``ref`` (or every one counted),
+    for type ``related`` (or every type; y = 0 only with ``everything``), largest lower bound
+    first."""
+    refs = [ref] if ref is not None else sorted(rc.n)
+    types = [related] if related is not None else list(catalog.type_names)
+    out = []
+    for f in refs:
+        for t in types:
+            got = rc.interval(f, t)
+            if got is None or (got[2] == 0 and not everything):
+                continue
+            lo, hi, y, n = got
+            p0 = rc.same_room(f, t, Rank.P0)
+            out.append(RoomRow(f, relation_name(f), t, y, n, p0, lo, hi))
+    return sorted(out, key=lambda r: (-r.low, r.relation, r.type))
+
+
 def run_show(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb show``."""
     catalog = load_catalog(args.catalog)
@@ -368,8 +403,12 @@ def run_show(args: argparse.Namespace) -> int:
         rows = kb.rows(args.ref_type, include_zero=args.all)
         if args.related is not None:
             rows = [r for r in rows if r.type == args.related]
+    rc: RoomContext = info["room_context"]
+    rooms = []
+    if not pooled and args.forget == Forget.NONE:
+        rooms = room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
     if args.json:
-        _emit(json.dumps([_row_dict(r) for r in rows], indent=1))
+        _emit(json.dumps([_row_dict(r) for r in [*rows, *rooms]], indent=1))
         return 0
     cat = kb.catalog
     class_names = tuple(c.name for c in classes.classes) if pooled else ()
@@ -398,6 +437,9 @@ def run_show(args: argparse.Namespace) -> int:
     hidden = total - shown_nonzero if not args.all else 0
     if hidden:
         out.append(f"({hidden} rows with y = 0 hidden; --all shows them)")
+    if rooms:
+        out.append(f"room context: {rc.rooms} rooms of the robot's maps held furniture")
+        out.append(format_rows(rooms))
     _emit("\n".join(out))
     return 0
 

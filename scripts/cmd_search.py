@@ -89,10 +89,10 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--room-context",
         action="store_true",
-        help="the oracle-prior policies also use room context: the true P(SAME-ROOM-AS-F(T)) "
-        "over the --truth-samples worlds, on the rooms of the map (the plan's on the given map, "
-        "the robot's segmentation of its own on the built map); the learned policies have none "
-        "yet",
+        help="the context policies also use room context, P(SAME-ROOM-AS-F(T)) on the rooms of "
+        "the map (the plan's on the given map, the robot's segmentation of its own on the built "
+        "map): the learned ones the store's intervals (learned in houses), the oracle-prior ones "
+        "the truth over the --truth-samples worlds",
     )
     p.add_argument(
         "--targets",

@@ -38,10 +38,9 @@ def test_room_truth_counts_furniture_rooms_exactly_on_one_house(house, catalog):
         for t in ("Cup", "Remote", "Pen"):
             want = sum(t in rooms[r] for r in own) / len(own)
             assert rt.same_room[(f, t)] == pytest.approx(want)
+    furnished = [s for s in rooms.values() if any(catalog.type(t).is_furniture for t in s)]
     for t in ("Cup", "Book", "Fridge"):
-        assert rt.room_share[t] == pytest.approx(
-            sum(t in s for s in rooms.values()) / len(house.rooms)
-        )
+        assert rt.room_share[t] == pytest.approx(sum(t in s for s in furnished) / len(furnished))
     # a piece of furniture is not in its own room's count unless a second one is there
     fridges = [house.room_of[o.id] for o in house.objects if o.type == "Fridge"]
     if len(fridges) == 1:
@@ -140,3 +139,24 @@ def test_the_oracle_priors_know_room_context_only_when_asked(catalog):
     assert rooms.room_share("Cup") == rt.room_share["Cup"]
     assert rooms.same_room("Fridge", "Cup") == rt.same_room[("Fridge", "Cup")]
     assert rooms.p("ON-TOP-OF-COUNTER", "Cup") == plain.p("ON-TOP-OF-COUNTER", "Cup")
+
+
+def test_plan_rooms_gives_the_built_map_the_plans_rooms_and_nothing_else(house, catalog, capsys):
+    from unittest import mock
+
+    from ctxsearch.scripts.experiments import plan_rooms
+
+    spec = RobotSpec()
+    plain = RoomMaps.built(house, catalog, spec)
+    assert plain.rooms is None
+    with mock.patch.object(RoomMaps, "built", classmethod(plan_rooms._with_plan_rooms)):
+        got = RoomMaps.built(house, catalog, spec)
+    assert np.array_equal(got.rooms.labels, RoomLabels.of_plan(house).labels)
+    assert (
+        got.furniture == ()
+        and got.map == plain.map
+        and np.array_equal(got.grid.free, plain.grid.free)
+    )
+    assert RoomMaps.built(house, catalog, spec).rooms is None  # the patch is gone
+    assert plan_rooms.main(["--kb", "x.sqlite", "--episodes", "0", "--out", "o"]) == 2
+    assert "--episodes must be at least 1" in capsys.readouterr().err

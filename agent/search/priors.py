@@ -19,6 +19,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Needs, Rank, parse
 from ctxsearch.knowledge.pooling import PooledCounts
+from ctxsearch.knowledge.room_context import RoomContext
 from ctxsearch.knowledge.store import EvidenceStore
 
 
@@ -65,6 +66,12 @@ def open_knowledge(
     return kb, learned
 
 
+def open_room_context(path: Path | str, catalog: Catalog) -> RoomContext:
+    """The room context learned in the store at ``path`` (knowledge.room_context)."""
+    with EvidenceStore.open(Path(path), catalog, read_only=True) as store:
+        return store.room_context()
+
+
 def open_pooled(path: Path | str, catalog: Catalog) -> PooledCounts:
     """The evidence of the store at ``path`` pooled over the catalog's hierarchy (for the backoff
     estimate); the store's one-line errors as ``open_knowledge``."""
@@ -109,7 +116,9 @@ class PriorSettings:
     interval: IntervalMethod = IntervalMethod.WILSON
     truth: Path | None = None  # ground-truth JSON of `ctxsearch truth`
     truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
-    rooms: bool = False  # the ground truth knows room context too (room_truth, issue 27)
+    # room context (issue 27): the store's learned SAME-ROOM intervals for the learned policies,
+    # the ground truth's (room_truth) for the oracle-prior ones
+    rooms: bool = False
 
 
 @dataclass(frozen=True)
@@ -122,6 +131,7 @@ class Priors:
     truth: ss.ProbabilitySource | None
     pooled: PooledCounts | None = None  # evidence over the hierarchy: the backoff estimate
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
+    room_context: RoomContext | None = None  # learned room context (with --room-context)
 
     def check(self, names: list[str] | tuple[str, ...]) -> None:
         """A one-line error if a policy needs a knowledge store and none was given."""
@@ -136,10 +146,12 @@ class Priors:
         if needs is Needs.KB:
             rooms = len(self.learned) or None
             if self.pooled is not None:
-                return ss.BackoffProbabilities(
+                probs = ss.BackoffProbabilities(
                     self.kb, self.pooled, r or self.rank, rooms, self.min_evidence
                 )
-            return ss.KBProbabilities(self.kb, r or self.rank, rooms=rooms)
+            else:
+                probs = ss.KBProbabilities(self.kb, r or self.rank, rooms=rooms)
+            return probs.with_room_context(self.room_context)
         if needs is Needs.TRUTH:
             return self.truth
         return None
@@ -191,6 +203,14 @@ def make_priors(
             rooms=settings.rooms,
         )  # fmt: skip
     rank = parse(Rank, settings.rank)
-    priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence)
+    rooms = None
+    if settings.rooms and source.path is not None and kb is not None:
+        rooms = open_room_context(source.path, catalog)
+        if rooms.rooms == 0 and any(info(split_name(n)[0]).needs is Needs.KB for n in policies):
+            raise CtxsearchError(
+                f"{source.path}: --room-context: the store holds no room context (it is "
+                "learned in houses, by ctxsearch learn from schema 6 on)"
+            )
+    priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence, rooms)
     priors.check(policies)
     return priors

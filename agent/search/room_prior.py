@@ -106,7 +106,7 @@ class RoomPrior:
         furniture = [o for o in known if self.catalog.type(o.type).is_furniture]
         if not furniture:
             return out
-        where = labels.at(np.array([o.position[:2] for o in furniture]))
+        where = labels.of_objects(furniture)
         for o, r in zip(furniture, where, strict=True):
             p = self.probs.same_room(o.type, self.target)
             if r < 0 or p is None:

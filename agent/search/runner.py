@@ -90,8 +90,8 @@ class SearchConfig:
     map: MapMode = MapMode.BUILT
     # type: any instance of the target type ends a search; instance: the world keeps one
     targets: Targets = Targets.TYPE
-    # Room context (issue 27) for the oracle-prior policies: the true P(SAME-ROOM-AS-F(T)) on
-    # the rooms of the robot's map (agent.search.room_prior); the learned policies have none yet
+    # Room context (issue 27): P(SAME-ROOM-AS-F(T)) on the rooms of the robot's map
+    # (agent.search.room_prior), learned (the store's) or true (the oracle-prior policies')
     rooms: bool = False
 
     def __post_init__(self) -> None:

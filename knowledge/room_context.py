@@ -1,0 +1,109 @@
+"""Room context learned by the robot (issue 27): SAME-ROOM-AS-F relations with the paper's
+counts and Wilson intervals, from what the rooms of its own map held.
+
+At the end of a house visit done to the end, the learner cuts its map into rooms
+(agent.room_segmentation) and records, per segment holding furniture, the instances of each type
+it recognized there (the examined objects and the objects found in their relation volumes, with
+a detector that has false positives only those it once saw with more confidence than a false
+positive can have: ``agent.room_segmentation.Recognized``; ``EvidenceStore.mark_room``'s
+contents, the store's ``room_contents`` table). From those rows:
+
+    n_F      = the recognized instances of furniture type F, over every segment
+    y_{F,T}  = those whose segment also held a T (T = F: a second F)
+    P(SAME-ROOM-AS-F(T)) in the Wilson interval of (y_{F,T}, n_F) at the store's alpha (eq. 1-2)
+    share(T) = the share of segments holding a T (what a room with furniture holds)
+
+When a visit may count (the issue's question): only a visit the learner finished (its tour of
+the house over; one left early by ``--room-budget`` records none), on its map as the tour left
+it; every segment holding recognized furniture counts. Misses: a T the robot never recognized
+in a segment counts as absent, which biases both y and share(T) low, by the same detector's
+misses; false reports: an object counts under the type reported most often, and only once an
+image saw it with more confidence than a false positive can have, so clutter does not put a
+phantom in every room. The
+belief uses the ratio of y / n to share(T) (agent.search.room_prior), in which a bias common
+to both largely cancels. A segment that joins two of the plan's rooms (a door the segmentation missed) counts
+as one room.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.options import Rank
+
+
+def relation_name(ref_type: str) -> str:
+    """``SAME-ROOM-AS-FRIDGE`` for ``Fridge``."""
+    return f"SAME-ROOM-AS-{ref_type.upper()}"
+
+
+@dataclass(frozen=True)
+class RoomContext:
+    """The counts of room context (module docstring) and the intervals they give."""
+
+    n: dict[str, int]  # F: recognized instances of furniture type F
+    y: dict[tuple[str, str], int]  # (F, T): those whose segment also held a T
+    rooms: int  # segments holding furniture
+    holding: dict[str, int]  # T: segments holding a T
+    alpha: float
+
+    @classmethod
+    def from_rows(
+        cls,
+        rows: Iterable[tuple[str, str, int, int, int, str, int]],
+        catalog: Catalog,
+        alpha: float,
+    ) -> RoomContext:
+        """From ``room_contents`` rows (run, style, room_seed, day, segment, type, instances);
+        only segments holding furniture count."""
+        segments: dict[tuple, dict[str, int]] = {}
+        for *visit, segment, typ, k in rows:
+            segments.setdefault((*visit, segment), {})[typ] = int(k)
+        n: dict[str, int] = {}
+        y: dict[tuple[str, str], int] = {}
+        holding: dict[str, int] = {}
+        rooms = 0
+        for held in segments.values():
+            furniture = [t for t in held if catalog.type(t).is_furniture]
+            if not furniture:
+                continue
+            rooms += 1
+            for t in held:
+                holding[t] = holding.get(t, 0) + 1
+            for f in furniture:
+                n[f] = n.get(f, 0) + held[f]
+                for t in held:
+                    if t != f or held[f] > 1:
+                        y[(f, t)] = y.get((f, t), 0) + held[f]
+        return cls(n, y, rooms, holding, alpha)
+
+    def interval(self, ref_type: str, type_name: str) -> tuple[float, float, int, int] | None:
+        """(low, high, y, n) of P(SAME-ROOM-AS-ref(T)); None if no ``ref_type`` was counted."""
+        n = self.n.get(ref_type, 0)
+        if n == 0:
+            return None
+        y = self.y.get((ref_type, type_name), 0)
+        lo, hi = intervals.interval(y, n, self.alpha)
+        return float(lo), float(hi), y, n
+
+    def same_room(self, ref_type: str, type_name: str, rank: Rank) -> float | None:
+        """P(SAME-ROOM-AS-ref(T)) read by ``rank``: the interval's lower bound, its Wilson
+        centre p0 or its upper bound; None if no ``ref_type`` was counted."""
+        got = self.interval(ref_type, type_name)
+        if got is None:
+            return None
+        lo, hi, y, n = got
+        if rank == Rank.LOW:
+            return lo
+        if rank == Rank.HIGH:
+            return hi
+        return float(intervals.p0(y, n, self.alpha))
+
+    def room_share(self, type_name: str) -> float | None:
+        """The share of segments with furniture holding a ``type_name``; None without any."""
+        if self.rooms == 0:
+            return None
+        return self.holding.get(type_name, 0) / self.rooms

@@ -1,0 +1,71 @@
+"""Room context on the robot's own map with the plan's rooms in place of its segmentation: an
+upper bound on what a better segmentation could give room context (issue 27):
+
+    python -m ctxsearch.scripts.experiments.plan_rooms --kb K --style apartment \\
+        --episodes 80 --policies oracle-prior-indirect --out D
+
+Runs ``bench search`` itself (serially) on the built map with ``--room-context``, the search's
+``RoomMaps`` given the plan's rooms (``RoomLabels.of_plan``; wrapped for the run, the rest of the
+built-map scenario as it is: furniture known only once seen). The points of a room whose
+furniture the robot has seen get the room factor even where its map does not reach. Writes the
+benchmark's files into ``--out`` (compare them with a run of the same episodes without room
+context: ``compare_runs``). Not in ``make bench``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from unittest import mock
+
+from ctxsearch.agent.room_segmentation import RoomLabels
+from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.options import MapMode
+from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+
+_BUILT = RoomMaps.built.__func__
+
+
+def _with_plan_rooms(cls, layout, catalog, spec, detector=None) -> RoomMaps:
+    """The built-map scenario's maps, their rooms the plan's."""
+    return replace(_BUILT(cls, layout, catalog, spec, detector), rooms=RoomLabels.of_plan(layout))
+
+
+def run(config: SearchBenchConfig, out: Path):
+    """``bench search`` of ``config`` (built map, room context) with the plan's rooms."""
+    with mock.patch.object(RoomMaps, "built", classmethod(_with_plan_rooms)):
+        return bench_search(config, out, progress=None, bar=False)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kb", type=Path, required=True, help="knowledge store (ctxsearch learn)")
+    ap.add_argument("--style", default="apartment", help="house style (default: apartment)")
+    ap.add_argument("--episodes", type=int, default=40, help="episodes (default: 40)")
+    ap.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    ap.add_argument("--policies", default="oracle-prior-indirect",
+                    help="comma-separated policies (default: %(default)s)")  # fmt: skip
+    ap.add_argument("--draw-cache", type=Path, help="the episode draw's cache (bench search's)")
+    ap.add_argument("--out", type=Path, required=True, help="where the benchmark's files go")
+    a = ap.parse_args(argv)
+    try:
+        if a.episodes < 1:
+            raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
+        config = SearchBenchConfig(
+            style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, map=MapMode.BUILT,
+            policies=tuple(p for p in a.policies.split(",") if p), rooms=True,
+            draw_cache=a.draw_cache,
+        )  # fmt: skip
+        res = run(config, a.out)
+    except CtxsearchError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(res.table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
