@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +40,7 @@ from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, read_json
 from ctxsearch.knowledge.geometry import ObjectInstance, related
+from ctxsearch.knowledge.room_context import relation_name
 
 
 def room_counts(
@@ -183,8 +184,8 @@ def truth_document(
 @dataclass(frozen=True)
 class RoomTruth:
     """Room context from the true plans (issue 27): ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
-    the share of the instances of furniture type F whose room holds at least one T (itself
-    excluded), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at
+    the share of the rooms holding furniture type F that hold at least one T (T = F: a second
+    F; the room is the unit, as knowledge.room_context explains), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at
     least one T (what a furnished room holds; knowledge.room_context counts the robot's own the
     same way). Counted over the rooms of ``houses`` houses (a single-room style's room is its
     world)."""
@@ -192,6 +193,30 @@ class RoomTruth:
     same_room: dict[tuple[str, str], float]
     room_share: dict[str, float]
     houses: int
+    instances: dict[str, int] = field(default_factory=dict)  # n: the rooms holding each F
+    rooms: int = 0  # the furnished rooms counted
+
+    def entries(self) -> list[dict]:
+        """``same_room`` as ``ctxsearch truth`` writes it: one {ref, relation, type, p, se, n, y}
+        per pair, n the rooms holding ref (relation ``SAME-ROOM-AS-<REF>``; se: binomial over
+        the rooms)."""
+        out = []
+        for (f, t), p in sorted(self.same_room.items()):
+            n = self.instances.get(f, 0)
+            if n < 1:
+                continue
+            out.append(
+                {
+                    "ref": f,
+                    "relation": relation_name(f),
+                    "type": t,
+                    "p": p,
+                    "se": math.sqrt(p * (1.0 - p) / n),
+                    "n": n,
+                    "y": round(p * n),
+                }
+            )
+        return out
 
 
 def room_truth(
@@ -216,19 +241,17 @@ def room_truth(
             rooms += 1
             for t in set(types):
                 holding[t] = holding.get(t, 0) + 1
-            for a in objs:
-                if not catalog.type(a.type).is_furniture:
-                    continue
-                n_ref[a.type] = n_ref.get(a.type, 0) + 1
-                others = set(types) if types.count(a.type) > 1 else set(types) - {a.type}
+            for f in {t for t in types if catalog.type(t).is_furniture}:
+                n_ref[f] = n_ref.get(f, 0) + 1
+                others = set(types) if types.count(f) > 1 else set(types) - {f}
                 for t in others:
-                    y[(a.type, t)] = y.get((a.type, t), 0) + 1
+                    y[(f, t)] = y.get((f, t), 0) + 1
     same = {k: v / n_ref[k[0]] for k, v in y.items()}
     for f in n_ref:  # a pair never seen together is a measured 0, not unknown
         for t in catalog.type_names:
             same.setdefault((f, t), 0.0)
     share = {t: holding.get(t, 0) / max(rooms, 1) for t in catalog.type_names}
-    return RoomTruth(same, share, int(samples))
+    return RoomTruth(same, share, int(samples), dict(n_ref), rooms)
 
 
 def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:

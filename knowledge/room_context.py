@@ -8,10 +8,19 @@ a detector that has false positives only those it once saw with more confidence 
 positive can have: ``agent.room_segmentation.Recognized``; ``EvidenceStore.mark_room``'s
 contents, the store's ``room_contents`` table). From those rows:
 
-    n_F      = the recognized instances of furniture type F, over every segment
-    y_{F,T}  = those whose segment also held a T (T = F: a second F)
+    n_F      = the segments holding furniture type F
+    y_{F,T}  = those of them also holding a T (T = F: a second F)
     P(SAME-ROOM-AS-F(T)) in the Wilson interval of (y_{F,T}, n_F) at the store's alpha (eq. 1-2)
     share(T) = the share of segments holding a T (what a room with furniture holds)
+
+The unit is the room, not the instance of F (the paper counts instances of the reference, whose
+relation volumes rarely overlap): the four chairs of a dining room share one room and so one
+outcome for every T, and counting each would make the Wilson interval as if four rooms had been
+seen. Measured on 30 learned apartments (``python -m
+ctxsearch.scripts.experiments.room_coverage``): counting instances, the intervals held the plans'
+value on 0.862 of the informative entries with oracle perception (0.838 with the camera); counting
+rooms, 0.938 (0.908), at a mean width of 0.150 instead of 0.122. The truth
+(envs.truth.room_truth) counts rooms the same way.
 
 When a visit may count (the issue's question): only a visit the learner finished (its tour of
 the house over; one left early by ``--room-budget`` records none), on its map as the tour left
@@ -44,8 +53,8 @@ def relation_name(ref_type: str) -> str:
 class RoomContext:
     """The counts of room context (module docstring) and the intervals they give."""
 
-    n: dict[str, int]  # F: recognized instances of furniture type F
-    y: dict[tuple[str, str], int]  # (F, T): those whose segment also held a T
+    n: dict[str, int]  # F: segments holding a recognized F
+    y: dict[tuple[str, str], int]  # (F, T): those also holding a T (T = F: a second F)
     rooms: int  # segments holding furniture
     holding: dict[str, int]  # T: segments holding a T
     alpha: float
@@ -74,10 +83,10 @@ class RoomContext:
             for t in held:
                 holding[t] = holding.get(t, 0) + 1
             for f in furniture:
-                n[f] = n.get(f, 0) + held[f]
+                n[f] = n.get(f, 0) + 1
                 for t in held:
                     if t != f or held[f] > 1:
-                        y[(f, t)] = y.get((f, t), 0) + held[f]
+                        y[(f, t)] = y.get((f, t), 0) + 1
         return cls(n, y, rooms, holding, alpha)
 
     def interval(self, ref_type: str, type_name: str) -> tuple[float, float, int, int] | None:

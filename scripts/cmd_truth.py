@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.houses import HouseStyle, resolve_style
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments, run_units
@@ -27,7 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the robot's own relation geometry, P(rel(B)) for every reference type A, relation rel of A "
         "and type B: the fraction of A instances with at least one B in rel, its binomial standard "
         "error se and a room-clustered se_room. Writes {style, samples, entries: [{ref, relation, "
-        "type, p, se, n}]} to --out.",
+        "type, p, se, n}]} to --out; for a house style also the room context: same_room "
+        "(P(SAME-ROOM-AS-F(T)) for each furniture type F, the share of the rooms holding an F "
+        "that hold a T), room_share (the share of furnished rooms holding each type) and "
+        "furnished_rooms.",
     )
     p.add_argument(
         "--style",
@@ -57,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
     # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
-    from ctxsearch.envs.truth import sample_counts, truth_document
+    from ctxsearch.envs.truth import room_truth, sample_counts, truth_document
 
     catalog = load_catalog(args.catalog)
     style = resolve_style(args.style, catalog)
@@ -75,6 +78,11 @@ def run(args: argparse.Namespace) -> int:
     )
     rooms = [c for part in parts for c in part]
     truth = truth_document(style, args.samples, args.seed, catalog, rooms)
+    if isinstance(style, HouseStyle):  # room context (issue 27) over the same houses
+        rt = room_truth(style, args.samples, catalog, args.seed)
+        truth["furnished_rooms"] = rt.rooms
+        truth["room_share"] = {t: s for t, s in sorted(rt.room_share.items()) if s > 0}
+        truth["same_room"] = rt.entries()
     dt = time.perf_counter() - t0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     # NaN (se_room of a type seen in one room only) is written as null: strict JSON.
@@ -96,4 +104,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'relation':<24} {'type':<12} {'p':>6} {'se':>6} {'n':>6}")
     for e in entries[: max(0, args.top)]:
         print(f"{e['relation']:<24} {e['type']:<12} {e['p']:6.3f} {e['se']:6.3f} {e['n']:6d}")
+    if "same_room" in truth:
+        print(f"room context over {truth['furnished_rooms']} furnished rooms (p / share of rooms):")
+        share = truth["room_share"]
+        same = sorted(
+            (e for e in truth["same_room"] if e["p"] > 0 and share.get(e["type"], 0) > 0),
+            key=lambda e: (-e["p"] / share[e["type"]], e["relation"], e["type"]),
+        )
+        for e in same[: max(0, args.top)]:
+            print(
+                f"{e['relation']:<24} {e['type']:<12} {e['p']:6.3f} {e['se']:6.3f} {e['n']:6d}"
+                f"  / {share[e['type']]:.3f}"
+            )
     return 0

@@ -351,7 +351,31 @@ def test_truth_cli_on_a_house(tmp_path, capsys):
     assert cli.main(["truth", "--style", "apartment", "--samples", "2", "--out", str(out)]) == 0
     truth = json.loads(out.read_text())
     assert truth["style"] == "apartment" and truth["samples"] == 2 and truth["rooms"] >= 6
-    assert "2 houses (" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "2 houses (" in out_text and "SAME-ROOM-AS-" in out_text
+    # SAME-ROOM-AS-F(T), counted here straight from the two plans: of the rooms holding an F,
+    # those holding a T other than that F (a second F for T = F)
+    lays = [generate_layout(resolve_style("apartment", cat()), s, cat()) for s in (0, 1)]
+    n, y = {}, {}
+    for lay in lays:
+        rooms = {}
+        for o in lay.objects:
+            rooms.setdefault(lay.room_of.get(o.id, 0), []).append(o.type)
+        for types in rooms.values():
+            for f in {t for t in types if cat().type(t).is_furniture}:
+                n[f] = n.get(f, 0) + 1
+                rest = list(types)
+                rest.remove(f)
+                for t in set(rest):
+                    y[(f, t)] = y.get((f, t), 0) + 1
+    same = {(e["ref"], e["type"]): e for e in truth["same_room"]}
+    assert {f for f, _ in same} == set(n)
+    for (f, t), e in same.items():
+        assert e["relation"] == f"SAME-ROOM-AS-{f.upper()}" and e["n"] == n[f]
+        assert e["y"] == y.get((f, t), 0) and e["p"] == pytest.approx(y.get((f, t), 0) / n[f])
+    assert any(e["p"] > 0 for e in same.values()) and any(e["p"] == 0 for e in same.values())
+    assert 0 < truth["furnished_rooms"] <= truth["rooms"]
+    assert all(0 < v <= 1 for v in truth["room_share"].values())
 
 
 def test_every_style_flag_says_house(capsys):

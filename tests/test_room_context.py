@@ -15,7 +15,7 @@ from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.options import Rank
 from ctxsearch.knowledge.ranking import KBProbabilities
-from ctxsearch.knowledge.room_context import RoomContext, relation_name
+from ctxsearch.knowledge.room_context import relation_name
 from ctxsearch.knowledge.store import SCHEMA_VERSION, EvidenceStore, merge_stores
 from tests.old_stores import as_version
 
@@ -37,9 +37,10 @@ def test_counts_and_intervals_are_the_papers_over_rooms_with_furniture(tmp_path,
     with EvidenceStore.open(path, catalog, read_only=True) as s:
         rc = s.room_context()
     assert rc.rooms == 3  # the hall holds no furniture
-    assert rc.n["Fridge"] == 2 and rc.n["Counter"] == 2 and "Cup" not in rc.n
+    # the unit is the room: two counters in one kitchen count once
+    assert rc.n["Fridge"] == 2 and rc.n["Counter"] == 1 and "Cup" not in rc.n
     assert rc.y[("Fridge", "Cup")] == 1 and rc.y[("Fridge", "Remote")] == 1
-    assert rc.y[("Counter", "Counter")] == 2  # a second counter in its room
+    assert rc.y[("Counter", "Counter")] == 1  # a room with a second counter
     assert ("Fridge", "Fridge") not in rc.y  # one fridge is not in the same room as another
     lo, hi = intervals.interval(1, 2, rc.alpha)
     assert rc.interval("Fridge", "Cup") == (pytest.approx(lo), pytest.approx(hi), 1, 2)
@@ -65,7 +66,7 @@ def test_a_visit_keeps_its_first_contents_and_bad_rows_write_nothing(tmp_path, c
                 s.mark_room("r1", "apartment", 4, "done", end_time=1.0, contents=bad)
         assert s.room_status("r1", "apartment", 4) is None  # nothing of it was written
         rc = s.room_context()
-    assert rc.n == {"Fridge": 1, "Counter": 2, "Sofa": 1}
+    assert rc.n == {"Fridge": 1, "Counter": 1, "Sofa": 1}
 
 
 def test_a_version_5_store_reads_no_room_context_and_is_upgraded_on_write(tmp_path, catalog):
@@ -102,9 +103,11 @@ def test_a_damaged_contents_row_is_a_one_line_error(tmp_path, catalog):
     conn.execute("UPDATE room_contents SET type = 'Unicorn' WHERE type = 'Sofa'")
     conn.commit()
     conn.close()
-    with EvidenceStore.open(path, catalog, read_only=True) as s:
-        with pytest.raises(StoreError, match=r"k\.sqlite: damaged knowledge store: room contents"):
-            s.room_context()
+    with (
+        EvidenceStore.open(path, catalog, read_only=True) as s,
+        pytest.raises(StoreError, match=r"k\.sqlite: damaged knowledge store: room contents"),
+    ):
+        s.room_context()
 
 
 def test_learned_probabilities_read_room_context_by_their_rank(tmp_path, catalog):

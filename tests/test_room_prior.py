@@ -34,7 +34,7 @@ def test_room_truth_counts_furniture_rooms_exactly_on_one_house(house, catalog):
     rt = room_truth("apartment", 1, catalog, seed=1234)
     rooms = _rooms_of(house, catalog)
     for f in {o.type for o in house.objects if catalog.type(o.type).is_furniture}:
-        own = [house.room_of[o.id] for o in house.objects if o.type == f]
+        own = {house.room_of[o.id] for o in house.objects if o.type == f}  # rooms, not instances
         for t in ("Cup", "Remote", "Pen"):
             want = sum(t in rooms[r] for r in own) / len(own)
             assert rt.same_room[(f, t)] == pytest.approx(want)
