@@ -9,7 +9,9 @@ belief (prior times miss field, normalised over the points still worth a look) a
 share in the known objects' relation volumes (what context can point at), its share in points
 not yet seen from within the built map's depth range (what only exploring can reach), and the
 share the chosen option expects to find (the first two overlap where a volume is not yet
-surveyed; a policy without knowledge has no volumes). Prints, per policy, the decisions'
+surveyed; a policy without knowledge has no volumes). With ``--room-context`` (issue 27) also
+the share in rooms whose known furniture sets a room factor (``agent.search.room_prior``) and,
+of it, the part not yet surveyed: room context pays before the robot has entered. Prints, per policy, the decisions'
 medians and quartiles of those shares and the episodes' median time to find; ``--csv FILE``
 writes one row per decision. Nothing is written into tracked files.
 
@@ -38,21 +40,32 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode, parse
 from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
 
-FIELDS = ("policy", "episode", "target", "t_s", "kind", "volumes", "unexplored", "expects")
+FIELDS = (
+    "policy", "episode", "target", "t_s", "kind", "volumes", "unexplored", "rooms",
+    "rooms_unexplored", "expects",
+)  # fmt: skip
 
 
-def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float]:
-    """The belief's share in the known relation volumes and in the points not yet surveyed."""
+def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float, float, float]:
+    """The belief's share in the known relation volumes, in the points not yet surveyed, in the
+    rooms with a room factor and in their points not yet surveyed (NaN: not defined)."""
     w = b.weights
+    nan = float("nan")
     if w is None:
-        return float("nan"), float("nan")
+        return nan, nan, nan, nan
     vols = float("nan")  # a policy without knowledge has no volumes
     if search.builder is not None:
         vols = 0.0
         every = search.builder.regions(search.known_objects())
         if every:
             vols = float(w[np.unique(np.concatenate([r.points for r in every]))].sum())
-    return vols, float(w[search.ctx.seen.unseen(sx.MAX_VIEW)].sum())
+    away = search.ctx.seen.unseen(sx.MAX_VIEW)
+    rooms = rooms_away = nan  # without room context
+    if search.rooms is not None:
+        f = search.rooms.factor(search.known_objects(), search.ctx.built)
+        ruled = np.zeros(len(w), bool) if f is None else f != 1.0
+        rooms, rooms_away = float(w[ruled].sum()), float(w[ruled & away].sum())
+    return vols, float(w[away].sum()), rooms, rooms_away
 
 
 def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[dict], dict]:
@@ -60,7 +73,9 @@ def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[
     files in a temporary directory, with the online search's belief and options wrapped for
     reading (each decision's row is written when the chosen option acts)."""
     rows: list[dict] = []
-    shares: dict[int, tuple[float, float]] = {}  # the search (by id): its last belief's shares
+    shares: dict[
+        int, tuple[float, float, float, float]
+    ] = {}  # the search (by id): its last belief's shares
     real_belief = on.OnlineSearch.belief
 
     def belief(self: on.OnlineSearch) -> on.Belief:
@@ -75,13 +90,14 @@ def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[
                 return None
 
             def act() -> None:
-                ctx, (vols, unexplored) = self.ctx, shares[id(self)]
+                ctx, (vols, unexplored, rooms, rooms_away) = self.ctx, shares[id(self)]
                 # P(find) of a sweep or a look (rate times its seconds); a detour states none
                 expects = o.rate * o.seconds if o.kind != "via" else float("nan")
                 rows.append({
                     "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
                     "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
-                    "unexplored": round(unexplored, 4), "expects": round(expects, 4),
+                    "unexplored": round(unexplored, 4), "rooms": round(rooms, 4),
+                    "rooms_unexplored": round(rooms_away, 4), "expects": round(expects, 4),
                 })  # fmt: skip
                 o.act()
 
@@ -126,6 +142,12 @@ def summary(rows: list[dict], times: dict[str, list[float]]) -> list[str]:
             f"{_quartiles(mine, 'expects')} (median [quartiles]); median time to find "
             f"{np.median(ts):.1f} s over {len(ts)} episodes"
         )
+        if any(np.isfinite(r["rooms"]) for r in mine):
+            out.append(
+                f"{p}: belief in rooms with a room factor {_quartiles(mine, 'rooms')}, of it not "
+                f"yet surveyed {_quartiles(mine, 'rooms_unexplored')}; decisions with any room "
+                f"factor {sum(r['rooms'] > 0 for r in mine)} of {len(mine)}"
+            )
     return out
 
 
@@ -141,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         default="frontier,oracle-prior-indirect",
         help="comma-separated online policies (default: %(default)s)",
     )
+    ap.add_argument("--room-context", action="store_true", help="room context in the belief")
     ap.add_argument("--csv", type=Path, help="write one row per decision to this file")
     a = ap.parse_args(argv)
     try:
@@ -149,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         policies = tuple(p for p in a.policies.split(",") if p)
         config = SearchBenchConfig(
             style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, policies=policies,
-            map=parse(MapMode, a.map),
+            map=parse(MapMode, a.map), rooms=a.room_context,
         )  # fmt: skip
         rows, times = measure(config, policies)
     except CtxsearchError as e:
