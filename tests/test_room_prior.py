@@ -160,3 +160,20 @@ def test_plan_rooms_gives_the_built_map_the_plans_rooms_and_nothing_else(house, 
     assert RoomMaps.built(house, catalog, spec).rooms is None  # the patch is gone
     assert plan_rooms.main(["--kb", "x.sqlite", "--episodes", "0", "--out", "o"]) == 2
     assert "--episodes must be at least 1" in capsys.readouterr().err
+
+
+def test_map_range_sets_the_depth_range_of_every_built_map_and_the_sight_cap_for_the_run(capsys):
+    from ctxsearch.agent.search import viewpoints as sx
+    from ctxsearch.scripts.experiments import map_range
+
+    spec = RobotSpec()
+    start = RobotPose(0.0, 0.0, 0.0)
+    before = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
+    with map_range.depth_range(9.5):
+        m = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
+        assert m.max_range == 9.5 and sx.MAX_VIEW == 9.5
+        assert m.resolution == before.resolution  # the other defaults kept
+    after = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
+    assert before.max_range == after.max_range == 5.0 and sx.MAX_VIEW == 5.0
+    assert map_range.main(["--kb", "x.sqlite", "--range", "0.2", "--out", "o"]) == 2
+    assert "--range must be in" in capsys.readouterr().err
