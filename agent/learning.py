@@ -170,6 +170,11 @@ class Summary:
             [
                 f"{w} budget: {self.room_budget_s:g} s simulated per {w}; the budget ended "
                 f"{self.rooms_left_early} of the {done_now} done in this call"
+                + (
+                    " (they record no room contents: no SAME-ROOM counts)"
+                    if w == "house" and self.rooms_left_early
+                    else ""
+                )
             ]
             if self.room_budget_s is not None
             else []

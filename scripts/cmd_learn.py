@@ -105,7 +105,8 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
+        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house (a house "
+        "the budget ends records no room contents, so no SAME-ROOM counts)",
     )
     p.add_argument(
         "--map",
@@ -314,7 +315,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house",
+        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house (a house "
+        "the budget ends records no room contents, so no SAME-ROOM counts)",
     )
     argtypes.add_detector_argument(p)
     argtypes.add_interval_argument(p)

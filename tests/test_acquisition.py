@@ -657,3 +657,17 @@ def test_each_rooms_perception_is_closed_and_released_when_the_room_is_done(tmp_
     s, _ = _learn(tmp_path, rooms=3, perception="tracked", perceive=Tracked, on_examination=on_exam)
     assert s.rooms == 3 and len(made) == 3 and all(closed)
     assert alive_before and max(alive_before) == 0  # no earlier room's perception kept alive
+
+
+def test_the_summary_says_a_house_the_budget_ended_records_no_room_contents():
+    from ctxsearch.agent.learning import Summary
+
+    s = Summary(run="r", room_budget_s=600.0, rooms_done_now=3, rooms_left_early=2)
+    s.world = "house"
+    assert "the budget ended 2 of the 3 houses done in this call (they record no room" in "\n".join(
+        s.lines()
+    )
+    s.rooms_left_early = 0
+    assert "room contents" not in "\n".join(s.lines())
+    s.world, s.rooms_left_early = "room", 2  # a single room records none anyway: not said
+    assert "room contents" not in "\n".join(s.lines())
