@@ -17,7 +17,6 @@ bench``.
 
 from __future__ import annotations
 
-import argparse
 import inspect
 import sys
 import time
@@ -29,8 +28,8 @@ from unittest import mock
 from ctxsearch.agent import mapping
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import MapMode
 from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+from ctxsearch.scripts.experiments.plan_rooms import config_of, parser
 
 MIN_RANGE, MAX_RANGE = 1.0, 30.0  # m
 
@@ -56,29 +55,15 @@ def run(config: SearchBenchConfig, out: Path, metres: float):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--kb", type=Path, required=True, help="knowledge store (ctxsearch learn)")
-    ap.add_argument("--style", default="apartment", help="house style (default: apartment)")
+    ap = parser(__doc__.split("\n\n")[0], "frontier,oracle-prior-indirect")
     ap.add_argument("--range", type=float, default=10.0, help="depth range, m (default: 10)")
-    ap.add_argument("--episodes", type=int, default=40, help="episodes (default: 40)")
-    ap.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
-    ap.add_argument("--policies", default="frontier,oracle-prior-indirect",
-                    help="comma-separated policies (default: %(default)s)")  # fmt: skip
-    ap.add_argument("--draw-cache", type=Path, help="the episode draw's cache (bench search's)")
-    ap.add_argument("--out", type=Path, required=True, help="where the benchmark's files go")
     a = ap.parse_args(argv)
     try:
-        if a.episodes < 1:
-            raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
+        config = config_of(a)
         if not MIN_RANGE <= a.range <= MAX_RANGE:
             raise CtxsearchError(
                 f"--range must be in [{MIN_RANGE:g}, {MAX_RANGE:g}] m (got {a.range})"
             )
-        config = SearchBenchConfig(
-            style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, map=MapMode.BUILT,
-            policies=tuple(p for p in a.policies.split(",") if p), rooms=True,
-            draw_cache=a.draw_cache,
-        )  # fmt: skip
         res, cpu = run(config, a.out, a.range)
     except CtxsearchError as e:
         print(f"error: {e}", file=sys.stderr)

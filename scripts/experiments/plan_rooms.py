@@ -40,26 +40,35 @@ def run(config: SearchBenchConfig, out: Path):
         return bench_search(config, out, progress=None, bar=False)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def parser(description: str, policies: str) -> argparse.ArgumentParser:
+    """The arguments of a built-map run with room context (this module's and ``map_range``'s)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--kb", type=Path, required=True, help="knowledge store (ctxsearch learn)")
     ap.add_argument("--style", default="apartment", help="house style (default: apartment)")
     ap.add_argument("--episodes", type=int, default=40, help="episodes (default: 40)")
     ap.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
-    ap.add_argument("--policies", default="oracle-prior-indirect",
+    ap.add_argument("--policies", default=policies,
                     help="comma-separated policies (default: %(default)s)")  # fmt: skip
     ap.add_argument("--draw-cache", type=Path, help="the episode draw's cache (bench search's)")
     ap.add_argument("--out", type=Path, required=True, help="where the benchmark's files go")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def config_of(a: argparse.Namespace) -> SearchBenchConfig:
+    """The built-map benchmark with room context that ``parser``'s arguments ask for."""
+    if a.episodes < 1:
+        raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
+    return SearchBenchConfig(
+        style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, map=MapMode.BUILT,
+        policies=tuple(p for p in a.policies.split(",") if p), rooms=True,
+        draw_cache=a.draw_cache,
+    )  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parser(__doc__.split("\n\n")[0], "oracle-prior-indirect").parse_args(argv)
     try:
-        if a.episodes < 1:
-            raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
-        config = SearchBenchConfig(
-            style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, map=MapMode.BUILT,
-            policies=tuple(p for p in a.policies.split(",") if p), rooms=True,
-            draw_cache=a.draw_cache,
-        )  # fmt: skip
-        res = run(config, a.out)
+        res = run(config_of(a), a.out)
     except CtxsearchError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
