@@ -25,8 +25,8 @@ rooms', and ``se_room`` treats the rooms as the independent units.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +40,7 @@ from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, read_json
 from ctxsearch.knowledge.geometry import ObjectInstance, related
-from ctxsearch.knowledge.room_context import relation_name
+from ctxsearch.knowledge.room_context import RoomContext, relation_name
 
 
 def room_counts(
@@ -181,20 +181,56 @@ def truth_document(
     return out
 
 
+def room_contents(layout: RoomLayout) -> list[tuple[int, str, int]]:
+    """(room, type, instances) of every type in every room of ``layout``'s plan (a single-room
+    style's world is room 0): the true counterpart of what a learning visit records."""
+    counts: dict[tuple[int, str], int] = {}
+    for o in layout.objects:
+        key = (layout.room_of.get(o.id, 0), o.type)
+        counts[key] = counts.get(key, 0) + 1
+    return sorted((r, t, k) for (r, t), k in counts.items())
+
+
+def sample_counts_and_rooms(
+    style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog
+) -> tuple[list, list[list[tuple[int, str, int]]]]:
+    """``sample_counts`` of ``seeds`` and each world's ``room_contents``, every world generated
+    once (``ctxsearch truth`` on a house style, a sweep unit)."""
+    counts, rooms = [], []
+    for s in seeds:
+        layout = generate_layout(style, s, catalog)
+        counts.extend(world_counts(layout, catalog))
+        rooms.append(room_contents(layout))
+    return counts, rooms
+
+
 @dataclass(frozen=True)
 class RoomTruth:
     """Room context from the true plans (issue 27): ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
     the share of the rooms holding furniture type F that hold at least one T (T = F: a second
-    F; the room is the unit, as knowledge.room_context explains), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at
-    least one T (what a furnished room holds; knowledge.room_context counts the robot's own the
-    same way). Counted over the rooms of ``houses`` houses (a single-room style's room is its
-    world)."""
+    F), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at least one
+    T. Counted by ``knowledge.room_context.RoomContext``, as the robot's own rooms are (the room
+    is the unit), over the rooms of ``houses`` houses (a single-room style's room is its world);
+    ``counts``: those counts (n: the rooms holding each F, y: those also holding T)."""
 
     same_room: dict[tuple[str, str], float]
     room_share: dict[str, float]
     houses: int
-    instances: dict[str, int] = field(default_factory=dict)  # n: the rooms holding each F
-    rooms: int = 0  # the furnished rooms counted
+    counts: RoomContext
+
+    @classmethod
+    def of_contents(
+        cls, worlds: Sequence[Sequence[tuple[int, str, int]]], catalog: Catalog
+    ) -> RoomTruth:
+        """From each world's ``room_contents``."""
+        rows = [(i, r, t, k) for i, rooms in enumerate(worlds) for r, t, k in rooms]
+        rc = RoomContext.from_rows(rows, catalog, alpha=0.05)  # alpha: no interval is read
+        same = {(f, t): y / rc.n[f] for (f, t), y in rc.y.items()}
+        for f in rc.n:  # a pair never seen together is a measured 0, not unknown
+            for t in catalog.type_names:
+                same.setdefault((f, t), 0.0)
+        share = {t: rc.holding.get(t, 0) / max(rc.rooms, 1) for t in catalog.type_names}
+        return cls(same, share, len(worlds), rc)
 
     def entries(self) -> list[dict]:
         """``same_room`` as ``ctxsearch truth`` writes it: one {ref, relation, type, p, se, n, y}
@@ -202,9 +238,7 @@ class RoomTruth:
         the rooms)."""
         out = []
         for (f, t), p in sorted(self.same_room.items()):
-            n = self.instances.get(f, 0)
-            if n < 1:
-                continue
+            n = self.counts.n[f]
             out.append(
                 {
                     "ref": f,
@@ -213,7 +247,7 @@ class RoomTruth:
                     "p": p,
                     "se": math.sqrt(p * (1.0 - p) / n),
                     "n": n,
-                    "y": round(p * n),
+                    "y": self.counts.y.get((f, t), 0),
                 }
             )
         return out
@@ -226,32 +260,10 @@ def room_truth(
     worlds ``ground_truth`` counts)."""
     if not isinstance(style, Style | HouseStyle):
         style = resolve_style(style, catalog)
-    n_ref: dict[str, int] = {}
-    y: dict[tuple[str, str], int] = {}
-    rooms, holding = 0, {}  # furnished rooms, and those holding each type
-    for s in range(int(seed), int(seed) + int(samples)):
-        layout = generate_layout(style, s, catalog)
-        by_room: dict[int, list[ObjectInstance]] = {}
-        for o in layout.objects:
-            by_room.setdefault(layout.room_of.get(o.id, 0), []).append(o)
-        for objs in by_room.values():
-            types = [o.type for o in objs]
-            if not any(catalog.type(t).is_furniture for t in types):
-                continue
-            rooms += 1
-            for t in set(types):
-                holding[t] = holding.get(t, 0) + 1
-            for f in {t for t in types if catalog.type(t).is_furniture}:
-                n_ref[f] = n_ref.get(f, 0) + 1
-                others = set(types) if types.count(f) > 1 else set(types) - {f}
-                for t in others:
-                    y[(f, t)] = y.get((f, t), 0) + 1
-    same = {k: v / n_ref[k[0]] for k, v in y.items()}
-    for f in n_ref:  # a pair never seen together is a measured 0, not unknown
-        for t in catalog.type_names:
-            same.setdefault((f, t), 0.0)
-    share = {t: holding.get(t, 0) / max(rooms, 1) for t in catalog.type_names}
-    return RoomTruth(same, share, int(samples), dict(n_ref), rooms)
+    seeds = range(int(seed), int(seed) + int(samples))
+    return RoomTruth.of_contents(
+        [room_contents(generate_layout(style, s, catalog)) for s in seeds], catalog
+    )
 
 
 def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:

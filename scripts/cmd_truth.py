@@ -60,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
     # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
-    from ctxsearch.envs.truth import room_truth, sample_counts, truth_document
+    from ctxsearch.envs.truth import RoomTruth, sample_counts_and_rooms, truth_document
 
     catalog = load_catalog(args.catalog)
     style = resolve_style(args.style, catalog)
@@ -69,18 +69,18 @@ def run(args: argparse.Namespace) -> int:
     chunks = [seeds[i : i + SEEDS_PER_UNIT] for i in range(0, len(seeds), SEEDS_PER_UNIT)]
     sweep = SweepOptions.from_args(args)
     parts = run_units(
-        functools.partial(sample_counts, style, catalog=catalog),
+        functools.partial(sample_counts_and_rooms, style, catalog=catalog),
         chunks,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
         desc=f"truth {style.name} ({SEEDS_PER_UNIT} worlds per unit)",
         progress=not args.no_progress and sys.stderr.isatty(),
     )
-    rooms = [c for part in parts for c in part]
+    rooms = [c for counts, _ in parts for c in counts]
     truth = truth_document(style, args.samples, args.seed, catalog, rooms)
     if isinstance(style, HouseStyle):  # room context (issue 27) over the same houses
-        rt = room_truth(style, args.samples, catalog, args.seed)
-        truth["furnished_rooms"] = rt.rooms
+        rt = RoomTruth.of_contents([w for _, worlds in parts for w in worlds], catalog)
+        truth["furnished_rooms"] = rt.counts.rooms
         truth["room_share"] = {t: s for t, s in sorted(rt.room_share.items()) if s > 0}
         truth["same_room"] = rt.entries()
     dt = time.perf_counter() - t0

@@ -11,9 +11,9 @@ not yet seen from within the built map's depth range (what only exploring can re
 share the chosen option expects to find (the first two overlap where a volume is not yet
 surveyed; a policy without knowledge has no volumes). With ``--room-context`` (issue 27) also
 the share in rooms whose known furniture sets a room factor (``agent.search.room_prior``) and,
-of it, the part not yet surveyed: room context pays before the robot has entered. Prints, per policy, the decisions'
-medians and quartiles of those shares and the episodes' median time to find; ``--csv FILE``
-writes one row per decision. Nothing is written into tracked files.
+of it, the part not yet surveyed: room context pays before the robot has entered. Prints, per
+policy, the decisions' medians and quartiles of those shares and the episodes' median time to
+find; ``--csv FILE`` writes one row per decision. Nothing is written into tracked files.
 
 The belief is read through the online search's own ``belief()`` and its options (wrapped for the
 run; nothing in the behaviour changes: the episodes' times are the benchmark's). The share an

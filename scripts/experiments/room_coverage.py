@@ -66,8 +66,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(
         f"{a.kb}: {out['rooms']} rooms, {out['entries']} SAME-ROOM entries against "
-        f"{a.truth_samples} worlds of {a.style}: coverage {out['coverage']:.3f}, on informative entries "
-        f"{out['coverage_informative']:.3f}; mean width {out['mean_width']:.3f}; mean |p0 - p_true| "
+        f"{a.truth_samples} worlds of {a.style}: coverage {out['coverage']:.3f}, on informative "
+        f"entries {out['coverage_informative']:.3f}; mean width {out['mean_width']:.3f}; mean |p0 - p_true| "
         f"{out['mean_abs_error']:.3f}; mean share of rooms holding a type {out['mean_share_learned']:.3f} "
         f"learned, {out['mean_share_true']:.3f} true"
     )
