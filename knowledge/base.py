@@ -16,9 +16,11 @@ n_S changed for all pairs of S; see DESIGN.md).
 The HIF score of a type A (Figure 2, line 11) averages impact(y_{rel,t}, n_A) over rel in
 RELATIONS(A) and all t in TYPES. Most y are 0, so the average is
 (sum over nonzero y + (R_A*T - nnz_A) * impact(0, n_A)) / (R_A*T), and since the score depends
-only on the multiset of y values, impact is evaluated once per distinct y (at most n_A + 1 of
-them): O(nnz_A) with a small constant, never O(T). Scores are cached per type and invalidated
-only for the type whose counts change.
+only on the multiset of y values, impact is evaluated once per distinct y, and since eq. 3 is
+symmetric (impact(y, n) = impact(n - y, n): eq. 2's y (n - y) is, and the two outcomes trade
+places), once per distinct min(y, n - y), at most n_A / 2 + 1 of them: O(nnz_A) with a small
+constant, never O(T). A choice scores all its uncached candidates in one numpy pass. Scores are
+cached per type and invalidated only for the type whose counts change.
 """
 
 from __future__ import annotations
@@ -132,14 +134,31 @@ def _d_fixed_n(y: np.ndarray, n: float, z: float) -> np.ndarray:
     return scale * np.sqrt(y * (n - y) * (1.0 / (n * n)) + z2 / (4.0 * n))
 
 
-def _impact_fixed_n(y: np.ndarray, n: int, alpha: float) -> np.ndarray:
-    """Eq. 3 for a vector of y and one n (same values as intervals.impact, within round-off)."""
-    if n == 0:
-        return np.broadcast_to(np.asarray(intervals.impact(0.0, 0.0, alpha)), y.shape)
-    z = intervals.z_value(alpha)
-    d0 = _d_fixed_n(y, float(n), z)
-    d1 = _d_fixed_n(y, float(n + 1), z)
-    d2 = _d_fixed_n(y + 1.0, float(n + 1), z)
+def _d_of_types(y: np.ndarray, n: np.ndarray, lens: np.ndarray, z: float) -> np.ndarray:
+    """``_d_fixed_n`` for values ``y`` of several types in runs, run j of ``lens[j]`` values
+    with n = ``n[j]``: what depends on n alone is computed once per run, then repeated. The same
+    operations on the same operands, so the same bits as ``_d_fixed_n`` run by run."""
+    z2 = z * z
+    scale = np.repeat(z / np.sqrt(n) / (1.0 + z2 / n), lens)
+    inv, c = np.repeat(1.0 / (n * n), lens), np.repeat(z2 / (4.0 * n), lens)
+    t = np.repeat(n, lens)
+    np.subtract(t, y, out=t)
+    np.multiply(t, y, out=t)  # y * (n - y): multiplication commutes bit for bit
+    t *= inv
+    t += c
+    np.sqrt(t, out=t)
+    t *= scale
+    return t
+
+
+def _impact_values(k: np.ndarray, n: np.ndarray, lens: np.ndarray, z: float) -> np.ndarray:
+    """Eq. 3 for values ``k`` of several types in runs (``_d_of_types``; every n > 0), with
+    ``_d_fixed_n``'s operations in their order: only +, -, *, / and sqrt, each correctly
+    rounded, so a value's bits do not depend on the other values, and equal those of one n at a
+    time (within 1e-14 of intervals.impact)."""
+    d0 = _d_of_types(k, n, lens, z)
+    d1 = _d_of_types(k, n + 1.0, lens, z)
+    d2 = _d_of_types(k + 1.0, n + 1.0, lens, z)
     np.subtract(d1, d0, out=d1)
     np.subtract(d2, d0, out=d2)
     np.abs(d1, out=d1)
@@ -149,14 +168,22 @@ def _impact_fixed_n(y: np.ndarray, n: int, alpha: float) -> np.ndarray:
     return d1
 
 
+def _impact_fixed_n(y: np.ndarray, n: int, alpha: float) -> np.ndarray:
+    """Eq. 3 for a vector of y and one n (same values as intervals.impact, within round-off)."""
+    if n == 0:
+        return np.broadcast_to(np.asarray(intervals.impact(0.0, 0.0, alpha)), y.shape)
+    y = np.asarray(y, float)
+    return _impact_values(y, np.array([float(n)]), np.array([len(y)]), intervals.z_value(alpha))
+
+
 def _score_terms(ys: np.ndarray | None, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(k, w): eq. 3's average over a type's m entries as sum w fn(k, n) / m, from its nonzero
+    """(k, w): a score's average over a type's m entries as sum w fn(k, n) / m, from its nonzero
     counts ``ys``: each distinct y once with its multiplicity where few distinct values are
     possible (y <= n), else every nonzero y once and the zeros together."""
     nnz = 0 if ys is None else len(ys)
     if nnz == 0:
         return np.zeros(1), np.array([float(m)])
-    if n <= 4 * nnz + 64:
+    if _few_values(n, nnz):
         hist = np.bincount(ys if ys.dtype != np.uint64 else ys.astype(np.int64))
         hist[0] = m - nnz
         k = np.flatnonzero(hist)
@@ -166,29 +193,69 @@ def _score_terms(ys: np.ndarray | None, m: int, n: int) -> tuple[np.ndarray, np.
     return np.concatenate([[0.0], ys.astype(float)]), w
 
 
-def _impact_batch(terms: list, alpha: float) -> list[float]:
-    """d_A of several types, each (m, n, k, w) from ``_score_terms`` or None (no relations: 0),
-    with eq. 3 evaluated for all of them in one numpy pass. ``_impact_fixed_n``'s operations in
-    its order, elementwise on a vector of n, so every value is the same bit for bit; each type's
-    weighted sum is its own dot product, as in ``_compute_score``."""
-    live = [t for t in terms if t is not None and t[1] > 0]
-    if live:
-        k = np.concatenate([t[2] for t in live])
-        n = np.repeat(np.array([float(t[1]) for t in live]), [len(t[2]) for t in live])
-        z = intervals.z_value(alpha)
-        d0, d1, d2 = _d_fixed_n(k, n, z), _d_fixed_n(k, n + 1.0, z), _d_fixed_n(k + 1.0, n + 1.0, z)
-        vals = 2.0 * np.maximum(np.abs(d1 - d0), np.abs(d2 - d0))
-    out, start = [], 0
-    for t in terms:
-        if t is None:
-            out.append(0.0)
-            continue
-        m, n, k, w = t
-        if n > 0:
-            part, start = vals[start : start + len(k)].copy(), start + len(k)
-        else:
-            part = np.full(k.shape, _impact_unseen(alpha))
-        out.append(float(w @ part) / m)
+def _few_values(n, nnz):
+    """Whether a type's counts are tallied by value (a histogram over 0..n) rather than listed:
+    where n is small against its nonzero counts (scalars or arrays)."""
+    return n <= 4 * nnz + 64
+
+
+def _impact_scores(kb: KnowledgeBase, types: Sequence[int]) -> np.ndarray:
+    """The paper's d_A of each type index in ``types`` in one numpy pass (the module docstring's
+    sum): the types' value tallies in one bincount, eq. 3 on all of them at once
+    (``_impact_values``), each type's weighted sum its own dot product. A type's score depends
+    only on its own counts, in the same order, whichever types share the batch: one at a time or
+    fifty, the same bits, and the bits of the per-type computation this replaced (so the same
+    HIF choices where round-off decides a tie of equal scores: impact(y, n) = impact(n - y, n)).
+    Types without relations score 0; never-examined ones impact(0, 0)."""
+    idx = np.asarray(types, np.int64)
+    m, n = kb._n_rel[idx] * kb._T, kb._n[idx]
+    counts = [kb._counts[a] for a in types]
+    nnz = np.array([0 if c is None else len(c.ys) for c in counts], np.int64)
+    out = np.zeros(len(idx))
+    out[(m > 0) & (n == 0)] = _impact_unseen(kb.alpha)
+    live = (m > 0) & (n > 0)
+    hist = live & _few_values(n, nnz)
+    k_parts, w_parts, order = [], [], []  # order: (types, how many values each)
+    h = np.flatnonzero(hist)
+    if len(h):
+        width = n[h] + 1
+        off = np.concatenate([[0], np.cumsum(width)[:-1]])
+        keys = np.repeat(off, nnz[h])
+        ys = [counts[j].ys for j in h if counts[j] is not None]
+        if ys:
+            keys += np.concatenate(ys).astype(np.int64)
+        tally = np.bincount(keys, minlength=int(width.sum()))
+        tally[off] = m[h] - nnz[h]  # the zeros (a nonzero y never lands on a type's bin 0)
+        at = np.flatnonzero(tally)
+        per = np.add.reduceat(tally != 0, off)
+        k_parts.append((at - np.repeat(off, per)).astype(float))
+        w_parts.append(tally[at].astype(float))
+        order.append((h, per))
+    r = np.flatnonzero(live & ~hist)  # few nonzero y against a large n: listed, zeros first
+    if len(r):
+        size = nnz[r] + 1
+        first = np.concatenate([[0], np.cumsum(size)[:-1]])
+        k = np.zeros(int(size.sum()))
+        listed = np.ones(len(k), bool)
+        listed[first] = False
+        ys = [counts[j].ys for j in r if counts[j] is not None]
+        if ys:
+            k[listed] = np.concatenate(ys)
+        w = np.ones(len(k))
+        w[first] = m[r] - nnz[r]
+        k_parts.append(k)
+        w_parts.append(w)
+        order.append((r, size))
+    if k_parts:
+        k, w = np.concatenate(k_parts), np.concatenate(w_parts)
+        runs = np.concatenate([t for t, _ in order])  # the types, in the order of their values
+        lens = np.concatenate([c for _, c in order])
+        vals = _impact_values(k, n[runs].astype(float), lens, intervals.z_value(kb.alpha))
+        start = 0
+        for j, end in zip(runs.tolist(), np.cumsum(lens).tolist(), strict=True):
+            # its own dot product, as for the type alone: the same bits
+            out[j] = float(w[start:end] @ vals[start:end]) / int(m[j])
+            start = end
     return out
 
 
@@ -541,16 +608,20 @@ class KnowledgeBase:
         """Figure 2, line 12: the candidate type with the largest score.
 
         Ties (common: all unseen types score impact(0, 0)) go to the type listed first in the
-        catalog, so the choice is deterministic and independent of the candidates' order.
+        catalog, so the choice is deterministic and independent of the candidates' order. Scores
+        equal only in exact arithmetic (impact(y, n) = impact(n - y, n), so two types with n = 1
+        tie whatever they saw) can differ in the last bit, which then decides; kept as it is
+        because making them exact ties would change every learned store's order.
         """
         cands = sorted({self._idx(t) for t in candidate_types})
         if not cands:
             raise CtxsearchError("no candidate types to choose from")
         names = self._names
         if fn is intervals.impact:
-            _cache_impacts(self, cands)
-        scores = [self.type_score(names[a], fn) for a in cands]
-        return names[cands[int(np.argmax(scores))]]
+            scores = _cached_impacts(self, cands)
+        else:
+            scores = [self.type_score(names[a], fn) for a in cands]
+        return names[cands[max(range(len(cands)), key=scores.__getitem__)]]
 
     def clear_cache(self) -> None:
         """Forget every cached type score (benchmarks use it to time cold choices)."""
@@ -558,16 +629,15 @@ class KnowledgeBase:
 
     # ---- internals ----------------------------------------------------------------------------
     def _compute_score(self, a: int, fn: ScoreFn) -> float:
+        if fn is intervals.impact:
+            return float(_impact_scores(self, [a])[0])
         m = int(self._n_rel[a]) * self._T
         if m == 0:
             return 0.0
         n = int(self._n[a])
         c = self._counts[a]
         k, w = _score_terms(c.ys if c is not None else None, m, n)
-        if fn is intervals.impact:
-            vals = _impact_fixed_n(k, n, self.alpha)
-        else:
-            vals = np.broadcast_to(np.asarray(fn(k, float(n), self.alpha), float), k.shape)
+        vals = np.broadcast_to(np.asarray(fn(k, float(n), self.alpha), float), k.shape)
         return float(w @ vals) / m
 
     def _idx(self, name: str) -> int:
@@ -588,14 +658,12 @@ class KnowledgeBase:
         self._score_cache.pop(a, None)
 
 
-def _cache_impacts(kb: KnowledgeBase, types: Sequence[int]) -> None:
-    """Cache the paper's d_A of several types of ``kb`` at once (``_impact_batch``: one numpy
-    pass for all of them, the same values as ``KnowledgeBase._compute_score`` bit for bit)."""
+def _cached_impacts(kb: KnowledgeBase, types: Sequence[int]) -> list[float]:
+    """The paper's d_A of several types of ``kb``, those not cached computed at once
+    (``_impact_scores``, the same bits as one at a time) and cached."""
     cache = kb._score_cache
-    todo = [a for a in types if intervals.impact not in cache.get(a, {})]
-    terms = []
-    for a in todo:
-        m, c, n = int(kb._n_rel[a]) * kb._T, kb._counts[a], int(kb._n[a])
-        terms.append((m, n, *_score_terms(c.ys if c is not None else None, m, n)) if m else None)
-    for a, score in zip(todo, _impact_batch(terms, kb.alpha), strict=True):
-        cache.setdefault(a, {})[intervals.impact] = score
+    todo = [a for a in types if intervals.impact not in cache.get(a, ())]
+    if todo:
+        for a, score in zip(todo, _impact_scores(kb, todo).tolist(), strict=True):
+            cache.setdefault(a, {})[intervals.impact] = score
+    return [cache[a][intervals.impact] for a in types]

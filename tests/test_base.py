@@ -282,6 +282,22 @@ def test_fast_impact_equals_intervals_impact():
             )
 
 
+def test_impact_is_symmetric_so_scores_fold_y_onto_min_y_n_minus_y(cat):
+    """The HIF score evaluates eq. 3 once per min(y, n - y): that is exact because impact(y, n)
+    = impact(n - y, n); a type whose counts sit above n / 2 scores as the brute force does."""
+    for alpha in (0.10, 0.05):
+        for n in (1, 2, 3, 8, 51, 1000):
+            y = np.arange(n + 1, dtype=float)
+            np.testing.assert_allclose(
+                intervals.impact(y, n, alpha), intervals.impact(n - y, n, alpha), rtol=0, atol=1e-15
+            )
+    kb = KnowledgeBase(cat)
+    kb.add_counts("Desk", 40, {("NEAR-DESK", "Cup"): 39, ("UNDER-DESK", "Chair"): 40})
+    kb.add_counts("Cup", 5000, {("NEAR-CUP", "Desk"): 4990, ("NEAR-CUP", "Book"): 7})  # listed
+    for t in ("Desk", "Cup"):
+        assert kb.type_impact(t) == pytest.approx(brute_force_score(kb, t), abs=1e-12)
+
+
 def test_large_n_with_few_nonzero_and_dtype_promotion(cat):
     kb = KnowledgeBase(cat)
     kb.add_counts("Desk", 5000, {("NEAR-DESK", "Cup"): 4999, ("UNDER-DESK", "Chair"): 3})
@@ -346,7 +362,7 @@ def test_clear_cache_forces_recomputation(cat):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_a_choice_scores_its_candidates_at_once_bit_for_bit(seed):
-    """``choose`` computes the uncached candidates' d_A in one numpy pass (``_impact_batch``):
+    """``choose`` computes the uncached candidates' d_A in one numpy pass (``_impact_scores``):
     every score equals the one-type computation exactly, on both of its paths (few distinct
     counts, and many), for unseen types and types without relations."""
     rng = np.random.default_rng(seed)
