@@ -45,6 +45,8 @@ from ctxsearch.knowledge.geometry import ObjectInstance
 # are) and holds this many expected seconds of weight: after that much of a kind was done, its
 # measured ratio weighs as much as the prior.
 CALIBRATION_PRIOR_S = 30.0
+# Choose by a two-step look-ahead (``OnlineSearch.choose``) rather than greedily.
+LOOKAHEAD = False
 
 
 @dataclass(frozen=True)
@@ -69,13 +71,22 @@ class ViaOption:
 class Option:
     """One thing the online search may do next: its probability of finding the target per
     expected second, a label for the log, the action, its kind (calibrated apart: ``region``,
-    ``explore``, ``via``) and its expected seconds."""
+    ``explore``, ``via``) and its expected seconds; where it starts and where it leaves the
+    robot (base positions, for the look-ahead)."""
 
     rate: float
     label: str
     act: Callable[[], None]
     kind: str
     seconds: float
+    start: tuple[float, float] | None = None
+    end: tuple[float, float] | None = None
+    finds: tuple[np.ndarray, np.ndarray] | None = None  # (belief points, P(found) of each)
+
+    @property
+    def found(self) -> float:
+        """The probability it finds the target (its rate times its expected seconds)."""
+        return self.rate * self.seconds
 
 
 @dataclass(frozen=True)
@@ -114,6 +125,7 @@ class OnlineSearch:
         prior = ss.expected_mass(ctx.catalog, probs, ctx.target) if probs else None
         self.prior = prior or 1.0
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
+        self.weights: np.ndarray | None = None  # the belief at the last decision
 
     def run(self) -> None:
         """Look around (on the built map: its first images map the floor), then take the best
@@ -133,7 +145,9 @@ class OnlineSearch:
             if b.left < belief.STOP_MASS:
                 ctx.note(f"{100 * b.left:.1f}% of the detectable mass left: stop")
                 return
-            options = [o for o in (self.region_option(b), self.direct_option(b.weights)) if o]
+            self.weights = b.weights
+            options = self.region_options(b)
+            options += [o for o in [self.direct_option(b.weights)] if o]
             options += [o for o in (self.via_option(v, b.mass) for v in self.vias) if o]
             if not options:
                 if self.explorer.unstick():
@@ -141,14 +155,54 @@ class OnlineSearch:
                     continue
                 ctx.note(f"no option left with {100 * b.left:.1f}% of the detectable mass")
                 return
-            best = max(options, key=lambda o: o.rate / self.scale(o.kind))
+            best, then = self.choose(options)
             f = self.scale(best.kind)
-            ctx.note(f"{best.label} ({best.rate / f:.4f}/s, time x{f:.2f}; {len(options)} options)")
+            ahead = f"; then {then.label}" if then is not None else ""
+            ctx.note(
+                f"{best.label} ({best.rate / f:.4f}/s, time x{f:.2f}; {len(options)} options{ahead})"
+            )
             t0 = ctx.elapsed
             best.act()
             sums = self.took.setdefault(best.kind, [0.0, 0.0])
             sums[0] += best.seconds
             sums[1] += ctx.elapsed - t0
+
+    def choose(self, options: Sequence[Option]) -> tuple[Option, Option | None]:
+        """The option to take now, and the one the plan takes after it (None: none).
+
+        Without ``LOOKAHEAD``: the most probability per expected second (calibrated). With it, a
+        two-step look-ahead (a close look costs a drive first, which greedy choice weighs
+        against the look alone): option a followed by option b finds the target with
+        probability m_a + m_b in expected seconds
+        t_a + (1 - m_a) t_b|a, where t_b|a is b's seconds with its drive from where a leaves
+        the robot instead of from here (straight lines at the drive speed, the difference added
+        to b's own estimate), and m_b what b would find of the mass a leaves: its points'
+        belief times P(b finds them) times (1 - P(a finds them)), a share of b's own (a
+        detour, which looks for another type, overlaps nothing). Each a is worth its best plan,
+        a alone or a then some b, per second; the best a is taken and the next step decided
+        again (receding horizon)."""
+        if not LOOKAHEAD or len(options) < 2:
+            best = max(options, key=lambda o: o.rate / self.scale(o.kind))
+            return best, None
+        here = self.ctx.body.pose().xy
+        speed = self.ctx.time_model.drive_speed
+        secs = [o.seconds * self.scale(o.kind) for o in options]
+        found = [min(max(o.found, 0.0), 1.0) for o in options]
+        away = [_dist(here, o.start) for o in options]
+        plans = []
+        for i, a in enumerate(options):
+            value, then = found[i] / max(secs[i], 1e-6), None
+            for j, b in enumerate(options):
+                if j == i:
+                    continue
+                t_b = max(secs[j] + (_dist(a.end, b.start) - away[j]) / speed, 1e-6)
+                m_b = found[j] * _left_after(a.finds, b.finds, self.weights)
+                v = (found[i] + m_b) / max(secs[i] + (1.0 - found[i]) * t_b, 1e-6)
+                if v > value:
+                    value, then = v, b
+            plans.append((value, -i, a, then))
+        _, _, best, then = max(plans, key=lambda p: (p[0], p[1]))
+        return best, then
 
     def record(self, b: Belief) -> None:
         """The belief on the recording's floor (agent.search.belief.log_belief)."""
@@ -210,7 +264,13 @@ class OnlineSearch:
             f"explore for {ctx.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
             f"P(find)={v.share:.3f}, ~{v.seconds:.0f} s"
         )
-        return Option(v.rate, label, lambda: ex.explore_target(v, weights), "explore", v.seconds)
+        at = (float(v.xy[0]), float(v.xy[1]))
+        act = lambda: ex.explore_target(v, weights)  # noqa: E731
+        finds = None
+        if LOOKAHEAD:
+            sight = sx.Sight(ctx.curve.reach, ctx.curve.found)
+            finds = ex.scorer().sweep_finds(v.xy, sight, ex.target_todo())
+        return Option(v.rate, label, act, "explore", v.seconds, at, at, finds)
 
     def via_option(self, via: ViaOption, mass: float = 1.0) -> Option | None:
         """Sweep for intermediate type ``via`` where a new one is most likely seen per second."""
@@ -240,20 +300,23 @@ class OnlineSearch:
                 self.via_spent[via.type] = self.via_spent.get(via.type, 0.0) + (ctx.elapsed - t0)
 
         label = f"look for {via.type} at ({v.xy[0]:.1f}, {v.xy[1]:.1f})"
-        return Option(rate, label, act, "via", v.seconds)
+        at = (float(v.xy[0]), float(v.xy[1]))
+        return Option(rate, label, act, "via", v.seconds, at, at)
 
-    def region_option(self, belief: Belief) -> Option | None:
-        """Look into the best candidate region of the belief, re-costed with planned gazes."""
+    def region_options(self, belief: Belief) -> list[Option]:
+        """Look into a candidate region of the belief, re-costed with planned gazes: the best
+        one (greedy choice), or each one re-costed (``LOOKAHEAD``: the plan may take another
+        first)."""
         ctx = self.ctx
         if not belief.regions:
-            return None
+            return []
         ranked = ss.score_regions(
             belief.regions, ctx.seen, ctx.target_range, rg.cost_model(ctx), ctx.body.pose().xy,
             belief.weights,
         )  # fmt: skip
         ranked = [r for r in ranked if r.score >= rg.MIN_REGION_SCORE]
         if not ranked:
-            return None
+            return []
         rg.log_candidates(ctx, ranked)
         # The cost model's estimate ranks; the best few are re-costed with their planned gazes
         # (on a built map the drive around what is not mapped yet can be much longer).
@@ -264,25 +327,50 @@ class OnlineSearch:
                 ctx.waiting.add(r.key)
                 continue
             cost = rg.planned_seconds(ctx, gz)
-            r.score = self.found_by(r, gz, belief.weights)
-            planned.append((r.score / max(cost, 1e-6), cost, r, gz))
-        if not planned:
-            return None
-        rate, cost, best, gazes = max(planned, key=lambda x: (x[0], -x[1]))
-        label = f"look into {best.label}: P={best.score:.2f}, ~{cost:.1f} s"
-        return Option(
-            rate, label, lambda: rg.look_region(ctx, best, gazes, self.gains), "region", cost
-        )
+            finds = self.gazes_find(r, gz)
+            if belief.weights is not None:
+                r.score = float((belief.weights[finds[0]] * finds[1]).sum())
+            planned.append((r.score / max(cost, 1e-6), cost, r, gz, finds))
+        if not LOOKAHEAD and planned:
+            planned = [max(planned, key=lambda x: (x[0], -x[1]))]
+        return [self._region(*p) for p in planned]
 
-    def found_by(self, region: ss.Region, gazes: Sequence, weights: np.ndarray | None) -> float:
-        """The belief mass the planned ``gazes`` into ``region`` are expected to find: its
-        points' mass times the probability a confirmed detection from the gazes' camera
-        positions finds them (``belief.gazes_found``)."""
-        if weights is None:
-            return region.score
+    def _region(self, rate, cost, region: ss.Region, gazes: Sequence, finds) -> Option:
+        label = f"look into {region.label}: P={region.score:.2f}, ~{cost:.1f} s"
+        start, end = gazes[0].pose, gazes[-1].pose
+        ctx = self.ctx
+
+        def act() -> None:
+            rg.look_region(ctx, region, gazes, self.gains)
+
+        start_xy, end_xy = (start.x, start.y), (end.x, end.y)
+        return Option(rate, label, act, "region", cost, start_xy, end_xy, finds)
+
+    def gazes_find(self, region: ss.Region, gazes: Sequence) -> tuple[np.ndarray, np.ndarray]:
+        """(the region's points, the probability a confirmed detection from the planned
+        ``gazes``' camera positions finds a target at each: ``belief.gazes_found``); the belief
+        mass they are expected to find is the points' mass times these."""
         ctx = self.ctx
         cams = np.array([[g.pose.x, g.pose.y, ctx.spec.camera_height] for g in gazes])
-        pts = region.points
-        return float(
-            (weights[pts] * belief.gazes_found(ctx.curve, cams, ctx.seen.points[pts])).sum()
-        )
+        pts = np.asarray(region.points)
+        return pts, belief.gazes_found(ctx.curve, cams, ctx.seen.points[pts])
+
+
+def _dist(p, q) -> float:
+    """The straight line between two base positions (0 if either is unknown)."""
+    return 0.0 if p is None or q is None else float(math.hypot(p[0] - q[0], p[1] - q[1]))
+
+
+def _left_after(first, then, weights: np.ndarray | None) -> float:
+    """The share of what ``then`` (points, P(found)) would find that ``first`` leaves: 1 where
+    either states no points (a detour) or there is no belief."""
+    if first is None or then is None or weights is None:
+        return 1.0
+    (ia, pa), (ib, pb) = first, then
+    alone = weights[ib] * pb
+    total = float(alone.sum())
+    if total <= 0.0:
+        return 1.0
+    miss_a = np.ones(len(weights))
+    miss_a[ia] = 1.0 - pa
+    return float((alone * miss_a[ib]).sum()) / total

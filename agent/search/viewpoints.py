@@ -293,6 +293,19 @@ class ViewpointScorer:
         """The todo points (``sub``, at ``pts``) a sweep at ``xy`` shows: their count and their
         weight (``weights`` over ``sub``, times ``sight.found`` at their distance; None: the
         count)."""
+        shown, dist = self._shown(blocked, xy, sight, sub, pts)
+        g = len(shown)
+        if g == 0:
+            return 0, 0.0
+        if weights is None:
+            return g, float(g)
+        if sight.found is None:
+            return g, float(weights[shown].sum())
+        return g, float((weights[shown] * sight.found(dist[shown])).sum())
+
+    def _shown(self, blocked, xy, sight: Sight, sub, pts) -> tuple[np.ndarray, np.ndarray]:
+        """(positions in ``sub`` of the points a sweep at ``xy`` shows, none if fewer than
+        ``MIN_GAIN``; every point's distance from the camera)."""
         rng = min(sight.range, MAX_VIEW)
         # the norm of pts - cam, summed in the order np.linalg.norm takes (the same numbers)
         dx, dy = pts[:, 0] - xy[0], pts[:, 1] - xy[1]
@@ -300,14 +313,16 @@ class ViewpointScorer:
         dist = np.sqrt(dx * dx + dy * dy + dz * dz)
         near = np.flatnonzero(dist <= rng)
         if len(near) < MIN_GAIN:
-            return 0, 0.0
-        shown = near[self._visible(blocked, xy, rng, sub[near])]
-        g = len(shown)
-        if weights is None:
-            return g, float(g)
-        if sight.found is None:
-            return g, float(weights[shown].sum())
-        return g, float((weights[shown] * sight.found(dist[shown])).sum())
+            return near[:0], dist
+        return near[self._visible(blocked, xy, rng, sub[near])], dist
+
+    def sweep_finds(self, xy: np.ndarray, sight: Sight, todo: np.ndarray):
+        """(point indices, P(found) of each) of a sweep at ``xy`` for ``sight`` among the points
+        ``todo`` (N,) bool: what ``best`` weighed it by."""
+        sub = np.flatnonzero(todo)
+        shown, dist = self._shown(coarse_blocked(self.built), xy, sight, sub, self.points[sub])
+        p = np.ones(len(shown)) if sight.found is None else sight.found(dist[shown])
+        return sub[shown], p
 
     def exhaust(self, xy: np.ndarray, unseen: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: the points a sweep at ``xy`` should have shown but did not (module

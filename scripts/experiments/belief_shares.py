@@ -84,30 +84,32 @@ def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[
         return b
 
     def recorded(build):
-        def option(self: on.OnlineSearch, *args) -> on.Option | None:
+        def option(self: on.OnlineSearch, *args):
             o = build(self, *args)
-            if o is None:
-                return None
-
-            def act() -> None:
-                ctx, (vols, unexplored, rooms, rooms_away) = self.ctx, shares[id(self)]
-                # P(find) of a sweep or a look (rate times its seconds); a detour states none
-                expects = o.rate * o.seconds if o.kind != "via" else float("nan")
-                rows.append({
-                    "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
-                    "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
-                    "unexplored": round(unexplored, 4), "rooms": round(rooms, 4),
-                    "rooms_unexplored": round(rooms_away, 4), "expects": round(expects, 4),
-                })  # fmt: skip
-                o.act()
-
-            return replace(o, act=act)
+            if isinstance(o, list):  # region_options: each one
+                return [wrap(self, x) for x in o]
+            return None if o is None else wrap(self, o)
 
         return option
 
+    def wrap(self: on.OnlineSearch, o: on.Option) -> on.Option:
+        def act() -> None:
+            ctx, (vols, unexplored, rooms, rooms_away) = self.ctx, shares[id(self)]
+            # P(find) of a sweep or a look (rate times its seconds); a detour states none
+            expects = o.rate * o.seconds if o.kind != "via" else float("nan")
+            rows.append({
+                "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
+                "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
+                "unexplored": round(unexplored, 4), "rooms": round(rooms, 4),
+                "rooms_unexplored": round(rooms_away, 4), "expects": round(expects, 4),
+            })  # fmt: skip
+            o.act()
+
+        return replace(o, act=act)
+
     with ExitStack() as stack, tempfile.TemporaryDirectory() as out:
         stack.enter_context(mock.patch.object(on.OnlineSearch, "belief", belief))
-        for name in ("direct_option", "region_option", "via_option"):
+        for name in ("direct_option", "region_options", "via_option"):
             build = getattr(on.OnlineSearch, name)
             stack.enter_context(mock.patch.object(on.OnlineSearch, name, recorded(build)))
         res = bench_search(replace(config, policies=policies), out, progress=None, bar=False)

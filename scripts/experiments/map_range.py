@@ -29,7 +29,7 @@ from ctxsearch.agent import mapping
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
-from ctxsearch.scripts.experiments.plan_rooms import config_of, parser
+from ctxsearch.scripts.experiments.plan_rooms import config_of, parser, timed_main
 
 MIN_RANGE, MAX_RANGE = 1.0, 30.0  # m
 
@@ -58,19 +58,16 @@ def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__.split("\n\n")[0], "frontier,oracle-prior-indirect")
     ap.add_argument("--range", type=float, default=10.0, help="depth range, m (default: 10)")
     a = ap.parse_args(argv)
-    try:
+
+    def make():
         config = config_of(a)
         if not MIN_RANGE <= a.range <= MAX_RANGE:
             raise CtxsearchError(
                 f"--range must be in [{MIN_RANGE:g}, {MAX_RANGE:g}] m (got {a.range})"
             )
-        res, cpu = run(config, a.out, a.range)
-    except CtxsearchError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    print(res.table)
-    print(f"depth range {a.range:g} m: {cpu:.0f} CPU s for {a.episodes} episodes")
-    return 0
+        return run(config, a.out, a.range)
+
+    return timed_main(make, f"depth range {a.range:g} m", a.episodes)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from unittest import mock
@@ -41,7 +42,8 @@ def run(config: SearchBenchConfig, out: Path):
 
 
 def parser(description: str, policies: str) -> argparse.ArgumentParser:
-    """The arguments of a built-map run with room context (this module's and ``map_range``'s)."""
+    """The arguments of a built-map run with room context (this module's, ``map_range``'s and
+    ``lookahead``'s, which sets its own map and room context)."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--kb", type=Path, required=True, help="knowledge store (ctxsearch learn)")
     ap.add_argument("--style", default="apartment", help="house style (default: apartment)")
@@ -63,6 +65,20 @@ def config_of(a: argparse.Namespace) -> SearchBenchConfig:
         policies=tuple(p for p in a.policies.split(",") if p), rooms=True,
         draw_cache=a.draw_cache,
     )  # fmt: skip
+
+
+def timed_main(make: Callable[[], tuple], what: str, episodes: int) -> int:
+    """``make()`` (a run's result and its CPU seconds: ``map_range``'s and ``lookahead``'s),
+    its table printed and the CPU seconds ``what`` took; a one-line error and exit code 2 on bad
+    input."""
+    try:
+        res, cpu = make()
+    except CtxsearchError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(res.table)
+    print(f"{what}: {cpu:.0f} CPU s for {episodes} episodes")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
