@@ -174,3 +174,30 @@ def test_stops_are_counted_per_policy():
     assert [x.stop for x in rs] == ["found", "budget", "gave-up", "gave-up"]
     assert (st.gave_up, st.gave_up_with_mass) == (2, 1)
     assert st.to_json()["gave_up_with_mass"] == 1
+
+
+def test_a_detour_is_worth_the_share_of_the_belief_its_volumes_would_hold(catalog):
+    """A detour for an intermediate type I: P(a new I is seen from the viewpoint: one expected
+    present, the sweep's share of I's places within I's range) times the share of the belief
+    I's relation volumes would hold (q over the mass left), per expected second (the sweep and,
+    if an I is found, the look); given up once the model's seconds to find one are spent."""
+    from types import SimpleNamespace
+
+    from ctxsearch.agent.search import online as on
+    from ctxsearch.agent.search.viewpoints import Viewpoint
+
+    s = on.OnlineSearch.__new__(on.OnlineSearch)
+    s.ctx = SimpleNamespace(found_of=lambda t: 0, range_of=lambda t: 4.0)
+    vp = Viewpoint(np.array([1.0, 2.0]), 50, 0.5, 20.0)
+    s.explorer = SimpleNamespace(viewpoint=lambda rng, images, zmax: vp)
+    s.via_spent = {}
+    via = on.ViaOption("Desk", q=0.4, instances=1.0, zmax=1.0, look_s=10.0, gain=1.5, find_s=99)
+    o = s.via_option(via, mass=0.8)
+    m = (1.0 - math.exp(-1.0)) * 0.5
+    assert o.kind == "via" and o.seconds == 20.0
+    assert o.rate == pytest.approx(m * 0.4 / 0.8 / (20.0 + m * 10.0))
+    s.ctx.found_of = lambda t: 1  # the one expected is found: little left to find
+    assert s.via_option(via, mass=0.8) is None
+    s.ctx.found_of = lambda t: 0
+    s.via_spent = {"Desk": 99.0}  # the model's expected seconds to find one are spent
+    assert s.via_option(via, mass=0.8) is None
