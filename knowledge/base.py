@@ -16,11 +16,10 @@ n_S changed for all pairs of S; see DESIGN.md).
 The HIF score of a type A (Figure 2, line 11) averages impact(y_{rel,t}, n_A) over rel in
 RELATIONS(A) and all t in TYPES. Most y are 0, so the average is
 (sum over nonzero y + (R_A*T - nnz_A) * impact(0, n_A)) / (R_A*T), and since the score depends
-only on the multiset of y values, impact is evaluated once per distinct y, and since eq. 3 is
-symmetric (impact(y, n) = impact(n - y, n): eq. 2's y (n - y) is, and the two outcomes trade
-places), once per distinct min(y, n - y), at most n_A / 2 + 1 of them: O(nnz_A) with a small
-constant, never O(T). A choice scores all its uncached candidates in one numpy pass. Scores are
-cached per type and invalidated only for the type whose counts change.
+only on the multiset of y values, impact is evaluated once per distinct y (at most n_A + 1 of
+them): O(nnz_A) with a small constant, never O(T). A choice scores all its uncached candidates
+in one numpy pass. Scores are cached per type and invalidated only for the type whose counts
+change.
 """
 
 from __future__ import annotations

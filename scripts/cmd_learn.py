@@ -24,6 +24,10 @@ ROOM_BUDGET_HELP = (
     "(the examination in flight completes), whatever is left unexamined (default: no limit, "
     "every room to completion as in the paper's Figure 2)"
 )
+WORLD_BUDGET_HELP = (
+    ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house (a house the budget "
+    "ends records no room contents, so no SAME-ROOM counts)"
+)
 
 
 def _strategy_names() -> list[str]:
@@ -105,8 +109,7 @@ def _add_learning_args(p: argparse.ArgumentParser) -> None:
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house (a house "
-        "the budget ends records no room contents, so no SAME-ROOM counts)",
+        help=WORLD_BUDGET_HELP,
     )
     p.add_argument(
         "--map",
@@ -315,8 +318,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         type=argtypes.seconds,
         default=None,
         metavar="SECONDS",
-        help=ROOM_BUDGET_HELP + "; --world-budget is the same, per room or house (a house "
-        "the budget ends records no room contents, so no SAME-ROOM counts)",
+        help=WORLD_BUDGET_HELP,
     )
     argtypes.add_detector_argument(p)
     argtypes.add_interval_argument(p)

@@ -18,7 +18,6 @@ def _search(x: float = 0.0, y: float = 0.0) -> on.OnlineSearch:
     body = SimpleNamespace(pose=lambda: RobotPose(x, y, 0.0, 0.0, 0.0))
     s.ctx = SimpleNamespace(body=body, time_model=TimeModel())
     s.took = {}
-    s.weights = None  # no belief points: the options' finds do not overlap
     return s
 
 
@@ -83,12 +82,11 @@ def test_what_the_second_look_finds_is_what_the_first_leaves(far_and_on_the_way,
     far, near = far_and_on_the_way
     monkeypatch.setattr(on, "LOOKAHEAD", True)
     s = _search()
-    s.weights = weights
     # the sweep on the way shows the region's points as well as the look would: no plan pays
     # for it, and the region alone is the better rate
     far_f = replace(far, finds=region)
     near_f = replace(near, finds=region)
-    assert s.choose([far_f, near_f]) == (far_f, None)
+    assert s.choose([far_f, near_f], weights) == (far_f, None)
 
 
 def test_the_experiment_runs_the_benchmark_with_the_look_ahead_on(monkeypatch, capsys, tmp_path):

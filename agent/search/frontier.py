@@ -75,10 +75,14 @@ class Explorer:
         """Where to sweep next for the target: the most belief mass (``weights``) found per
         second, each point's mass times the probability that a sweep there finds it at its
         distance (the detection curve); None if none is worth it."""
+        return self._best(self.ctx.target_range, self.target_todo(), self.target_sight(),
+                          sx.SWEEP_IMAGES, weights, None)  # fmt: skip
+
+    def target_sight(self) -> sx.Sight:
+        """What a sweep for the target is scored for: each point's P(found) at its distance
+        (the detection curve), up to the curve's reach."""
         curve = self.ctx.curve
-        sight = sx.Sight(curve.reach, curve.found)
-        return self._best(self.ctx.target_range, self.target_todo(), sight, sx.SWEEP_IMAGES,
-                          weights, None)  # fmt: skip
+        return sx.Sight(curve.reach, curve.found)
 
     def _best(self, rng, todo, sight, images, weights, key) -> sx.Viewpoint | None:
         ctx = self.ctx

@@ -125,7 +125,6 @@ class OnlineSearch:
         prior = ss.expected_mass(ctx.catalog, probs, ctx.target) if probs else None
         self.prior = prior or 1.0
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
-        self.weights: np.ndarray | None = None  # the belief at the last decision
 
     def run(self) -> None:
         """Look around (on the built map: its first images map the floor), then take the best
@@ -145,7 +144,6 @@ class OnlineSearch:
             if b.left < belief.STOP_MASS:
                 ctx.note(f"{100 * b.left:.1f}% of the detectable mass left: stop")
                 return
-            self.weights = b.weights
             options = self.region_options(b)
             options += [o for o in [self.direct_option(b.weights)] if o]
             options += [o for o in (self.via_option(v, b.mass) for v in self.vias) if o]
@@ -155,7 +153,7 @@ class OnlineSearch:
                     continue
                 ctx.note(f"no option left with {100 * b.left:.1f}% of the detectable mass")
                 return
-            best, then = self.choose(options)
+            best, then = self.choose(options, b.weights)
             f = self.scale(best.kind)
             ahead = f"; then {then.label}" if then is not None else ""
             ctx.note(
@@ -167,8 +165,11 @@ class OnlineSearch:
             sums[0] += best.seconds
             sums[1] += ctx.elapsed - t0
 
-    def choose(self, options: Sequence[Option]) -> tuple[Option, Option | None]:
-        """The option to take now, and the one the plan takes after it (None: none).
+    def choose(
+        self, options: Sequence[Option], weights: np.ndarray | None = None
+    ) -> tuple[Option, Option | None]:
+        """The option to take now, and the one the plan takes after it (None: none); ``weights``:
+        the belief the options were valued on.
 
         Without ``LOOKAHEAD``: the most probability per expected second (calibrated). With it, a
         two-step look-ahead (a close look costs a drive first, which greedy choice weighs
@@ -196,7 +197,7 @@ class OnlineSearch:
                 if j == i:
                     continue
                 t_b = max(secs[j] + (_dist(a.end, b.start) - away[j]) / speed, 1e-6)
-                m_b = found[j] * _left_after(a.finds, b.finds, self.weights)
+                m_b = found[j] * _left_after(a.finds, b.finds, weights)
                 v = (found[i] + m_b) / max(secs[i] + (1.0 - found[i]) * t_b, 1e-6)
                 if v > value:
                     value, then = v, b
@@ -268,8 +269,7 @@ class OnlineSearch:
         act = lambda: ex.explore_target(v, weights)  # noqa: E731
         finds = None
         if LOOKAHEAD:
-            sight = sx.Sight(ctx.curve.reach, ctx.curve.found)
-            finds = ex.scorer().sweep_finds(v.xy, sight, ex.target_todo())
+            finds = ex.scorer().sweep_finds(v.xy, ex.target_sight(), ex.target_todo())
         return Option(v.rate, label, act, "explore", v.seconds, at, at, finds)
 
     def via_option(self, via: ViaOption, mass: float = 1.0) -> Option | None:
