@@ -7,8 +7,9 @@ are the search's only readers of the true layout.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -99,6 +100,8 @@ MIN_RECALL = 0.02  # a detector that errs: views where the target's recall is be
 PERSPECTIVE_GAIN = 2.5  # an object at the image corner shows up to ~1/cos^3(43 deg) its pixels
 ORACLE_MAX_RENDERS = 600  # images rendered per plan: bounds the look for an undetectable target
 VISIBLE_MIN_P = MIN_RECALL  # visible at the start: some start view may detect it this likely
+# whether a base position can be reached, and the planned path there (None: no drive)
+Route = tuple[bool, np.ndarray | None]
 
 
 class OracleEye:
@@ -123,6 +126,8 @@ class OracleEye:
         self.renders = 0
         self.layout = layout
         self._rooms_seen: dict[tuple[float, float], frozenset[int] | None] = {}
+        self._ray_points: dict[tuple[int, ...], np.ndarray] = {}  # ``rays_meet``'s grids
+        self._focal: float | None = None  # the head camera's, in pixels (``rays_meet``)
 
     def rays_meet(self, camera: np.ndarray, o: ObjectInstance) -> bool:
         """False if no ray from ``camera`` (3,) through a grid of points filling ``o``'s
@@ -130,13 +135,19 @@ class OracleEye:
         shows in fewer pixels than the grid's spacing (``RAY_SPACING_PX``) covers; True
         otherwise, or if the body renders nothing. A test before an image is rendered: the
         oracle's planner renders only the views whose rays meet the target."""
+        if self._focal is None:
+            b = self.body
+            self._focal = 0.5 * b.height / math.tan(math.radians(b.spec.fovy_deg) / 2)
         size = np.asarray(o.size, float)
         dist = max(box_distance(camera, o), 0.05)
-        focal = 0.5 * self.body.height / math.tan(math.radians(self.body.spec.fovy_deg) / 2)
-        n = np.clip(np.ceil(size * focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX).astype(int)
-        axes = [(np.arange(k) + 0.5) / k - 0.5 for k in n]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) * size
-        hits = self.body.ray_instances(np.asarray(camera, float), o.box().world_points(grid))
+        n = np.clip(np.ceil(size * self._focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX)
+        key = (o.id, *n.astype(int).tolist())
+        points = self._ray_points.get(key)
+        if points is None:  # the grid's points depend on the instance and the counts only
+            axes = [(np.arange(k) + 0.5) / k - 0.5 for k in key[1:]]
+            grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) * size
+            points = self._ray_points[key] = o.box().world_points(grid)
+        hits = self.body.ray_instances(np.asarray(camera, float), points)
         return hits is None or bool(np.any(hits == o.id))
 
     def may_see(self, xy: np.ndarray, o: ObjectInstance) -> bool:
@@ -287,16 +298,16 @@ def _exact_gaze(
     spec: RobotSpec,
     tm: TimeModel,
     frac: float = 0.0,
+    route: Route | None = None,
 ) -> Gaze | None:
     """The gaze at base position ``xy`` that shows ``target`` as ``execute_gaze`` runs it from
     ``pose``, its ``cost`` the seconds it charges (None: ``xy`` cannot be reached). ``frac`` 0:
     the head aimed at ``target``; ``frac`` > 0: the head moved as little as it can from where it
-    is while ``target`` stays within ``frac`` of the half field of view from the image centre."""
-    path = None
-    if float(np.hypot(*(np.asarray(xy) - pose.xy))) > 1e-9:
-        path = plan_path(grid, pose.xy, np.asarray(xy, float))
-        if path is None:
-            return None
+    is while ``target`` stays within ``frac`` of the half field of view from the image centre.
+    ``route``: ``_path_to(grid, pose, xy)`` if the caller has it (planned here otherwise)."""
+    reachable, path = _path_to(grid, pose, xy) if route is None else route
+    if not reachable:
+        return None
     yaw, end = pose.yaw, pose.xy
     if path is not None and len(path) >= 2:
         seg = path[-1] - path[-2]
@@ -332,6 +343,15 @@ def _exact_gaze(
     t += tm.head_time(pose.pan, pose.tilt, pan, tilt) + tm.image_cost
     out = RobotPose(float(end[0]), float(end[1]), float(yaw), float(pan), float(tilt))
     return Gaze(out, aim_xyz, cost=float(t), path=path)
+
+
+def _path_to(grid: OccupancyGrid, pose: RobotPose, xy: np.ndarray) -> Route:
+    """Whether base position ``xy`` can be reached from ``pose`` and the planned path there
+    (None: the robot stands there already)."""
+    if float(np.hypot(*(np.asarray(xy) - pose.xy))) <= 1e-9:
+        return True, None
+    path = plan_path(grid, pose.xy, np.asarray(xy, float))
+    return path is not None, path
 
 
 def _oracle_candidates(
@@ -375,30 +395,37 @@ def _oracle_candidates(
     return pos, pairs
 
 
-def _aimed_view(
-    eye: OracleEye,
-    grid: OccupancyGrid,
-    pose: RobotPose,
-    xy: np.ndarray,
-    o: ObjectInstance,
-    now: float,
-    until: float,
-    tm: TimeModel,
-) -> tuple[Gaze | None, bool, float | None]:
-    """The gaze at ``xy`` aimed at ``o`` from ``pose`` (None: unreachable), whether any view
-    from there may detect ``o`` (the aimed image's pixels times ``PERSPECTIVE_GAIN``), and the
-    second of the first image taken there that ends the search by ``until`` (None: none,
-    ``OracleEye.first_success``)."""
-    cam = np.array([xy[0], xy[1], eye.body.spec.camera_height])
-    if not eye.may_see(xy, o) or not eye.rays_meet(cam, o):
-        return None, False, None
-    g = _exact_gaze(grid, pose, xy, np.asarray(o.position, float), eye.body.spec, tm)
-    if g is None:
-        return None, False, None
-    frame = eye.frame_at(g.pose)
-    if not eye.worth(eye.probability(frame, PERSPECTIVE_GAIN, o)):
-        return g, False, None
-    return g, True, eye.first_success(frame, now + g.cost, until)
+class _Aimed:
+    """A base position's aimed view of one instance in ``oracle_view``: the gaze (None: the
+    position cannot see the instance or cannot be reached) and, once a view from there is cheap
+    enough to be tried (``read``), whether any view from there may detect the instance (the
+    aimed image's pixels times ``PERSPECTIVE_GAIN``) and the second of the first aimed image
+    that ends the search (None: none). The image is rendered only then: more than half of the
+    aimed views a plan met cost more than its best so far, and none of their views was tried."""
+
+    def __init__(
+        self, eye: OracleEye, grid: OccupancyGrid, pose: RobotPose, xy: np.ndarray,
+        o: ObjectInstance, tm: TimeModel, route: Callable[[], Route],
+    ):  # fmt: skip
+        self.gaze: Gaze | None = None
+        self.worth: bool | None = None  # None: not rendered yet
+        self.hit: float | None = None
+        cam = np.array([xy[0], xy[1], eye.body.spec.camera_height])
+        if eye.may_see(xy, o) and eye.rays_meet(cam, o):
+            target = np.asarray(o.position, float)
+            self.gaze = _exact_gaze(grid, pose, xy, target, eye.body.spec, tm, 0.0, route())
+
+    def read(self, eye: OracleEye, o: ObjectInstance, now: float, until: float) -> bool:
+        """Render the aimed image (once) and read it (``OracleEye.first_success`` by ``until``:
+        a later call's limit is never larger, so a second found after it is never taken);
+        returns ``worth``."""
+        if self.worth is None:
+            assert self.gaze is not None
+            frame = eye.frame_at(self.gaze.pose)
+            self.worth = eye.worth(eye.probability(frame, PERSPECTIVE_GAIN, o))
+            if self.worth:
+                self.hit = eye.first_success(frame, now + self.gaze.cost, until)
+        return self.worth
 
 
 def oracle_view(
@@ -422,35 +449,51 @@ def oracle_view(
     spec = eye.body.spec
     if not eye.instances:
         return None
-    renders0 = eye.renders
     pos, pairs = _oracle_candidates(eye, grid, pose, tm)
     best: OracleView | None = None
-    # (position, instance) -> the aimed gaze (None: unreachable), whether it may detect (if it
-    # shows too little, so do the off-centre views) and the second its images end the search
-    aimed: dict[tuple[int, int], tuple[Gaze | None, bool, float | None]] = {}
+    # (position, instance) -> its aimed view (``_Aimed``); position -> the planned path there.
+    # ``checked`` counts the views a plan examines as if every aimed view met were rendered
+    # when met (as it was before the aimed image waited for a view cheap enough to need it):
+    # the cap and the count a plan reports are unchanged, and so is every choice.
+    aimed: dict[tuple[int, int], _Aimed] = {}
+    paths: dict[int, Route] = {}
+    checked = 0
+
+    def route(i: int) -> Route:
+        if i not in paths:
+            paths[i] = _path_to(grid, pose, pos[i])
+        return paths[i]
+
     for lb, i, j, v in pairs:
         limit = deadline_s if best is None else min(deadline_s, best.seconds - 1e-9)
         if lb > limit + 1e-9:
             break
         o = eye.instances[j]
         key = (round(float(pos[i, 0]), 3), round(float(pos[i, 1]), 3), o.id, v)
-        if key in exclude or eye.renders - renders0 >= ORACLE_MAX_RENDERS:
+        if key in exclude or checked >= ORACLE_MAX_RENDERS:
+            continue
+        if (i, j) not in aimed:
+            aimed[i, j] = _Aimed(eye, grid, pose, pos[i], o, tm, functools.partial(route, i))
+            checked += aimed[i, j].gaze is not None
+        a = aimed[i, j]
+        if a.gaze is None:
             continue
         target = np.asarray(o.position, float)
-        if (i, j) not in aimed:
-            aimed[i, j] = _aimed_view(eye, grid, pose, pos[i], o, now, now + limit, tm)
-        g0, worth, hit0 = aimed[i, j]
-        if not worth:
+        if v == 0:
+            g = a.gaze
+        elif a.worth is False:
             continue
-        g = g0 if v == 0 else _exact_gaze(grid, pose, pos[i], target, spec, tm, ORACLE_VIEWS[v])
-        if g.cost > limit + 1e-9:
+        else:
+            g = _exact_gaze(grid, pose, pos[i], target, spec, tm, ORACLE_VIEWS[v], route(i))
+        if g.cost > limit + 1e-9 or not a.read(eye, o, now, now + limit):
             continue
         if v == 0:
-            hit = hit0
+            hit = a.hit
         else:
+            checked += 1
             hit = eye.first_success(eye.frame_at(g.pose), now + g.cost, now + limit)
         if hit is not None and hit - now < limit + 1e-9:
-            best = OracleView(hit - now, g, o.id, eye.renders - renders0, key)
+            best = OracleView(hit - now, g, o.id, checked, key)
             if not soonest:
                 break
     return best
