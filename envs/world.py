@@ -291,9 +291,10 @@ class World:
         dt = CONTROL_STEPS * m.opt.timestep
         total = float(knots_t[-1])
         n = math.ceil(total / dt - 1e-9) if total > 0 else 0
-        for k in range(1, n + 1):
-            t = min(k * dt, total)
-            d.ctrl[self._act] = [np.interp(t, knots_t, knots_q[:, j]) for j in range(5)]
+        # every tick's targets at once (np.interp gives each the same number as alone)
+        ticks = np.minimum(np.arange(1, n + 1) * dt, total)
+        for row in np.column_stack([np.interp(ticks, knots_t, knots_q[:, j]) for j in range(5)]):
+            d.ctrl[self._act] = row
             mujoco.mj_step(m, d, CONTROL_STEPS)
         target = knots_q[-1]
         d.ctrl[self._act] = target
