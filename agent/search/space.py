@@ -618,14 +618,16 @@ def coverage_viewpoints(
     coverable = cover.any(0)
     need = int(math.ceil(goal * coverable.sum()))
     got = np.zeros(len(points), bool)
+    gain = cover.sum(1)  # per candidate, the points it covers that none chosen covers
     chosen: list[int] = []
     while got.sum() < need and len(chosen) < max_viewpoints:
-        gain = (cover & ~got).sum(1)
         i = int(np.argmax(gain))
         if gain[i] == 0:
             break
         chosen.append(i)
-        got |= cover[i]
+        new = cover[i] & ~got
+        got |= new
+        gain -= cover[:, new].sum(1)
     return tour_order(grid, cand[chosen], start_xy)
 
 
