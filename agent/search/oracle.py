@@ -446,24 +446,15 @@ def oracle_view(
     None exactly when the soonest is (both look at the same views, in the same order, until the
     first that ends the search) at a fraction of the images (7-24 instead of 30-190 in office
     rooms): whether the target can be found in time, not when."""
-    spec = eye.body.spec
     if not eye.instances:
         return None
     pos, pairs = _oracle_candidates(eye, grid, pose, tm)
     best: OracleView | None = None
-    # (position, instance) -> its aimed view (``_Aimed``); position -> the planned path there.
-    # ``checked`` counts the views a plan examines as if every aimed view met were rendered
-    # when met (as it was before the aimed image waited for a view cheap enough to need it):
-    # the cap and the count a plan reports are unchanged, and so is every choice.
+    # ``checked`` counts every aimed view met as rendered (``_Aimed``): the cap, the count a
+    # plan reports and every choice are those of rendering each when met
     aimed: dict[tuple[int, int], _Aimed] = {}
-    paths: dict[int, Route] = {}
+    route = functools.cache(lambda i: _path_to(grid, pose, pos[i]))  # position -> its Route
     checked = 0
-
-    def route(i: int) -> Route:
-        if i not in paths:
-            paths[i] = _path_to(grid, pose, pos[i])
-        return paths[i]
-
     for lb, i, j, v in pairs:
         limit = deadline_s if best is None else min(deadline_s, best.seconds - 1e-9)
         if lb > limit + 1e-9:
@@ -478,12 +469,12 @@ def oracle_view(
         a = aimed[i, j]
         if a.gaze is None:
             continue
-        target = np.asarray(o.position, float)
         if v == 0:
             g = a.gaze
         elif a.worth is False:
             continue
         else:
+            target, spec = np.asarray(o.position, float), eye.body.spec
             g = _exact_gaze(grid, pose, pos[i], target, spec, tm, ORACLE_VIEWS[v], route(i))
         if g.cost > limit + 1e-9 or not a.read(eye, o, now, now + limit):
             continue

@@ -618,8 +618,7 @@ def coverage_viewpoints(
     coverable = cover.any(0)
     need = int(math.ceil(goal * coverable.sum()))
     got = np.zeros(len(points), bool)
-    gain = cover.sum(1)  # per candidate, the points it covers that none chosen covers
-    chosen: list[int] = []
+    gain, chosen = cover.sum(1), []  # a candidate's gain: what it covers that none chosen does
     while got.sum() < need and len(chosen) < max_viewpoints:
         i = int(np.argmax(gain))
         if gain[i] == 0:
