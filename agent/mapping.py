@@ -87,6 +87,7 @@ class BuiltMap:
         self.images = 0
         self._rays_key: tuple[int, int, float] | None = None
         self._rays = np.zeros((0, 4), np.float32)
+        self._traced = np.zeros(0, bool)  # per ray of ``_rays``: traced into ``seen_voxels``
         self._grid: OccupancyGrid | None = None
         self._dirty = True
         xs, ys = self._centers()
@@ -125,7 +126,8 @@ class BuiltMap:
         # Distance along a ray = depth * |local ray|; within range and past the near clip only.
         rng = depth * local[:, 3]
         keep = np.flatnonzero(np.isfinite(depth) & (depth > NEAR_CLIP) & (rng <= self.max_range))
-        rays = local[keep, :3] @ np.asarray(cam.xmat, np.float32).T
+        # np.take: the same rows as local[keep, :3], several times faster
+        rays = np.take(local, keep, axis=0)[:, :3] @ np.asarray(cam.xmat, np.float32).T
         pts = np.asarray(cam.position, np.float32) + rays * depth[keep, None]
         z = pts[:, 2]
         rows = np.floor((pts[:, 1] - self.y0) / self.resolution).astype(np.int64)
@@ -139,9 +141,7 @@ class BuiltMap:
         flo = ok & (z < FLOOR_EPS)
         self.floor[rows[flo], cols[flo]] = True
         self.floor &= ~self.occupied
-        w_sub = len(range(0, cam.width, COL_STRIDE))
-        sub = keep % w_sub % (RAY_STRIDE // COL_STRIDE) == 0
-        sub &= keep // w_sub % RAY_STRIDE == 0
+        sub = self._traced[keep]
         self._trace(np.asarray(cam.position, float), pts[sub], rng[keep][sub])
         self.images += 1
         self._dirty = True
@@ -156,6 +156,11 @@ class BuiltMap:
             y = -(np.arange(cam.height) + 0.5 - cam.height / 2) / f
             local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -1.0), -1).reshape(-1, 3)
             self._rays = np.column_stack([local, np.linalg.norm(local, axis=1)]).astype(np.float32)
+            # the rays traced into the seen-space record: every RAY_STRIDE-th row and pixel
+            w_sub = len(range(0, cam.width, COL_STRIDE))
+            pix = np.arange(len(local))
+            self._traced = pix % w_sub % (RAY_STRIDE // COL_STRIDE) == 0
+            self._traced &= pix // w_sub % RAY_STRIDE == 0
             self._rays_key = key
         return self._rays
 
@@ -167,7 +172,7 @@ class BuiltMap:
         t = np.arange(0.0, self.max_range, VOXEL)
         keep = t[None, :] <= d[:, None]
         q = origin + u[:, None, :] * t[None, :, None]
-        q = q[keep]
+        q = np.take(q.reshape(-1, 3), np.flatnonzero(keep), axis=0)  # q[keep], faster
         vh, vw, vz = self.seen_voxels.shape
         r = np.floor((q[:, 1] - self.y0) / VOXEL).astype(np.int64)
         c = np.floor((q[:, 0] - self.x0) / VOXEL).astype(np.int64)
