@@ -39,13 +39,14 @@ test: $(STAMP)
 # by side (make -j2, their lines interleaved): lane A starts with the steps that
 # run on one core (the hierarchy, the oracle learning runs), lane B with the curve (whose
 # learning run is one core's too), so no core idles while a one-core step runs. The steps write disjoint files and every result is
-# deterministic, so the lanes' order does not change a number. Time on 2 cores: 63 minutes
+# deterministic, so the lanes' order does not change a number. Time on 2 cores: 61 minutes on 2026-12-04
 # (README, Usage).
 # The sweeps (truth, bench learning, bench search, curve, transfer, intervals, drift) run their
 # units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)
 STRATEGIES := hif,random,round-robin,nearest,fewest,expected-hif,cost-hif
 CTX := $(VENV)/bin/ctxsearch
+T := sh scripts/timed.sh  # each step prints its wall-clock time
 bench: $(STAMP)
 	@start=$$(date +%s); \
 	$(MAKE) --no-print-directory bench-timing && \
@@ -54,28 +55,28 @@ bench: $(STAMP)
 
 # Wall-clock timings first, alone on the machine.
 bench-timing: $(STAMP)
-	$(CTX) bench kb --out results
-	$(CTX) bench sim --out results
-	$(CTX) bench sim --style apartment --rooms 3 --gazes 50 --explore 3 --out results/sim_apartment
+	$(T) $(CTX) bench kb --out results
+	$(T) $(CTX) bench sim --out results
+	$(T) $(CTX) bench sim --style apartment --rooms 3 --gazes 50 --explore 3 --out results/sim_apartment
 
 bench-a: $(STAMP)
-	$(CTX) bench hierarchy --style office --quiet --out results/hierarchy
-	$(CTX) bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
+	$(T) $(CTX) bench hierarchy --style office --quiet --out results/hierarchy
+	$(T) $(CTX) bench learning --style office --rooms 10 --seeds 3 --strategies hif --interval clustered --truth-samples 100 --out results/intervals/oracle
 	rm -f build/kb_office.sqlite && mkdir -p build
-	$(CTX) learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
+	$(T) $(CTX) learn --style office --rooms 30 --perception oracle --kb build/kb_office.sqlite --no-progress
 # Search (issue 12): paired episodes, the target not visible from the start, feasible, the
 # realistic detector. The small-world reference: 40 office episodes on the given map.
-	$(CTX) bench search --kb build/kb_office.sqlite --style office --episodes 40 --quiet --out results/search --workers $(WORKERS)
+	$(T) $(CTX) bench search --kb build/kb_office.sqlite --style office --episodes 40 --quiet --out results/search --workers $(WORKERS)
 # A drifting world set: forgetting methods (about a minute on 2 cores, oracle perception).
-	$(CTX) bench drift --out results/drift --workers $(WORKERS)
+	$(T) $(CTX) bench drift --out results/drift --workers $(WORKERS)
 	for s in office biology_lab living_room kitchen; do \
-	  $(CTX) truth --style $$s --samples 200 --out results/truth/$$s.json --no-progress --workers $(WORKERS); done
+	  $(T) $(CTX) truth --style $$s --samples 200 --out results/truth/$$s.json --no-progress --workers $(WORKERS); done
 
 bench-b: $(STAMP)
 # Does learning pay? The paired search ratio after k learned houses, built and given map (issue
 # 12), and context learned in one room style used in another.
 	rm -rf results/curve/stores results/transfer/stores
-	$(CTX) bench curve --style apartment --rooms 0,1,3,10,30 --seed 0 --episodes 20 --quiet --out results/curve --workers $(WORKERS)
+	$(T) $(CTX) bench curve --style apartment --rooms 0,1,3,10,30 --seed 0 --episodes 20 --quiet --out results/curve --workers $(WORKERS)
 # The headline: houses after 30 learned houses, 200 paired episodes per map scenario. The store is
 # the curve's after 30 houses: the same run as `ctxsearch learn --style apartment --rooms 30 --kb
 # build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice; the old
@@ -83,18 +84,18 @@ bench-b: $(STAMP)
 # the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache).
 	rm -f build/kb_apartment.sqlite build/kb_apartment.sqlite-wal build/kb_apartment.sqlite-shm
 	mkdir -p build && cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
-	$(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
-	$(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS) --draw-cache build/draws
-	$(CTX) bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
-	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
-	$(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
+	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
+	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
 # Detector x interval against the truth, camera mode: office after 10 and 30 rooms, apartment after
 # 3 and 10 houses (14 runs each: 7 detector settings x 2 seeds).
-	$(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
-	$(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 400 --out results/intervals_apartment --workers $(WORKERS)
+	$(T) $(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
+	$(T) $(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 400 --out results/intervals_apartment --workers $(WORKERS)
 # The robot's rooms against the plans: 10 houses of every stock house style, explored and segmented.
-	$(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
-	$(CTX) room --style family_house --seed 1 --views 0 --out results/rooms/family_house_1
+	$(T) $(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
+	$(T) $(CTX) room --style family_house --seed 1 --views 0 --out results/rooms/family_house_1
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
