@@ -21,7 +21,7 @@ from ctxsearch.agent.search.coverage import cover
 from ctxsearch.agent.search.episode import OracleView
 from ctxsearch.agent.search.policies import SearchPolicy
 from ctxsearch.agent.viewplan import Gaze, aim
-from ctxsearch.envs.camera import Frame, half_fov_tangents
+from ctxsearch.envs.camera import Frame, focal_length, half_fov_tangents
 from ctxsearch.envs.detector import (
     Detection,
     DetectorModel,
@@ -127,7 +127,6 @@ class OracleEye:
         self.layout = layout
         self._rooms_seen: dict[tuple[float, float], frozenset[int] | None] = {}
         self._ray_points: dict[tuple[int, ...], np.ndarray] = {}  # ``rays_meet``'s grids
-        self._focal: float | None = None  # the head camera's, in pixels (``rays_meet``)
 
     def rays_meet(self, camera: np.ndarray, o: ObjectInstance) -> bool:
         """False if no ray from ``camera`` (3,) through a grid of points filling ``o``'s
@@ -135,12 +134,10 @@ class OracleEye:
         shows in fewer pixels than the grid's spacing (``RAY_SPACING_PX``) covers; True
         otherwise, or if the body renders nothing. A test before an image is rendered: the
         oracle's planner renders only the views whose rays meet the target."""
-        if self._focal is None:
-            b = self.body
-            self._focal = 0.5 * b.height / math.tan(math.radians(b.spec.fovy_deg) / 2)
+        focal = focal_length(self.body.spec.fovy_deg, self.body.height)
         size = np.asarray(o.size, float)
         dist = max(box_distance(camera, o), 0.05)
-        n = np.clip(np.ceil(size * self._focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX)
+        n = np.clip(np.ceil(size * focal / dist / RAY_SPACING_PX), 2, RAY_GRID_MAX)
         key = (o.id, *n.astype(int).tolist())
         points = self._ray_points.get(key)
         if points is None:  # the grid's points depend on the instance and the counts only
