@@ -42,6 +42,7 @@ Pure numpy.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -89,16 +90,24 @@ class RoomCounts:
     n_room: np.ndarray
     y_room: Mapping[tuple[str, str], np.ndarray]
 
-    @property
+    # Cached (the counts are frozen): an entry's interval reads them for every entry of A.
+    @functools.cached_property
     def n(self) -> int:
         """n_A."""
         return int(self.n_room.sum())
 
-    @property
+    @functools.cached_property
     def mean_room_size(self) -> float:
         """m = sum n_j^2 / n: the mean number of A-examinations a room contributes, per exam."""
         n = self.n
         return float((self.n_room.astype(float) ** 2).sum() / n) if n else 0.0
+
+    @functools.cached_property
+    def design_effects(self) -> dict[tuple[str, str], float | None]:
+        """Each pair's ``design_effect`` (None where not estimable), in sorted pair order: the
+        type's mean correlation (``type_rho``) sums them in this order, whatever order the counts
+        came in (a set's order varies from process to process with the strings' hashes)."""
+        return {key: design_effect(self.y_room[key], self.n_room) for key in sorted(self.y_room)}
 
 
 def design_effect(y_room: np.ndarray, n_room: np.ndarray) -> float | None:
@@ -119,8 +128,7 @@ def type_rho(counts: RoomCounts) -> float | None:
     if m <= 1.0:
         return None
     rhos = []
-    for y_room in counts.y_room.values():
-        deff = design_effect(y_room, counts.n_room)
+    for deff in counts.design_effects.values():
         if deff is not None:
             rhos.append(min(1.0, (deff - 1.0) / (m - 1.0)))
     return float(np.mean(rhos)) if rhos else None
@@ -138,6 +146,11 @@ class ClusteredIntervals:
         known = [r for r in rhos.values() if r is not None]
         fallback = float(np.mean(known)) if known else 0.0
         object.__setattr__(self, "_rho", {a: fallback if r is None else r for a, r in rhos.items()})
+        object.__setattr__(  # the df factor of each type's entries (one per type)
+            self,
+            "_df",
+            {a: df_factor(len(c.n_room), c.n, self.alpha) for a, c in self.counts.items() if c.n},
+        )
 
     def rho(self, ref_type: str) -> float:
         """The intra-room correlation used for A's entries with y = 0 or y = n."""
@@ -148,11 +161,9 @@ class ClusteredIntervals:
         c = self.counts.get(ref_type)
         if c is None or c.n == 0:
             return 1.0
-        y_room = c.y_room.get(key)
-        if y_room is not None:
-            own = design_effect(y_room, c.n_room)
-            if own is not None:
-                return own
+        own = c.design_effects.get(key)
+        if own is not None:
+            return own
         return max(1.0, 1.0 + (c.mean_room_size - 1.0) * self.rho(ref_type))
 
     def shrink(self, ref_type: str, key: tuple[str, str]) -> float:
@@ -160,7 +171,7 @@ class ClusteredIntervals:
         c = self.counts.get(ref_type)
         if c is None or c.n == 0:
             return 1.0
-        return self.deff(ref_type, key) * df_factor(len(c.n_room), c.n, self.alpha)
+        return self.deff(ref_type, key) * self._df[ref_type]  # type: ignore[attr-defined]
 
     def interval(self, ref_type: str, key: tuple[str, str], y: int, n: int) -> tuple[float, float]:
         """Wilson's interval on the effective counts (y, n) / shrink; [0, 1] with no data."""

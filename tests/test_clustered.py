@@ -97,3 +97,16 @@ def test_room_counts_from_rows():
     assert list(rc["Desk"].y_room[KEY]) == [1, 1]
     assert rc["Cup"].n == 1 and not rc["Cup"].y_room
     assert rc["Desk"].mean_room_size == pytest.approx((4 + 1) / 3)
+
+
+def test_intervals_do_not_depend_on_the_order_the_pairs_came_in():
+    """The type's mean correlation sums its entries' in one fixed order: pairs recorded in any
+    order (a set's order changes from process to process) give the same bits."""
+    rng = np.random.default_rng(0)  # reversed, the unsorted sum differs in the last bit
+    n_room = rng.integers(1, 9, 12)
+    ys = {("NEAR-DESK", f"T{j}"): np.minimum(n_room, rng.integers(0, 9, 12)) for j in range(20)}
+    shrinks = set()
+    for order in (sorted(ys), sorted(ys, reverse=True)):
+        ci = ClusteredIntervals({"Desk": RoomCounts(n_room, {k: ys[k] for k in order})})
+        shrinks.add((ci.rho("Desk"), ci.shrink("Desk", ("NEAR-DESK", "absent"))))
+    assert len(shrinks) == 1

@@ -86,6 +86,7 @@ class TruthTracker:
         # Per reference type: examinations per room, and per pair the examinations per room.
         self.n_room: dict[str, dict[int, int]] = {}
         self.y_room: dict[str, dict[tuple[str, str], dict[int, int]]] = {}
+        self._counts: dict[str, RoomCounts] = {}  # clustered(): per type, until it changes
 
     def record(self, ref_type: str, pairs, room: int = 0) -> None:
         """One examination of a ``ref_type`` object in room ``room`` that saw ``pairs``
@@ -98,6 +99,7 @@ class TruthTracker:
             if i is not None:
                 self.y[i] += 1
         if self.interval == IntervalMethod.CLUSTERED:
+            self._counts.pop(ref_type, None)
             per = self.n_room.setdefault(ref_type, {})
             per[room] = per.get(room, 0) + 1
             ys = self.y_room.setdefault(ref_type, {})
@@ -109,6 +111,9 @@ class TruthTracker:
         """The clustered intervals of the evidence so far (knowledge.clustered)."""
         counts = {}
         for ref, per in self.n_room.items():
+            if ref in self._counts:  # unchanged since the last call (its design effects kept)
+                counts[ref] = self._counts[ref]
+                continue
             rooms = sorted(per)
             col = {r: j for j, r in enumerate(rooms)}
             ys = {}
@@ -118,6 +123,7 @@ class TruthTracker:
                     arr[col[r]] = v
                 ys[pair] = arr
             counts[ref] = RoomCounts(np.array([per[r] for r in rooms], np.int64), ys)
+            self._counts[ref] = counts[ref]
         return ClusteredIntervals(counts, self.alpha)
 
     def metrics(self) -> dict[str, float]:
