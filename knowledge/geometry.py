@@ -247,11 +247,16 @@ def related(
     others = [o for o in objects if o.id != ref.id]
     if not others:
         return []
-    arr = BoxArray.from_instances(others)
+    rels = catalog.type(ref.type).relations
+    if not rels:
+        return []
+    # every relation's volume at once (each pair's test is the same elementwise arithmetic)
+    hits = overlap_matrix(
+        BoxArray.from_instances(others), BoxArray.of([relation_volume(r, ref) for r in rels])
+    )
     out: list[tuple[str, ObjectInstance]] = []
-    for rel in catalog.type(ref.type).relations:
-        mask = overlaps(arr, relation_volume(rel, ref))
-        out.extend((rel.name, others[i]) for i in np.flatnonzero(mask))
+    for j, rel in enumerate(rels):
+        out.extend((rel.name, others[i]) for i in np.flatnonzero(hits[:, j]))
     return out
 
 
