@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import os
 import socket
 import sys
@@ -96,6 +97,7 @@ def run_units(
         raise CtxsearchError(f"--workers must be at least 1, got {workers}")
     if workers == 1 and not ray_address:
         out = []
+        freeze_long_lived()
         with _progress(len(units), desc, progress) as bar:
             for u in units:
                 out.append(fn(u))
@@ -108,7 +110,24 @@ def _apply(fn: Callable[[U], R], unit: U) -> R:
     """A Ray task: ``fn(unit)`` (Ray's remote takes functions, not partials), in a session of the
     worker's own (``own_session``)."""
     own_session()
+    freeze_long_lived()
     return fn(unit)
+
+
+_frozen = False
+
+
+def freeze_long_lived() -> None:
+    """Before this process's first unit: collect, then freeze what survives (``gc.freeze``: the
+    modules and what the command set up), once. Python's full collections walk every tracked
+    object, ~100,000 of them once mujoco, dm_control and the project are loaded, about 90 ms a
+    time; frozen ones are skipped (and still freed when their last reference goes). The numbers
+    a unit gives do not depend on when garbage is collected."""
+    global _frozen
+    if not _frozen:
+        gc.collect()
+        gc.freeze()
+        _frozen = True
 
 
 def own_session() -> bool:

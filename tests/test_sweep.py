@@ -43,6 +43,28 @@ def test_one_worker_is_a_loop_without_ray():
 
 
 @pytest.mark.slow
+def test_the_first_unit_runs_with_the_long_lived_objects_frozen(monkeypatch):
+    """A full collection skips what existed before the first unit (``freeze_long_lived``)."""
+    import gc
+
+    from ctxsearch.scripts import sweep
+
+    monkeypatch.setattr(sweep, "_frozen", False)
+    before = [[]]  # a tracked container made before the sweep
+    seen = []
+
+    def unit(u):
+        seen.append(any(o is before for o in gc.get_objects()))
+        return u
+
+    try:
+        assert run_units(unit, [1, 2], progress=False) == [1, 2]
+        assert seen == [False, False]  # frozen: no longer among the collected generations
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+
+
 def test_two_workers_give_the_serial_results_in_order():
     units = list(range(8))
     serial = run_units(square_with_pid, units, progress=False)
