@@ -39,7 +39,7 @@ test: $(STAMP)
 # by side (make -j2, their lines interleaved): lane A starts with the steps that
 # run on one core (the hierarchy, the oracle learning runs), lane B with the curve (whose
 # learning run is one core's too), so no core idles while a one-core step runs. The steps write disjoint files and every result is
-# deterministic, so the lanes' order does not change a number. Time on 2 cores: 61 minutes on 2026-12-04
+# deterministic, so the lanes' order does not change a number. Time on 2 cores: 61 and 63 minutes on 2026-12-04
 # (README, Usage).
 # The sweeps (truth, bench learning, bench search, curve, transfer, intervals, drift) run their
 # units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the same for any WORKERS.
