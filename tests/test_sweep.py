@@ -42,7 +42,6 @@ def test_one_worker_is_a_loop_without_ray():
     assert r.returncode == 0, r.stderr
 
 
-@pytest.mark.slow
 def test_the_first_unit_runs_with_the_long_lived_objects_frozen(monkeypatch):
     """A full collection skips what existed before the first unit (``freeze_long_lived``)."""
     import gc
@@ -65,6 +64,7 @@ def test_the_first_unit_runs_with_the_long_lived_objects_frozen(monkeypatch):
         gc.unfreeze()
 
 
+@pytest.mark.slow
 def test_two_workers_give_the_serial_results_in_order():
     units = list(range(8))
     serial = run_units(square_with_pid, units, progress=False)
