@@ -56,6 +56,7 @@ from ctxsearch.knowledge.catalog import Catalog
 LATTICE_M = 0.1  # m between the lattice points of a volume
 MAX_PER_AXIS = 8  # lattice points per axis at most (a large volume is sampled more sparsely)
 VISIBLE_TOL = 0.05  # m a point may lie behind the rendered surface and still be shown
+GROWN_PAD = 1e-6  # m the prefilter of ``_false_rate`` is wider than the grown volume it bounds
 EXAM_MIN_RANGE = 1.0  # m: examinations planned to see never ask for closer viewpoints
 EXAM_RANGES = np.round(np.arange(EXAM_MIN_RANGE, 2.5001, 0.05), 2)  # the ranges considered
 
@@ -120,15 +121,17 @@ class ViewModel:
             return ()
         rels = self.catalog.type(ref.type).relations
         boxes = [geometry.relation_volume(rel, ref) for rel in rels]
-        # Where false reports may stand, kept only near the volumes (the shares count all).
-        c0 = np.asarray(ref.position, float)
-        far = max(np.linalg.norm(np.asarray(b.center) - c0) + self._reach(b) for b in boxes)
+        # Where false reports may stand, kept only in the box that bounds every volume's
+        # ``_grown`` box (the shares count all).
         surfaces = []
-        for f in frames if self.confirm == 1 and self._fp_rate.any() else ():
-            points, valid, _ = false_positive_sites(f.instance_ids, f.camera, f.depth)
-            at = points[valid]
-            near = ((at - c0) ** 2).sum(axis=1) <= far * far
-            surfaces.append((at[near], len(at)))
+        if self.confirm == 1 and self._fp_rate.any():
+            grown = np.array([self._grown(b) for b in boxes])  # (V, 2, 3)
+            lo, hi = grown[:, 0].min(axis=0), grown[:, 1].max(axis=0)
+            for f in frames:
+                points, valid, _ = false_positive_sites(f.instance_ids, f.camera, f.depth)
+                at = points[valid]
+                xyz = at[_within(at[:, 0], at[:, 1], at[:, 2], lo, hi)]
+                surfaces.append((tuple(np.ascontiguousarray(xyz.T)), len(at)))
         return tuple(
             (rel.name, self._recall(box, frames), self._false_rate(box, surfaces))
             for rel, box in zip(rels, boxes, strict=True)
@@ -140,6 +143,19 @@ class ViewModel:
         halves = self._half[np.flatnonzero(self._fp_rate)] if self._fp_rate.any() else self._half
         lift = float((np.linalg.norm(halves, axis=1) + halves[:, 2]).max())
         return float(np.linalg.norm(np.asarray(box.half, float))) + lift
+
+    def _grown(self, box: geometry.Box) -> np.ndarray:
+        """(2, 3) world-axis bounds (low, high) of ``box`` grown by the largest false-positive
+        type's half size, and as far down as such a type's lifted point may stand, ``GROWN_PAD``
+        wider: every surface point that can put a false positive in it lies within them."""
+        big = self._half[np.flatnonzero(self._fp_rate)].max(axis=0)
+        center, half = np.asarray(box.center, float), np.asarray(box.half, float)
+        c, s = abs(float(np.cos(box.yaw))), abs(float(np.sin(box.yaw)))
+        gx, gy = half[0] + big[0], half[1] + big[1]
+        ext = np.array([c * gx + s * gy, s * gx + c * gy, 0.0]) + GROWN_PAD
+        low = center - ext - np.array([0.0, 0.0, half[2] + 2.0 * big[2]])
+        high = center + ext + np.array([0.0, 0.0, half[2]])
+        return np.array([low, high])
 
     def _recall(self, box: geometry.Box, frames: list[Frame]) -> np.ndarray:
         """q (T,) of the volume ``box`` (module docstring)."""
@@ -160,10 +176,12 @@ class ViewModel:
             return np.zeros(n_t)
         return (1.0 - np.prod(1.0 - p[:, :, shown], axis=0)).mean(axis=1)
 
-    def _false_rate(self, box: geometry.Box, surfaces: list[tuple[np.ndarray, int]]) -> np.ndarray:
+    def _false_rate(self, box: geometry.Box, surfaces: list[tuple[tuple, int]]) -> np.ndarray:
         """f (T,) of the volume ``box`` (module docstring) from each image's surface points near
-        the volumes and its count of all of them. Only the points within ``_reach`` of the
-        volume are turned into its frame (the others cannot put a false positive in it)."""
+        the volumes (their x, y and z arrays) and its count of all of them. Only the points
+        within ``_reach`` of the volume are turned into its frame (the others cannot put a
+        false positive in it), and before that only those within its ``_grown`` bounds are read
+        (a superset: each point kept gets the exact test)."""
         rate = np.zeros(len(self.catalog.types))
         if self.confirm > 1 or not self._fp_rate.any():
             return rate
@@ -171,18 +189,22 @@ class ViewModel:
         halves = self._half[fp]  # (k, 3): each false-positive type's half size
         center, half = np.asarray(box.center, float), np.asarray(box.half, float)
         reach = self._reach(box)
+        lo, hi = self._grown(box)
         c, s = np.cos(box.yaw), np.sin(box.yaw)
         lam = np.zeros(len(fp))
-        for at, total in surfaces:
+        for (x, y, z), total in surfaces:
             if not total:
                 continue
-            d = at - center
-            near = np.flatnonzero((d * d).sum(axis=1) <= reach * reach)
+            keep = _within(x, y, z, lo, hi)
+            z = z[keep]
+            dx, dy, dz = x[keep] - center[0], y[keep] - center[1], z - center[2]
+            # (dx^2 + dy^2) + dz^2: the order numpy's sum over a point's three coordinates takes
+            near = np.flatnonzero((dx * dx + dy * dy) + dz * dz <= reach * reach)
             if not len(near):
                 continue
-            dx, dy = d[near, 0], d[near, 1]
+            dx, dy = dx[near], dy[near]
             lx, ly = c * dx + s * dy, -s * dx + c * dy
-            lz = (at[near, 2][:, None] + halves[:, 2]) - center[2]  # lifted by half a height
+            lz = (z[near][:, None] + halves[:, 2]) - center[2]  # lifted by half a height
             inside = (
                 (np.abs(lx)[:, None] <= half[0] + halves[:, 0])
                 & (np.abs(ly)[:, None] <= half[1] + halves[:, 1])
@@ -191,3 +213,12 @@ class ViewModel:
             lam += self._fp_rate[fp] * inside.sum(axis=0) / total
         rate[fp] = 1.0 - np.exp(-lam)
         return rate
+
+
+def _within(x, y, z, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(N,) bool: which points (coordinate arrays ``x``, ``y``, ``z``) lie within the world-axis
+    bounds ``low``..``high``."""
+    return (
+        (x >= low[0]) & (x <= high[0]) & (y >= low[1]) & (y <= high[1])
+        & (z >= low[2]) & (z <= high[2])
+    )  # fmt: skip

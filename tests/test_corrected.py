@@ -223,6 +223,58 @@ def test_the_volume_lattice_fills_its_box():
     assert np.ptp(local[:, 0]) > 0.9
 
 
+@pytest.mark.parametrize("yaw", [0.0, 0.4, np.pi / 2, 2.5, -1.2])
+def test_the_false_report_rate_counts_every_point_its_bounds_could_hold(catalog, yaw):
+    """f from the prefiltered points (``ViewModel._grown``, then the exact test) against the
+    definition over every point: 1 - exp(-sum over images of rate_B * (points whose lifted
+    position lies in the volume grown by B's half size) / the image's count). The points crowd
+    the grown boxes' faces, where a prefilter too tight would drop some."""
+    from ctxsearch.agent.exam_views import ViewModel, _within
+    from ctxsearch.envs.detector import load_detector
+
+    vm = ViewModel(catalog, load_detector("realistic"), 1, 0.0)
+    box = geometry.Box(np.array([1.0, -0.5, 0.9]), yaw, np.array([0.5, 0.3, 0.2]))
+    fp = np.flatnonzero(vm._fp_rate)
+    rng = np.random.default_rng(7)
+    c, s = np.cos(yaw), np.sin(yaw)
+    surfaces, expected = [], np.zeros(len(fp))
+    for total in (4000, 9000):
+        # local points on and near the grown faces of each type, and some anywhere around
+        g = box.half + vm._half[fp][rng.integers(len(fp), size=total)]
+        local = rng.uniform(-1.3, 1.3, (total, 3)) * g
+        face = rng.integers(3, size=total)
+        local[np.arange(total), face] = (
+            np.sign(local[np.arange(total), face])
+            * g[np.arange(total), face]
+            * rng.choice([0.999, 1.0, 1.001], total)
+        )
+        world = (
+            np.column_stack(
+                [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1], local[:, 2]]
+            )
+            + box.center
+        )
+        world[:, 2] -= vm._half[fp][rng.integers(len(fp), size=total), 2]  # as lifted points
+        d = world - box.center
+        lx, ly = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+        for j, t in enumerate(fp):
+            hb = vm._half[t]
+            lz = (world[:, 2] + hb[2]) - box.center[2]
+            inside = (
+                (np.abs(lx) <= box.half[0] + hb[0])
+                & (np.abs(ly) <= box.half[1] + hb[1])
+                & (np.abs(lz) <= box.half[2] + hb[2])
+            )
+            expected[j] += vm._fp_rate[t] * inside.sum() / total
+        lo, hi = vm._grown(box)
+        kept = world[_within(world[:, 0], world[:, 1], world[:, 2], lo, hi)]
+        surfaces.append((tuple(np.ascontiguousarray(kept.T)), total))
+    f = vm._false_rate(box, surfaces)
+    assert (expected > 0).all()  # every false-positive type has points inside
+    np.testing.assert_allclose(f[fp], 1.0 - np.exp(-expected), rtol=1e-12)
+    assert (np.delete(f, fp) == 0).all()
+
+
 def test_the_range_planned_to_see_shrinks_as_the_recall_asked_grows(catalog):
     from ctxsearch.agent.exam_views import EXAM_MIN_RANGE, ViewModel
     from ctxsearch.envs.camera import focal_length
