@@ -612,11 +612,11 @@ def coverage_viewpoints(
         return np.zeros((0, 2))
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
     cover = np.zeros((len(cand), len(points)), bool)
-    for i in range(0, len(cand), 64):
-        d = np.linalg.norm(cams[i : i + 64, None, :] - points[None, :, :], axis=-1)
-        cover[i : i + 64] = d <= max_range
-    coverable = cover.any(0)
-    need = int(math.ceil(goal * coverable.sum()))
+    pts = [np.ascontiguousarray(points[:, j]) for j in range(3)]
+    for i in range(0, len(cand), 64):  # norm's sum, (dx^2 + dy^2) + dz^2, without (., ., 3)
+        dx, dy, dz = (cams[i : i + 64, j, None] - pts[j] for j in range(3))
+        cover[i : i + 64] = np.sqrt((dx * dx + dy * dy) + dz * dz) <= max_range
+    need = int(math.ceil(goal * cover.any(0).sum()))
     got = np.zeros(len(points), bool)
     gain, chosen = cover.sum(1), []  # a candidate's gain: what it covers that none chosen does
     while got.sum() < need and len(chosen) < max_viewpoints:
