@@ -21,11 +21,13 @@ free paths, and stepping stays cheap) nor show in the head camera: they live in 
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control/mujoco are first imported
 
+import mujoco
 import numpy as np
 from dm_control import composer, mjcf
 
@@ -213,3 +215,63 @@ def qpos_to_pose(q: np.ndarray) -> RobotPose:
     """The RobotPose of joint positions (x, y, yaw, pan, tilt)."""
     q = np.asarray(q, float)
     return RobotPose(float(q[0]), float(q[1]), wrap_angle(float(q[2])), float(q[3]), float(q[4]))
+
+
+# What the robot's motion depends on, compared between a world's model and the robot's own
+_SAME_OPTIONS = ("timestep", "integrator", "disableflags", "enableflags", "gravity", "wind",
+                 "magnetic", "density", "viscosity", "cone", "jacobian")  # fmt: skip
+_SAME_ARRAYS = ("jnt_type", "jnt_range", "jnt_limited", "jnt_axis", "jnt_pos", "jnt_qposadr",
+                "jnt_dofadr", "dof_parentid", "dof_armature", "dof_damping", "dof_frictionloss",
+                "actuator_trntype", "actuator_trnid", "actuator_dyntype", "actuator_gaintype",
+                "actuator_biastype", "actuator_gainprm", "actuator_biasprm", "actuator_dynprm",
+                "actuator_ctrlrange", "actuator_ctrllimited", "actuator_forcerange",
+                "actuator_forcelimited", "actuator_gear", "qpos0")  # fmt: skip
+_SAME_BODY = ("body_mass", "body_inertia", "body_pos", "body_quat", "body_ipos", "body_iquat",
+              "body_gravcomp")  # fmt: skip
+
+
+def robot_dynamics(robot: Robot, model: mujoco.MjModel) -> mujoco.MjModel | None:
+    """The robot alone as a MuJoCo model of its own, for stepping its motion in ``model`` (a
+    world it is attached to at the origin): nothing in a world acts on the robot (no contacts,
+    no constraints but its own joint limits; every other body is static), so its joints move
+    the same there as here, bit for bit (``tests/test_world.py`` steps both side by side), at
+    a quarter of the cost of a house (about 2.5 against 10 us a physics step: MuJoCo poses
+    every static body at every step). None where the two models differ in anything the motion
+    depends on (the options, the joints, actuators and bodies): then the world's model is
+    stepped."""
+    xml = robot.mjcf_model.to_xml_string()
+    xml = xml.replace("<worldbody>", '<worldbody><body name="attachment">', 1)
+    xml = xml.replace("</worldbody>", "</body></worldbody>", 1)
+    opts = tuple(np.asarray(getattr(model.opt, k)).tobytes() for k in _SAME_OPTIONS)
+    own = _compiled(xml, opts)
+    if own is None or own.nq != model.nq or own.nv != model.nv or own.nu != model.nu:
+        return None
+    for k in _SAME_OPTIONS:
+        if not np.array_equal(getattr(own.opt, k), getattr(model.opt, k)):
+            return None
+    if any(not np.array_equal(getattr(own, k), getattr(model, k)) for k in _SAME_ARRAYS):
+        return None
+    # the bodies that move, with the attachment frame above them, in the same order
+    moving = np.flatnonzero(model.body_dofnum > 0)
+    ids = np.concatenate([[model.body_parentid[moving[0]]], moving])
+    row = {int(b): i + 1 for i, b in enumerate(ids)}  # a body's index in ``own``
+    if [row.get(int(model.body_parentid[b]), 0) for b in ids] != list(own.body_parentid[1:]):
+        return None
+    for k in _SAME_BODY:
+        if not np.array_equal(getattr(own, k)[1:], getattr(model, k)[ids]):
+            return None
+    return own
+
+
+@functools.lru_cache(maxsize=32)
+def _compiled(xml: str, opts: tuple[bytes, ...]) -> mujoco.MjModel | None:
+    """The robot's model from its XML with a world's options (``_SAME_OPTIONS``, as bytes)."""
+    try:
+        spec = mujoco.MjSpec.from_string(xml)
+        for k, raw in zip(_SAME_OPTIONS, opts, strict=True):
+            cur = getattr(spec.option, k)
+            value = np.frombuffer(raw, np.asarray(cur).dtype)
+            setattr(spec.option, k, value if np.ndim(cur) else value[0].item())
+        return spec.compile()
+    except (ValueError, TypeError, mujoco.FatalError):
+        return None

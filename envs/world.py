@@ -38,7 +38,7 @@ from ctxsearch.envs.arena import MAX_IMAGE_SIZE, OVERHEAD_GEOM_GROUP, WALL_THICK
 from ctxsearch.envs.camera import Frame, PinholeCamera
 from ctxsearch.envs.house_view import RoomCulling
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose
+from ctxsearch.envs.robot import ROBOT_GEOM_GROUP, qpos_to_pose, robot_dynamics
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel, wrap_angle
 from ctxsearch.envs.task import RoomTask
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
@@ -211,6 +211,8 @@ class World:
         self._vadr = self.physics.bind(robot.joints).dofadr.astype(int)
         self._act = self.physics.bind(robot.actuators).element_id.astype(int)
         self._cam_id = int(self.physics.bind(robot.camera).element_id)
+        own = robot_dynamics(robot, self._m)  # the robot's motion, stepped without the room
+        self._motion = (own, mujoco.MjData(own)) if own is not None else (self._m, self._d)
         self._geom_instance = self.task.objects.geom_instance_ids(self.physics)
         self._culling = (
             RoomCulling(layout, self._m.geom_rgba, self._geom_instance) if layout.is_house else None
@@ -287,7 +289,8 @@ class World:
     def _execute(self, knots_t: np.ndarray, knots_q: np.ndarray) -> None:
         """Step the physics while the servo targets follow the piecewise-linear joint trajectory
         (knots_t (K,), knots_q (K, 5)), then hold the last knot until the joints settle."""
-        m, d = self._m, self._d
+        m, d = self._motion  # the robot's own model (``robot_dynamics``), or the world's
+        _copy_state(self._d, d)
         dt = CONTROL_STEPS * m.opt.timestep
         total = float(knots_t[-1])
         n = math.ceil(total / dt - 1e-9) if total > 0 else 0
@@ -305,7 +308,8 @@ class World:
             ):
                 break
             mujoco.mj_step(m, d, CONTROL_STEPS)
-        mujoco.mj_forward(m, d)
+        _copy_state(d, self._d)
+        mujoco.mj_forward(self._m, self._d)
 
     # -- images --------------------------------------------------------------------------------
 
@@ -415,6 +419,16 @@ class World:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _copy_state(src: mujoco.MjData, dst: mujoco.MjData) -> None:
+    """What a physics step reads of the robot's state (both models have only its joints and
+    actuators, in the same order: ``robot_dynamics``), from ``src`` to ``dst``."""
+    if src is dst:
+        return
+    dst.time = src.time
+    for name in ("qpos", "qvel", "act", "ctrl", "qacc_warmstart", "qfrc_applied"):
+        getattr(dst, name)[:] = getattr(src, name)
 
 
 def _check_size(width: int, height: int) -> None:

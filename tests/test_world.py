@@ -136,6 +136,35 @@ def test_drive_and_head_reach_targets_and_charge_time_model(world):
     assert _close(world.pose(), RobotPose(1.0, 0.0, 0.0))
 
 
+@pytest.mark.parametrize("style", ["office", "apartment"])
+def test_the_robot_alone_moves_as_it_does_in_the_world_bit_for_bit(catalog, style):
+    """``World`` steps the robot's motion in the robot's own model (``robot_dynamics``): the same
+    joint positions, velocities and physics time as stepping the whole world's model, after
+    every drive and head motion, with joint limits met on the way."""
+    from ctxsearch.envs.floorplan import generate_layout
+    from ctxsearch.envs.houses import resolve_style
+
+    layout = generate_layout(resolve_style(style, catalog), 3, catalog)
+    own, full = World(layout, catalog), World(layout, catalog)
+    assert own._motion[0].nbody == 5 and own._motion[0] is not own._m  # the robot alone
+    full._motion = (full._m, full._d)  # the whole world's model, as before
+    rng = np.random.default_rng(3)
+    half = np.array([layout.width, layout.depth]) / 2 - 0.5
+    for w in (own, full):
+        w.reset_pose(RobotPose(0.0, 0.0, 0.3))
+    for _ in range(6):
+        path = rng.uniform(-half, half, (3, 2))
+        yaw, pan, tilt = rng.uniform(-3, 3), rng.uniform(-4, 4), rng.uniform(-2, 1)
+        for w in (own, full):
+            w.drive(path, final_yaw=yaw)
+            w.move_head(pan, tilt)  # beyond the head's limits at times
+        for name in ("qpos", "qvel", "qacc_warmstart", "ctrl", "xpos", "cam_xpos", "cam_xmat"):
+            assert getattr(own._d, name).tobytes() == getattr(full._d, name).tobytes(), name
+        assert own._d.time == full._d.time and own.sim_time == full.sim_time
+    own.close()
+    full.close()
+
+
 @pytest.mark.render
 def test_camera_sees_the_desk_in_front_and_projects_consistently(world, layout):
     world.reset_pose(RobotPose(-0.5, 0.0, 0.0, 0.0, -0.3))
