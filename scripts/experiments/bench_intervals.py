@@ -41,12 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ctxsearch.envs.truth import ground_truth
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 from ctxsearch.knowledge.store import EvidenceStore
-from ctxsearch.scripts.experiments.bench_learning import TRUTH_SEED
+from ctxsearch.scripts.experiments.bench_learning import ground_truth_units
 from ctxsearch.scripts.experiments.learning_trace import (
     LearningBenchConfig,
     Trace,
@@ -55,7 +54,7 @@ from ctxsearch.scripts.experiments.learning_trace import (
     run_trace,
 )
 from ctxsearch.scripts.experiments.tables import write_csv
-from ctxsearch.scripts.sweep import SweepOptions, run_units
+from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 
 # (label, detector preset, confirm, min score, confirm reference, exam recall): the detector
 # settings compared. ``confirm2`` counts a related object once two images detected it;
@@ -242,19 +241,23 @@ def bench_intervals(
         "perception": "camera",
         "rows": [],
     }
-    truths = {s: ground_truth(s, config.truth_samples, TRUTH_SEED, catalog) for s in config.styles}
     units = [
         (st, se, seed) for st in config.styles for se in settings for seed in range(config.seeds)
     ]
-    t0 = time.perf_counter()
-    done = run_units(
-        functools.partial(_run, tuple(config.room_marks), truths, config.alpha),
-        units,
-        workers=sweep.workers,
-        ray_address=sweep.ray_address,
-        desc="bench intervals",
-        progress=progress,
-    )
+    with session(sweep):  # one Ray start for the truths' units and the runs
+        truths = {
+            s: ground_truth_units(s, config.truth_samples, catalog, sweep, progress)
+            for s in config.styles
+        }
+        t0 = time.perf_counter()
+        done = run_units(
+            functools.partial(_run, tuple(config.room_marks), truths, config.alpha),
+            units,
+            workers=sweep.workers,
+            ray_address=sweep.ray_address,
+            desc="bench intervals",
+            progress=progress,
+        )
     by_unit = dict(zip(units, done, strict=True))
     runs: list[dict] = []  # intervals.csv: one row per (style, detector, seed, room mark)
     bias_rows: list[dict] = []  # intervals_bias.csv: one row per those and reference type

@@ -152,10 +152,18 @@ def exam_rows(config: LearningBenchConfig, traces: dict[str, list[Trace]]):
 def _ground_truth(
     config: LearningBenchConfig, catalog: Catalog, progress: bool, sweep: SweepOptions
 ) -> dict:
-    """``envs.truth.ground_truth`` of the benchmark's style, its rooms counted in sweep units of
-    ``TRUTH_ROOMS_PER_UNIT`` (the same document as the serial call)."""
-    style = resolve_style(config.style, catalog)
-    seeds = list(range(TRUTH_SEED, TRUTH_SEED + config.truth_samples))
+    """``envs.truth.ground_truth`` of the benchmark's style (``ground_truth_units``)."""
+    return ground_truth_units(config.style, config.truth_samples, catalog, sweep, progress)
+
+
+def ground_truth_units(
+    style_name: str, samples: int, catalog: Catalog, sweep: SweepOptions, progress: bool
+) -> dict:
+    """``envs.truth.ground_truth`` of ``style_name`` over ``samples`` rooms from ``TRUTH_SEED``,
+    its rooms counted in sweep units of ``TRUTH_ROOMS_PER_UNIT`` (the same document as the
+    serial call)."""
+    style = resolve_style(style_name, catalog)
+    seeds = list(range(TRUTH_SEED, TRUTH_SEED + samples))
     chunks = [
         seeds[i : i + TRUTH_ROOMS_PER_UNIT] for i in range(0, len(seeds), TRUTH_ROOMS_PER_UNIT)
     ]
@@ -168,7 +176,7 @@ def _ground_truth(
         progress=progress,
     )
     rooms = [c for part in parts for c in part]
-    return truth_document(style, config.truth_samples, TRUTH_SEED, catalog, rooms)
+    return truth_document(style, samples, TRUTH_SEED, catalog, rooms)
 
 
 def _run_all(
