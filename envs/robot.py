@@ -253,6 +253,8 @@ def robot_dynamics(robot: Robot, model: mujoco.MjModel) -> mujoco.MjModel | None
         return None
     # the bodies that move, with the attachment frame above them, in the same order
     moving = np.flatnonzero(model.body_dofnum > 0)
+    if not len(moving):
+        return None
     ids = np.concatenate([[model.body_parentid[moving[0]]], moving])
     row = {int(b): i + 1 for i, b in enumerate(ids)}  # a body's index in ``own``
     if [row.get(int(model.body_parentid[b]), 0) for b in ids] != list(own.body_parentid[1:]):
