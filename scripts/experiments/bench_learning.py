@@ -98,7 +98,7 @@ def bench_learning(
     out.mkdir(parents=True, exist_ok=True)
     sweep = sweep or SweepOptions()
     with session(sweep):  # one Ray for both sweeps
-        truth = _ground_truth(config, catalog, progress, sweep)
+        truth = ground_truth_units(config.style, config.truth_samples, catalog, sweep, progress)
         traces = _run_all(config, truth, catalog, progress, sweep)
     data = _data(config, truth, traces)
     c = config
@@ -147,13 +147,6 @@ def exam_rows(config: LearningBenchConfig, traces: dict[str, list[Trace]]):
                     "sim_s": float(t),
                     **{m: float(tr.metrics[m][k]) for m in METRICS},
                 }
-
-
-def _ground_truth(
-    config: LearningBenchConfig, catalog: Catalog, progress: bool, sweep: SweepOptions
-) -> dict:
-    """``envs.truth.ground_truth`` of the benchmark's style (``ground_truth_units``)."""
-    return ground_truth_units(config.style, config.truth_samples, catalog, sweep, progress)
 
 
 def ground_truth_units(
