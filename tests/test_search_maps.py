@@ -8,6 +8,7 @@ import contextlib
 import math
 import subprocess
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -373,3 +374,67 @@ def test_viewpoint_bounds_sum_the_found_mass_as_over_every_point():
     for k in range(0, len(cand), 16):  # the reference: P(found) at every point, batch by batch
         s = slice(k, k + 16)
         assert np.array_equal(mass[s], (near[s] * sight.found(np.sqrt(d2[s])) * w).sum(1))
+
+
+def _lattice_scorer(step: float = 0.2, zs: Sequence[float] = tuple(np.arange(0.05, 1.86, 0.15))):
+    """A scorer over a lattice of points ``step`` m apart on a 12 m square, at the heights
+    ``zs`` (default: the seen map's)."""
+
+    class _Map:
+        x0, y0 = -6.0, -6.0
+
+    xs = np.arange(-6.0, 6.0, step) + step / 2
+    pts = np.stack(np.meshgrid(xs, xs, np.asarray(zs), indexing="ij"), -1).reshape(-1, 3)
+    return sx.ViewpointScorer(_Map(), pts, RobotSpec(), TimeModel())
+
+
+def _found(d):
+    return 1.0 / (1.0 + np.exp(2.0 * (d - 2.0))) ** 2
+
+
+def test_bin_distance_is_at_most_every_points_and_reached_by_one():
+    """A bin's distance is the nearest point of the box around its points: at most any of its
+    points' distances, and equal to it for a camera standing over a point at its own height."""
+    scorer = _lattice_scorer(zs=(*np.arange(0.05, 1.86, 0.15), RobotSpec().camera_height))
+    rng = np.random.default_rng(4)
+    cand = np.vstack([rng.uniform(-7.0, 7.0, size=(40, 2)), scorer.points[::997, :2]])
+    bins = np.arange(len(scorer._bin_lo))
+    d2 = scorer._bin_d2(cand, bins)
+    cam = np.column_stack([cand, np.full(len(cand), scorer.spec.camera_height)])
+    pd2 = ((scorer.points[None, :, :] - cam[:, None, :]) ** 2).sum(-1)
+    nearest = np.full((len(cand), len(bins)), np.inf)
+    np.minimum.at(nearest.T, scorer._bin, pd2.T)
+    assert (d2 <= nearest + 1e-12).all()
+    assert np.isclose(d2, nearest, rtol=0, atol=1e-12).mean() > 0.05  # a box's face reached
+    assert (d2[40:, :] == 0.0).any(axis=1).all()  # a camera over a bin is in its box's xy
+
+
+def test_bin_bounds_bound_the_point_bounds_and_keep_the_cached_gains():
+    """``best``'s first bounds, per bin, are never below the points' bounds they stand for
+    (count and mass, with and without weights and P(found)); with one point per bin they are
+    those bounds; a candidate's cached gain is taken as it is; nothing near counts nothing."""
+    rng = np.random.default_rng(3)
+    for step, zs in ((0.2, None), (0.4, (0.8,))):  # 0.4 m at one height: one point per bin
+        scorer = _lattice_scorer(step) if zs is None else _lattice_scorer(step, zs)
+        share = 0.5 if zs is None else 1.0
+        sub = np.flatnonzero(rng.random(len(scorer.points)) < share)
+        cand = np.vstack([rng.uniform(-7.0, 7.0, size=(60, 2)), scorer.points[sub[:20], :2]])
+        w = rng.random(len(sub))
+        for sight in (sx.Sight(3.5, _found), sx.Sight(2.0)):
+            for weights in (w, None):
+                fine = scorer._bounds(cand, scorer.points[sub], sight, weights, [-1] * len(cand))
+                up, mass, exact = scorer._bin_bounds(cand, sub, sight, weights, [-1] * len(cand))
+                assert not exact.any() and (fine[0] > 0).sum() > 10
+                assert (up >= fine[0]).all() and (mass >= fine[1]).all()
+                if zs is not None:  # one point per bin: the points' bounds
+                    assert np.array_equal(up, fine[0])
+                    assert np.allclose(mass, fine[1], rtol=1e-8, atol=0)
+    cached = [-1] * len(cand)
+    cached[3] = 7
+    up, mass, exact = scorer._bin_bounds(cand, sub, sx.Sight(3.5, _found), w, cached)
+    assert exact.tolist() == [i == 3 for i in range(len(cand))]
+    assert up[3] == 7 and mass[3] == 7.0
+    up, mass, _ = scorer._bin_bounds(
+        np.array([[100.0, 100.0]]), sub, sx.Sight(3.5, _found), w, [-1]
+    )
+    assert up[0] == 0 and mass[0] == 0.0

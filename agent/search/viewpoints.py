@@ -29,6 +29,7 @@ robot can expect before it has seen anything.
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
@@ -52,6 +53,10 @@ MAX_VIEW = 5.0  # m: the built map's depth range; nothing further is counted as 
 # 1.2 m).
 LOW_Z = 0.4  # m
 MIN_GAIN = 8  # points a viewpoint must show to be worth driving to
+# ``ViewpointScorer.best``'s first bounds: bins of this many visibility cells a side, and the
+# relative allowance for rounding that keeps them above the points' bounds they stand for
+BIN_CELLS = 2
+BOUND_SLACK = 1e-9
 VISITED_RADIUS = 0.4  # m: a viewpoint this near an earlier sweep's is not chosen again
 HEAD_S = 0.6  # s: mean head slew per image
 
@@ -153,6 +158,15 @@ class ViewpointScorer:
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
         self._gains: dict[Hashable, dict[tuple[float, float], int]] = {}  # best(): last gains
+        # ``_bin_bounds``' bins: each point's bin and each bin's box around all its points
+        b = self.cells // BIN_CELLS
+        b -= b.min(axis=0) if len(b) else 0
+        self._bin = b[:, 1] * (int(b[:, 0].max()) + 1 if len(b) else 1) + b[:, 0]
+        n = int(self._bin.max()) + 1 if len(b) else 0
+        self._bin_lo = np.full((n, 3), np.inf)
+        self._bin_hi = np.full((n, 3), -np.inf)
+        np.minimum.at(self._bin_lo, self._bin, points)
+        np.maximum.at(self._bin_hi, self._bin, points)
 
     def visible_points(self, blocked: Blockers, xy: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
@@ -198,44 +212,43 @@ class ViewpointScorer:
         Lazy evaluation, exact: a candidate's gain is at most the number of todo points within
         range of it (the trace only removes points) and, for calls with the same ``key`` whose
         ``todo`` only shrinks (the seen map and the exhausted points only grow, occupied cells
-        of the built map are never cleared), at most the gain it had at the last call. The
-        candidates are traced in order of that bound on their rate and the search stops when
-        the bound falls below the best rate found: the viewpoint tracing them all would pick.
+        of the built map are never cleared), at most the gain it had at the last call. Those
+        bounds on the rate are bounded in turn by their bins' (``_bin_bounds``). Candidates
+        are taken by bound, largest first: a bin bound gives way to the points' bound, a points'
+        bound is traced, until the largest left falls below the best rate found: the viewpoint
+        tracing them all would pick (a bound never changes what is picked, only how soon).
 
         ``weights`` (N,) non-negative: a point's share is its weight over the todo points'
         total (the belief: agent.search.belief); the bound is then the weight within range, and
         gains are not cached (the weights change with every image)."""
         count = int(todo.sum())
-        if count < MIN_GAIN:
-            return None
         w = None if weights is None else np.asarray(weights, float)[todo]
         left = float(count) if w is None else float(w.sum())
-        if left <= 0.0:
+        if count < MIN_GAIN or left <= 0.0:
             return None
         cand, seconds = self._reachable(grid, here, images, avoid)
         if len(cand) == 0:
             return None
         sub = np.flatnonzero(todo)
-        pts = self.points[sub]
+        pts, blocked, best = self.points[sub], None, None
         cache = self._gains.setdefault(key, {}) if key is not None and w is None else {}
         ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
-        upper, mass = self._bounds(cand, pts, sight, w, [cache.get(i, -1) for i in ids])
-        bound = mass / left / seconds
-        blocked = None
-        best: Viewpoint | None = None
-        for i in np.argsort(-bound, kind="stable"):
-            if best is not None and bound[i] < best.rate:
+        upper, mass, exact = self._bin_bounds(cand, sub, sight, w, [cache.get(i, -1) for i in ids])
+        heap = _heap(mass / left / seconds, upper, exact)
+        while heap:
+            neg, i, fine = heapq.heappop(heap)
+            if best is not None and -neg < best.rate:
                 break
-            if upper[i] < MIN_GAIN:
+            if not fine:  # a bin's bound: the points' bound takes its place
+                up, m = self._bounds(cand[i : i + 1], pts, sight, w, [-1])
+                if up[0] >= MIN_GAIN:
+                    heapq.heappush(heap, (-float(m[0] / left / seconds[i]), i, True))
                 continue
-            if blocked is None:
-                blocked = coarse_blocked(self.built)
+            blocked = blocked or coarse_blocked(self.built)
             g, m = self._gain(blocked, cand[i], sight, sub, pts, w)
             cache[ids[i]] = g
-            if g < MIN_GAIN:
-                continue
             v = Viewpoint(cand[i], g, m / left, float(seconds[i]))
-            if best is None or _order(v) < _order(best):
+            if g >= MIN_GAIN and (best is None or _order(v) < _order(best)):
                 best = v
         return best
 
@@ -259,6 +272,52 @@ class ViewpointScorer:
         sweep_s = self.tm.looks_estimate(images, HEAD_S)
         seconds = np.array([self.tm.leg_estimate(d) for d in drive[reach]], float) + sweep_s
         return cand[reach], seconds
+
+    def _bin_bounds(
+        self, cand: np.ndarray, sub: np.ndarray, sight: Sight, w: np.ndarray | None, cached: list
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Upper bounds on ``_bounds``' bounds of each candidate, cheap: the todo points ``sub``
+        summed per bin (``BIN_CELLS`` x ``BIN_CELLS`` visibility cells), each bin counted whole
+        when the nearest point of the box around its points is within range, its weight times
+        ``sight.found`` at that distance (P(found) never grows with distance: the recall falls
+        with distance and with fewer pixels), and an allowance for rounding; and which are
+        exact already (``cached``, the last call's gain, where it is not -1: as ``_bounds``)."""
+        cached_a = np.array(cached, np.int64)
+        exact = cached_a >= 0
+        upper, mass = cached_a.copy(), cached_a.astype(float)
+        new = np.flatnonzero(~exact)
+        nb = len(self._bin_lo)
+        count = np.bincount(self._bin[sub], minlength=nb)
+        live = np.flatnonzero(count)
+        count = count[live]
+        if len(new) == 0 or len(live) == 0:
+            upper[new], mass[new] = 0, 0.0
+            return upper, mass, exact
+        d2 = self._bin_d2(cand[new], live)
+        near = d2 <= min(sight.range, MAX_VIEW) ** 2 * (1.0 + BOUND_SLACK)
+        upper[new] = near @ count
+        if w is None:
+            mass[new] = upper[new]
+            return upper, mass, exact
+        weight = np.bincount(self._bin[sub], weights=w, minlength=nb)[live]
+        if sight.found is not None:
+            f = np.zeros_like(d2)
+            f[near] = sight.found(np.sqrt(d2[near]))
+            mass[new] = (f * weight).sum(1) * (1.0 + BOUND_SLACK)  # not BLAS: see _bounds
+        else:
+            mass[new] = (near * weight).sum(1) * (1.0 + BOUND_SLACK)
+        return upper, mass, exact
+
+    def _bin_d2(self, cand: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """(M, B): the squared distance from the camera at each candidate (M, 2) to the nearest
+        point of the box around the points of each bin of ``bins`` (B,)."""
+        lo, hi = self._bin_lo[bins], self._bin_hi[bins]
+        cx, cy = cand[:, 0][:, None], cand[:, 1][:, None]
+        cz = self.spec.camera_height
+        dx = np.maximum(np.maximum(lo[:, 0] - cx, cx - hi[:, 0]), 0.0)
+        dy = np.maximum(np.maximum(lo[:, 1] - cy, cy - hi[:, 1]), 0.0)
+        dz = np.maximum(np.maximum(lo[:, 2] - cz, cz - hi[:, 2]), 0.0)
+        return dx * dx + dy * dy + dz * dz
 
     def _bounds(
         self, cand: np.ndarray, pts: np.ndarray, sight: Sight, w: np.ndarray | None, cached: list
@@ -329,6 +388,15 @@ class ViewpointScorer:
         docstring)."""
         near = self.visible_points(coarse_blocked(self.built), xy, min(rng, EXHAUST_RADIUS))
         return near & unseen
+
+
+def _heap(bound: np.ndarray, upper: np.ndarray, exact: np.ndarray) -> list:
+    """(-bound, candidate index, exact?) of the candidates whose ``upper`` bound on their points
+    reaches ``MIN_GAIN``, as a heap: the largest bound first, then the lowest index
+    (``ViewpointScorer.best``)."""
+    heap = [(-b, i, e) for i, (b, u, e) in enumerate(zip(bound.tolist(), upper.tolist(), exact.tolist(), strict=True)) if u >= MIN_GAIN]  # fmt: skip
+    heapq.heapify(heap)
+    return heap
 
 
 def _order(v: Viewpoint) -> tuple[float, float, float, float]:
