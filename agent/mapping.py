@@ -135,11 +135,14 @@ class BuiltMap:
         h, w = self.floor.shape
         ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
         top = self.spec.camera_height + HEAD_MARGIN
-        hit = ok & (z >= FLOOR_EPS) & (z <= top)
-        self.occupied[rows[hit], cols[hit]] = True
-        np.maximum.at(self.top_z, (rows[hit], cols[hit]), z[hit])
-        flo = ok & (z < FLOOR_EPS)
-        self.floor[rows[flo], cols[flo]] = True
+        cell = rows * w + cols  # the flat cell index (valid where ok)
+        hit = np.flatnonzero(ok & (z >= FLOOR_EPS) & (z <= top))
+        np.put(self.occupied, cell[hit], True)
+        # the highest point per cell: only the points above what their cell holds can raise it
+        hr, hc, zh = rows[hit], cols[hit], z[hit]
+        up = zh > self.top_z[hr, hc]
+        np.maximum.at(self.top_z, (hr[up], hc[up]), zh[up])
+        np.put(self.floor, cell[ok & (z < FLOOR_EPS)], True)
         self.floor &= ~self.occupied
         sub = self._traced[keep]
         self._trace(np.asarray(cam.position, float), pts[sub], rng[keep][sub])
@@ -170,15 +173,15 @@ class BuiltMap:
             return
         u = (p - origin) / np.maximum(d, 1e-9)[:, None]
         t = np.arange(0.0, self.max_range, VOXEL)
-        keep = t[None, :] <= d[:, None]
-        q = origin + u[:, None, :] * t[None, :, None]
-        q = np.take(q.reshape(-1, 3), np.flatnonzero(keep), axis=0)  # q[keep], faster
+        ray, step = np.nonzero(t[None, :] <= d[:, None])  # the samples along each ray
+        ts = t[step]
+        qx, qy, qz = (origin[j] + u[ray, j] * ts for j in range(3))
         vh, vw, vz = self.seen_voxels.shape
-        r = np.floor((q[:, 1] - self.y0) / VOXEL).astype(np.int64)
-        c = np.floor((q[:, 0] - self.x0) / VOXEL).astype(np.int64)
-        k = np.floor(q[:, 2] / VOXEL).astype(np.int64)
+        r = np.floor((qy - self.y0) / VOXEL).astype(np.int64)
+        c = np.floor((qx - self.x0) / VOXEL).astype(np.int64)
+        k = np.floor(qz / VOXEL).astype(np.int64)
         inside = (r >= 0) & (r < vh) & (c >= 0) & (c < vw) & (k >= 0) & (k < vz)
-        self.seen_voxels[r[inside], c[inside], k[inside]] = True
+        np.put(self.seen_voxels, ((r * vw + c) * vz + k)[inside], True)
 
     # ------------------------------------------------------------------ the navigable grid
     @property

@@ -140,3 +140,64 @@ def test_learn_says_which_map_and_takes_the_world_budget(tmp_path, capsys):
     assert e.value.code == 2
     assert main([*args, "--perception", "oracle", "--map", "built"]) == 2
     assert "needs --map given" in capsys.readouterr().err
+
+
+def _reference_update(m: BuiltMap, frame: Frame) -> None:
+    """The built map's update as first written (every hit through ``np.maximum.at``, every
+    ray's samples as one (rays, steps, 3) array): the definition the faster code must equal."""
+    from ctxsearch.agent import mapping as mp
+
+    cam = frame.camera
+    depth = np.asarray(frame.depth, np.float32)[:, :: mp.COL_STRIDE].ravel()
+    local = m._local_rays(cam)
+    rng = depth * local[:, 3]
+    keep = np.flatnonzero(np.isfinite(depth) & (depth > mp.NEAR_CLIP) & (rng <= m.max_range))
+    rays = local[keep, :3] @ np.asarray(cam.xmat, np.float32).T
+    pts = np.asarray(cam.position, np.float32) + rays * depth[keep, None]
+    z = pts[:, 2]
+    rows = np.floor((pts[:, 1] - m.y0) / m.resolution).astype(np.int64)
+    cols = np.floor((pts[:, 0] - m.x0) / m.resolution).astype(np.int64)
+    h, w = m.floor.shape
+    ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    hit = ok & (z >= mp.FLOOR_EPS) & (z <= m.spec.camera_height + mp.HEAD_MARGIN)
+    m.occupied[rows[hit], cols[hit]] = True
+    np.maximum.at(m.top_z, (rows[hit], cols[hit]), z[hit])
+    flo = ok & (z < mp.FLOOR_EPS)
+    m.floor[rows[flo], cols[flo]] = True
+    m.floor &= ~m.occupied
+    sub = m._traced[keep]
+    origin, p, d = np.asarray(cam.position, float), pts[sub], rng[keep][sub]
+    u = (p - origin) / np.maximum(d, 1e-9)[:, None]
+    t = np.arange(0.0, m.max_range, mp.VOXEL)
+    q = (origin + u[:, None, :] * t[None, :, None])[t[None, :] <= d[:, None]]
+    vh, vw, vz = m.seen_voxels.shape
+    r = np.floor((q[:, 1] - m.y0) / mp.VOXEL).astype(np.int64)
+    c = np.floor((q[:, 0] - m.x0) / mp.VOXEL).astype(np.int64)
+    k = np.floor(q[:, 2] / mp.VOXEL).astype(np.int64)
+    inside = (r >= 0) & (r < vh) & (c >= 0) & (c < vw) & (k >= 0) & (k < vz)
+    m.seen_voxels[r[inside], c[inside], k[inside]] = True
+
+
+def test_the_map_update_equals_its_definition_cell_for_cell():
+    """Images of a floor with a wall, and of clutter at random depths (many points per cell,
+    later images raising some cells' highest point and not others), out of range and
+    beyond the map's edge: the update's floor, occupied cells, highest points and seen voxels
+    are those of the update as first written, bit for bit."""
+    spec = RobotSpec()
+    rng = np.random.default_rng(7)
+    fast = BuiltMap((-3.0, -2.0, 3.0, 2.5), spec, RobotPose(0.0, 0.0, 0.0))
+    ref = BuiltMap((-3.0, -2.0, 3.0, 2.5), spec, RobotPose(0.0, 0.0, 0.0))
+    for i in range(12):
+        pose = RobotPose(*rng.uniform(-1.0, 1.0, 2), rng.uniform(-3, 3), rng.uniform(-1, 1),
+                         rng.uniform(-0.9, 0.1))  # fmt: skip
+        frame = _plane_frame(pose, spec, wall_x=float(rng.uniform(1.5, 4.0)))
+        if i % 2:  # clutter: depths scattered in front of the floor, some beyond range
+            d = frame.depth * rng.uniform(0.2, 1.0, frame.depth.shape).astype(np.float32)
+            d[rng.random(d.shape) < 0.05] = np.inf
+            frame = Frame(None, d, frame.instance_ids, frame.camera, pose)
+        fast.update(frame)
+        _reference_update(ref, frame)
+        for a in ("floor", "occupied", "top_z", "seen_voxels"):
+            assert np.array_equal(getattr(fast, a), getattr(ref, a)), (i, a)
+    assert fast.occupied.sum() > 100 and (fast.top_z > 0.5).sum() > 10
+    assert fast.seen_voxels.sum() > 1000 and fast.floor.sum() > 100
