@@ -394,7 +394,8 @@ def _heap(bound: np.ndarray, upper: np.ndarray, exact: np.ndarray) -> list:
     """(-bound, candidate index, exact?) of the candidates whose ``upper`` bound on their points
     reaches ``MIN_GAIN``, as a heap: the largest bound first, then the lowest index
     (``ViewpointScorer.best``)."""
-    heap = [(-b, i, e) for i, (b, u, e) in enumerate(zip(bound.tolist(), upper.tolist(), exact.tolist(), strict=True)) if u >= MIN_GAIN]  # fmt: skip
+    rows = zip(bound.tolist(), upper.tolist(), exact.tolist(), strict=True)
+    heap = [(-b, i, e) for i, (b, u, e) in enumerate(rows) if u >= MIN_GAIN]
     heapq.heapify(heap)
     return heap
 
