@@ -144,9 +144,8 @@ class SeenMap:
     # (built: ``learn_support``); None: every point
     support: np.ndarray | None = None
     learn_support: bool = False
-    # the points' lattice keys sorted, and the point of each (``_keys``, made on first use)
-    _sorted: np.ndarray | None = field(default=None, repr=False, compare=False)
-    _order: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the points' lattice keys sorted, the point of each, the lattice's corner (``_keys``)
+    _index: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def for_room(
@@ -249,28 +248,26 @@ class SeenMap:
         hits = hits[ok]
         if len(hits) == 0:
             return
-        key = self._keys()
-        lo = self.points[:, :2].min(axis=0)
+        key, order, lo = self._keys()
         ix = np.floor((hits[:, 0] - lo[0]) / LATTICE_XY + 0.5).astype(np.int64)
         iy = np.floor((hits[:, 1] - lo[1]) / LATTICE_XY + 0.5).astype(np.int64)
         iz = np.ceil((hits[:, 2] - z0) / dz - 1e-9).astype(np.int64)
-        found = np.searchsorted(key, _lattice_key(ix, iy, iz))
-        found = np.clip(found, 0, len(key) - 1)
-        match = key[found] == _lattice_key(ix, iy, iz)
-        self.support[self._order[found[match]]] = True
+        want = _lattice_key(ix, iy, iz)
+        found = np.clip(np.searchsorted(key, want), 0, len(key) - 1)
+        self.support[order[found[key[found] == want]]] = True
 
-    def _keys(self) -> np.ndarray:
-        """The points' lattice keys, sorted (``_order``: the point of each; the lattice's
-        corner is the points' least x and y: the whole footprint lattice, ``for_footprint``)."""
-        if self._sorted is None:
+    def _keys(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The points' lattice keys sorted, the point of each, and the lattice's corner (the
+        points' least x and y: the whole footprint lattice, ``for_footprint``); made once."""
+        if self._index is None:
             lo = self.points[:, :2].min(axis=0)
             ix = np.rint((self.points[:, 0] - lo[0]) / LATTICE_XY).astype(np.int64)
             iy = np.rint((self.points[:, 1] - lo[1]) / LATTICE_XY).astype(np.int64)
             iz = np.rint((self.points[:, 2] - LATTICE_Z[0]) / LATTICE_Z[2]).astype(np.int64)
             k = _lattice_key(ix, iy, iz)
-            self._order = np.argsort(k, kind="stable")
-            self._sorted = k[self._order]
-        return self._sorted
+            order = np.argsort(k, kind="stable")
+            self._index = (k[order], order, lo)
+        return self._index
 
     def update(self, camera: PinholeCamera, depth: np.ndarray) -> np.ndarray:
         """Record an image: the points visible in ``depth`` (H, W, optical-axis metres) from
