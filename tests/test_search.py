@@ -3,6 +3,7 @@ episodes) and the policies on a hand-made room (render-marked)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -190,6 +191,42 @@ def test_coverage_viewpoints_cover_the_room_within_range(catalog):
     assert len(ss.coverage_viewpoints(grid, seen.points, START.xy, 1.5)) > len(
         ss.coverage_viewpoints(grid, seen.points, START.xy, 3.0)
     )
+
+
+def _dense_coverage_choice(grid, points, start_xy, max_range, goal=0.95):
+    """The greedy cover as first written: every candidate against every point, candidates by
+    rows (the definition ``coverage_viewpoints`` must equal)."""
+    cand = ss.lattice_candidates(grid, start_xy, 0.5)
+    cams = np.column_stack([cand, np.full(len(cand), RobotSpec().camera_height)])
+    d = np.sqrt(((cams[:, None, :2] - points[None, :, :2]) ** 2).sum(-1)
+                + (cams[:, None, 2] - points[None, :, 2]) ** 2)  # fmt: skip
+    cover = d <= max_range
+    need, got, gain, chosen = (
+        math.ceil(goal * cover.any(0).sum()),
+        ~cover[0] & False,
+        cover.sum(1),
+        [],
+    )
+    while got.sum() < need and len(chosen) < 40 and gain.max() > 0:
+        chosen.append(int(np.argmax(gain)))
+        new = cover[chosen[-1]] & ~got
+        got, gain = got | new, gain - cover[:, new].sum(1)
+    return ss.tour_order(grid, cand[chosen], start_xy)
+
+
+def test_coverage_viewpoints_are_the_dense_greedy_cover(catalog):
+    """The cover measured only for the points near each chunk of candidates, by points' rows,
+    chooses the sites of the dense greedy cover, in the same tour order."""
+    big = dataclasses.replace(room(DESK, SHELF), width=12.0, depth=9.0)  # 7 chunks of candidates
+    for seed, lay in enumerate((big, room(DESK))):
+        grid = OccupancyGrid.from_layout(lay)
+        rand = np.random.default_rng(seed)  # points anywhere, so each near-miss counts
+        pts = rand.uniform(-1.0, 1.0, (3000, 3)) * (lay.width / 2, lay.depth / 2, 1.0) + (0, 0, 1)
+        for rng, goal in ((0.8, 1.0), (1.5, 1.0), (3.0, 0.95)):
+            got = ss.coverage_viewpoints(grid, pts, START.xy, rng, goal=goal)
+            want = _dense_coverage_choice(grid, pts, START.xy, rng, goal)
+            assert np.array_equal(got, want), rng
+            assert len(got) >= 1
 
 
 def test_sweep_skips_seen_directions():

@@ -608,22 +608,25 @@ def coverage_viewpoints(
     if len(cand) == 0 or len(points) == 0:
         return np.zeros((0, 2))
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
-    cover = np.zeros((len(cand), len(points)), bool)
+    cover = np.zeros((len(points), len(cand)), bool)  # (point, candidate): its rows are read
     pts = [np.ascontiguousarray(points[:, j]) for j in range(3)]
     for i in range(0, len(cand), 64):  # norm's sum, (dx^2 + dy^2) + dz^2, without (., ., 3)
-        dx, dy, dz = (cams[i : i + 64, j, None] - pts[j] for j in range(3))
-        cover[i : i + 64] = np.sqrt((dx * dx + dy * dy) + dz * dz) <= max_range
-    need = int(math.ceil(goal * cover.any(0).sum()))
+        c = cams[i : i + 64]  # only the points within range of the chunk's x and y spans
+        lo, hi = c.min(axis=0) - max_range - 1e-9, c.max(axis=0) + max_range + 1e-9
+        near = (pts[0] >= lo[0]) & (pts[0] <= hi[0]) & (pts[1] >= lo[1]) & (pts[1] <= hi[1])
+        dx, dy, dz = (c[:, j, None] - pts[j][near] for j in range(3))
+        cover[near, i : i + 64] = (np.sqrt((dx * dx + dy * dy) + dz * dz) <= max_range).T
+    need = int(math.ceil(goal * cover.any(1).sum()))
     got = np.zeros(len(points), bool)
-    gain, chosen = cover.sum(1), []  # a candidate's gain: what it covers that none chosen does
+    gain, chosen = cover.sum(0), []  # a candidate's gain: what it covers that none chosen does
     while got.sum() < need and len(chosen) < max_viewpoints:
         i = int(np.argmax(gain))
         if gain[i] == 0:
             break
         chosen.append(i)
-        new = cover[i] & ~got
+        new = cover[:, i] & ~got
         got |= new
-        gain -= cover[:, new].sum(1)
+        gain -= cover[new].sum(0)
     return tour_order(grid, cand[chosen], start_xy)
 
 
