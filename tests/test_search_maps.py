@@ -366,7 +366,7 @@ def test_viewpoint_bounds_sum_the_found_mass_as_over_every_point():
     cand = rng.uniform(-6.0, 6.0, size=(40, 2))
     w = rng.random(len(pts))
     sight = sx.Sight(3.5, lambda d: 1.0 / (1.0 + np.exp(2.0 * (d - 2.0))))
-    upper, mass = scorer._bounds(cand, pts, sight, w, [-1] * len(cand))
+    upper, mass = scorer._bounds(cand, pts, sight, w)
     cams = np.column_stack([cand, np.full(len(cand), spec.camera_height)])
     d2 = ((pts[None, :, :] - cams[:, None, :]) ** 2).sum(-1)
     near = d2 <= 3.5**2
@@ -398,7 +398,7 @@ def test_bin_distance_is_at_most_every_points_and_reached_by_one():
     scorer = _lattice_scorer(zs=(*np.arange(0.05, 1.86, 0.15), RobotSpec().camera_height))
     rng = np.random.default_rng(4)
     cand = np.vstack([rng.uniform(-7.0, 7.0, size=(40, 2)), scorer.points[::997, :2]])
-    bins = np.arange(len(scorer._bin_lo))
+    bins = np.arange(len(scorer._boxes()[0]))
     d2 = scorer._bin_d2(cand, bins)
     cam = np.column_stack([cand, np.full(len(cand), scorer.spec.camera_height)])
     pd2 = ((scorer.points[None, :, :] - cam[:, None, :]) ** 2).sum(-1)
@@ -422,7 +422,7 @@ def test_bin_bounds_bound_the_point_bounds_and_keep_the_cached_gains():
         w = rng.random(len(sub))
         for sight in (sx.Sight(3.5, _found), sx.Sight(2.0)):
             for weights in (w, None):
-                fine = scorer._bounds(cand, scorer.points[sub], sight, weights, [-1] * len(cand))
+                fine = scorer._bounds(cand, scorer.points[sub], sight, weights)
                 up, mass, exact = scorer._bin_bounds(cand, sub, sight, weights, [-1] * len(cand))
                 assert not exact.any() and (fine[0] > 0).sum() > 10
                 assert (up >= fine[0]).all() and (mass >= fine[1]).all()

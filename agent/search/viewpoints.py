@@ -158,15 +158,26 @@ class ViewpointScorer:
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
         self._gains: dict[Hashable, dict[tuple[float, float], int]] = {}  # best(): last gains
-        # ``_bin_bounds``' bins: each point's bin and each bin's box around all its points
+        # ``_bin_bounds``' bins: each point's bin and each bin's box (low, high) around all its
+        # points (``_boxes``, made on first use: many scorers never choose a viewpoint)
         b = self.cells // BIN_CELLS
         b -= b.min(axis=0) if len(b) else 0
         self._bin = b[:, 1] * (int(b[:, 0].max()) + 1 if len(b) else 1) + b[:, 0]
-        n = int(self._bin.max()) + 1 if len(b) else 0
-        self._bin_lo = np.full((n, 3), np.inf)
-        self._bin_hi = np.full((n, 3), -np.inf)
-        np.minimum.at(self._bin_lo, self._bin, points)
-        np.maximum.at(self._bin_hi, self._bin, points)
+        self._bin_box: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(B, 3) low and high corners of the box around each bin's points (inf, -inf: none)."""
+        if self._bin_box is None:
+            n = int(self._bin.max()) + 1 if len(self._bin) else 0
+            lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+            if n:  # each bin's points one after the other, reduced run by run
+                order = np.argsort(self._bin, kind="stable")
+                b, p = self._bin[order], self.points[order]
+                first = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+                lo[b[first]] = np.minimum.reduceat(p, first, axis=0)
+                hi[b[first]] = np.maximum.reduceat(p, first, axis=0)
+            self._bin_box = (lo, hi)
+        return self._bin_box
 
     def visible_points(self, blocked: Blockers, xy: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
@@ -240,7 +251,7 @@ class ViewpointScorer:
             if best is not None and -neg < best.rate:
                 break
             if not fine:  # a bin's bound: the points' bound takes its place
-                up, m = self._bounds(cand[i : i + 1], pts, sight, w, [-1])
+                up, m = self._bounds(cand[i : i + 1], pts, sight, w)
                 if up[0] >= MIN_GAIN:
                     heapq.heappush(heap, (-float(m[0] / left / seconds[i]), i, True))
                 continue
@@ -281,12 +292,12 @@ class ViewpointScorer:
         when the nearest point of the box around its points is within range, its weight times
         ``sight.found`` at that distance (P(found) never grows with distance: the recall falls
         with distance and with fewer pixels), and an allowance for rounding; and which are
-        exact already (``cached``, the last call's gain, where it is not -1: as ``_bounds``)."""
+        exact already (``cached``, the last call's gain, where it is not -1, is both bounds)."""
         cached_a = np.array(cached, np.int64)
         exact = cached_a >= 0
         upper, mass = cached_a.copy(), cached_a.astype(float)
         new = np.flatnonzero(~exact)
-        nb = len(self._bin_lo)
+        nb = len(self._boxes()[0])
         count = np.bincount(self._bin[sub], minlength=nb)
         live = np.flatnonzero(count)
         count = count[live]
@@ -311,7 +322,7 @@ class ViewpointScorer:
     def _bin_d2(self, cand: np.ndarray, bins: np.ndarray) -> np.ndarray:
         """(M, B): the squared distance from the camera at each candidate (M, 2) to the nearest
         point of the box around the points of each bin of ``bins`` (B,)."""
-        lo, hi = self._bin_lo[bins], self._bin_hi[bins]
+        lo, hi = (a[bins] for a in self._boxes())
         cx, cy = cand[:, 0][:, None], cand[:, 1][:, None]
         cz = self.spec.camera_height
         dx = np.maximum(np.maximum(lo[:, 0] - cx, cx - hi[:, 0]), 0.0)
@@ -320,15 +331,14 @@ class ViewpointScorer:
         return dx * dx + dy * dy + dz * dz
 
     def _bounds(
-        self, cand: np.ndarray, pts: np.ndarray, sight: Sight, w: np.ndarray | None, cached: list
+        self, cand: np.ndarray, pts: np.ndarray, sight: Sight, w: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Upper bounds on each candidate's gain: the count (``cached``, the last call's gain,
-        where it is not -1, else the todo points ``pts`` within range) and the weight (``w``
-        over ``pts``, times ``sight.found`` at its distance; None: the count) of the todo
-        points it may show."""
-        upper = np.array(cached, np.int64)
-        mass = upper.astype(float)
-        new = np.flatnonzero(upper < 0)
+        """Upper bounds on each candidate's gain: the count of the todo points ``pts`` within
+        range (the trace only removes points) and their weight (``w`` over ``pts``, times
+        ``sight.found`` at its distance; None: the count)."""
+        upper = np.zeros(len(cand), np.int64)
+        mass = np.zeros(len(cand))
+        new = np.arange(len(cand))
         view2 = min(sight.range, MAX_VIEW) ** 2
         cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
         x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
