@@ -438,3 +438,69 @@ def test_bin_bounds_bound_the_point_bounds_and_keep_the_cached_gains():
         np.array([[100.0, 100.0]]), sub, sx.Sight(3.5, _found), w, [-1]
     )
     assert up[0] == 0 and mass[0] == 0.0
+
+
+def test_the_lattice_over_a_furnished_room_is_its_definition(catalog):
+    """``SeenMap.for_room`` tests each furniture part against the points within its x extent
+    only: the points and supports are those of testing every point against every part (an
+    apartment, whose parts stand at every yaw, and the hand-made room)."""
+    from ctxsearch.envs.floorplan import generate_layout
+    from ctxsearch.envs.houses import resolve_style
+    from ctxsearch.envs.parts import world_parts_array
+    from ctxsearch.knowledge.geometry import Box
+
+    z = ss.LATTICE_Z
+    layouts = [room(DESK, SHELF), generate_layout(resolve_style("apartment", catalog), 7, catalog)]
+    for lay in layouts:
+        pts = ss.SeenMap._lattice(lay, ss.LATTICE_XY, z)
+        keep, rests = np.ones(len(pts), bool), pts[:, 2] < z[0] + z[2] / 2
+        for o in (o for o in lay.objects if catalog.type(o.type).is_furniture):
+            arr = world_parts_array(o, catalog)
+            for c, yaw, h in zip(arr.centers, arr.yaws, arr.halves, strict=True):
+                keep &= ~Box(c, float(yaw), h).contains_points(pts)
+                slab = Box((c[0], c[1], c[2] + h[2] + z[2] / 2), float(yaw), (*h[:2], z[2] / 2))
+                rests |= slab.contains_points(pts)
+        seen = ss.SeenMap.for_room(lay, catalog)
+        assert (~keep).sum() > 10 and rests[keep].sum() > (pts[keep, 2] < z[0] + 0.01).sum()
+        assert np.array_equal(seen.points, pts[keep]) and np.array_equal(seen.support, rests[keep])
+
+
+def test_floor_headings_read_the_cells_near_the_robot_as_the_whole_map_would():
+    """``floor_headings`` reads only the map's window within ``near`` of the robot: the same
+    headings as over the whole map, on maps of every size and at positions inside, at the
+    edge of and outside them."""
+    from types import SimpleNamespace
+
+    from ctxsearch.agent.mapping import BuiltMap
+
+    def whole(built, xy, heading0, near=(0.4, 2.0), min_unknown=0.3):
+        xs, ys = built._centers()
+        dx, dy = xs[None, :] - xy[0], ys[:, None] - xy[1]
+        d, ang = np.hypot(dx, dy), np.arctan2(dy, dx)
+        ring, unknown, out = (d >= near[0]) & (d <= near[1]), built.unknown, []
+        for i in range(6):
+            h = heading0 + i * math.pi / 3
+            wedge = ring & (np.abs(np.angle(np.exp(1j * (ang - h)))) <= math.radians(25))
+            if wedge.any() and unknown[wedge].mean() >= min_unknown:
+                out.append(float(np.angle(np.exp(1j * h))))
+        return out
+
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(60):
+        h, w = (int(n) for n in rng.integers(20, 200, 2))
+        floor = rng.random((h, w)) < rng.random()
+        occupied = (rng.random((h, w)) < 0.2) & ~floor
+        x0, y0 = -w * 0.025 + rng.normal(), -h * 0.025 + rng.normal()
+        b = SimpleNamespace(resolution=0.05, x0=x0, y0=y0, floor=floor, occupied=occupied)
+        b._centers = BuiltMap._centers.__get__(b)
+        b.unknown = ~floor & ~occupied
+        for _ in range(4):
+            xy = np.array(
+                [rng.uniform(x0 - 1, x0 + w * 0.05 + 1), rng.uniform(y0 - 1, y0 + h * 0.05 + 1)]
+            )
+            h0, share = rng.uniform(-4, 4), rng.uniform(0.0, 0.8)
+            got = sx.floor_headings(b, xy, h0, min_unknown=share)
+            assert got == whole(b, xy, h0, min_unknown=share)
+            seen.add(len(got))
+    assert {0, 6} <= seen and len(seen) >= 4  # none, all and some of the six

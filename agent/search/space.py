@@ -149,12 +149,9 @@ class SeenMap:
 
     @classmethod
     def for_room(
-        cls,
-        layout: RoomLayout,
-        catalog: Catalog,
-        step_xy: float = LATTICE_XY,
+        cls, layout: RoomLayout, catalog: Catalog, step_xy: float = LATTICE_XY,
         z: tuple[float, float, float] = LATTICE_Z,
-    ) -> SeenMap:
+    ) -> SeenMap:  # fmt: skip
         """The lattice over ``layout``'s room minus the points inside furniture's solid parts."""
         pts = cls._lattice(layout, step_xy, z)
         keep = np.ones(len(pts), bool)
@@ -164,20 +161,20 @@ class SeenMap:
                 continue
             arr = world_parts_array(o, catalog)
             for c, yaw, h in zip(arr.centers, arr.yaws, arr.halves, strict=True):
-                keep &= ~Box(c, float(yaw), h).contains_points(pts)
+                # the same test on the points within the part's x extent (the lattice is x-major)
+                ex = abs(math.cos(yaw)) * h[0] + abs(math.sin(yaw)) * h[1] + 1e-6
+                i, j = np.searchsorted(pts[:, 0], [c[0] - ex, c[0] + ex + 1e-12])
+                keep[i:j] &= ~Box(c, float(yaw), h).contains_points(pts[i:j])
                 # the slab of one lattice step above the part's top rests on it
                 top = float(c[2] + h[2])
                 slab = Box((c[0], c[1], top + z[2] / 2), float(yaw), (h[0], h[1], z[2] / 2))
-                rests |= slab.contains_points(pts)
+                rests[i:j] |= slab.contains_points(pts[i:j])
         return cls(pts[keep], np.full(int(keep.sum()), np.inf), rests[keep])
 
     @classmethod
     def for_footprint(
-        cls,
-        layout: RoomLayout,
-        step_xy: float = LATTICE_XY,
-        z: tuple[float, float, float] = LATTICE_Z,
-    ) -> SeenMap:
+        cls, layout: RoomLayout, step_xy: float = LATTICE_XY, z: tuple[float, float, float] = LATTICE_Z
+    ) -> SeenMap:  # fmt: skip
         """The lattice over ``layout``'s footprint and height only (what a robot that knows
         nothing of the furniture may assume: ``--map built``)."""
         pts = cls._lattice(layout, step_xy, z)

@@ -423,11 +423,15 @@ def floor_headings(
     the near-floor tilt still maps something. Without these the robot would never know the floor
     around itself free (agent.frontiers: its look-around's second tilt)."""
     xs, ys = built._centers()
-    dx, dy = xs[None, :] - xy[0], ys[:, None] - xy[1]
+    # the cells within ``near[1]`` along both axes (the same cells of the ring, in the same order)
+    cols = np.flatnonzero(np.abs(xs - xy[0]) <= near[1] + 1e-6)
+    rows = np.flatnonzero(np.abs(ys - xy[1]) <= near[1] + 1e-6)
+    dx, dy = xs[None, cols] - xy[0], ys[rows, None] - xy[1]
     d = np.hypot(dx, dy)
     ring = (d >= near[0]) & (d <= near[1])
     ang = np.arctan2(dy, dx)
-    unknown = built.unknown
+    window = np.ix_(rows, cols)
+    unknown = ~built.floor[window] & ~built.occupied[window]  # ``built.unknown`` there
     out = []
     for i in range(6):
         h = heading0 + i * math.pi / 3
