@@ -338,24 +338,23 @@ class ViewpointScorer:
         ``sight.found`` at its distance; None: the count)."""
         upper = np.zeros(len(cand), np.int64)
         mass = np.zeros(len(cand))
-        new = np.arange(len(cand))
         view2 = min(sight.range, MAX_VIEW) ** 2
-        cams = np.column_stack([cand[new], np.full(len(new), self.spec.camera_height)])
+        cams = np.column_stack([cand, np.full(len(cand), self.spec.camera_height)])
         x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
-        for k in range(0, len(new), 16):  # the todo points within range of each camera
+        for k in range(0, len(cand), 16):  # the todo points within range of each camera
             c = cams[k : k + 16, :, None]
             # the squared distances, summed in the order a sum over the last axis takes
             d2 = (x - c[:, 0]) ** 2 + (y - c[:, 1]) ** 2 + (z - c[:, 2]) ** 2
             near = d2 <= view2
-            upper[new[k : k + 16]] = near.sum(1)
+            upper[k : k + 16] = near.sum(1)
             if w is None:
-                mass[new[k : k + 16]] = near.sum(1)
+                mass[k : k + 16] = near.sum(1)
             elif sight.found is None:
-                mass[new[k : k + 16]] = (near * w).sum(1)  # not BLAS: thread-independent
+                mass[k : k + 16] = (near * w).sum(1)  # not BLAS: thread-independent
             else:  # P(found) where it counts only: 0 elsewhere, as near times any value was
                 f = np.zeros_like(d2)
                 f[near] = sight.found(np.sqrt(d2[near]))
-                mass[new[k : k + 16]] = (near * f * w).sum(1)
+                mass[k : k + 16] = (near * f * w).sum(1)
         return upper, mass
 
     def _gain(self, blocked, xy, sight: Sight, sub, pts, weights=None) -> tuple[int, float]:
@@ -430,8 +429,7 @@ def floor_headings(
     d = np.hypot(dx, dy)
     ring = (d >= near[0]) & (d <= near[1])
     ang = np.arctan2(dy, dx)
-    window = np.ix_(rows, cols)
-    unknown = ~built.floor[window] & ~built.occupied[window]  # ``built.unknown`` there
+    unknown = built.unknown[np.ix_(rows, cols)]
     out = []
     for i in range(6):
         h = heading0 + i * math.pi / 3
