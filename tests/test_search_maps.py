@@ -504,3 +504,53 @@ def test_floor_headings_read_the_cells_near_the_robot_as_the_whole_map_would():
             assert got == whole(b, xy, h0, min_unknown=share)
             seen.add(len(got))
     assert {0, 6} <= seen and len(seen) >= 4  # none, all and some of the six
+
+
+def test_kept_views_give_the_gains_and_choices_of_tracing_afresh(catalog):
+    """On the given map a candidate's view is traced once over all points and kept
+    (``ViewpointScorer``'s ``views``, shared by the policies of a room): its count and weight for
+    any todo points are those of tracing the todo points afresh, bit for bit, and ``best`` picks
+    what it picks without kept views, in an apartment (walls between rooms) as the todo points
+    shrink and the weights change, and with views another scorer kept."""
+    from ctxsearch.envs.floorplan import generate_layout
+    from ctxsearch.envs.houses import resolve_style
+
+    spec, tm = RobotSpec(), TimeModel()
+    layout = generate_layout(resolve_style("apartment", catalog), 7, catalog)
+    maps = RoomMaps.given(layout, catalog, spec)
+    pts, grid = maps.seen.points, maps.grid
+    sight = sx.Sight(3.0, lambda d: np.exp(-np.asarray(d) / 2.0))
+    fresh = sx.ViewpointScorer(maps.occluders, pts, spec, tm)
+    views: dict = {}
+    kept = sx.ViewpointScorer(maps.occluders, pts, spec, tm, views)
+    blocked = sx.coarse_blocked(maps.occluders)
+    rng = np.random.default_rng(3)
+    here = np.array(ss.lattice_candidates(grid, np.array(layout.rooms[0].center), 0.5)[0])
+    cand = ss.lattice_candidates(grid, here, 0.5)
+    todo = np.ones(len(pts), bool)
+    shown_some = 0
+    for step in range(6):
+        w = rng.random(len(pts)) * (rng.random(len(pts)) < 0.7)
+        sub = np.flatnonzero(todo)
+        for xy in cand[rng.choice(len(cand), 12, replace=False)]:
+            want = fresh._gain(blocked, xy, sight, sub, pts[sub], w[sub])
+            got = kept._gain(blocked, xy, sight, sub, pts[sub], w[sub], (todo, np.cumsum(todo) - 1))
+            assert got == want, (step, xy)
+            shown_some += want[0] >= sx.MIN_GAIN
+        a = fresh.best(grid, todo, here, sight, sx.SWEEP_IMAGES, weights=w)
+        b = kept.best(grid, todo, here, sight, sx.SWEEP_IMAGES, weights=w)
+        assert (a is None) == (b is None) and (step > 0 or a is not None)
+        if a is not None:
+            assert (tuple(a.xy), a.gain, a.share, a.seconds) == (
+                tuple(b.xy), b.gain, b.share, b.seconds)  # fmt: skip
+            todo = todo & (np.linalg.norm(pts[:, :2] - a.xy, axis=1) > 1.5)
+    assert shown_some > 20 and len(views) > 20
+    # another policy's scorer in the same room reads the views the first one kept
+    other = sx.ViewpointScorer(maps.occluders, pts, spec, tm, views)
+    before = len(views)
+    w = rng.random(len(pts))
+    a = fresh.best(grid, todo, here, sight, sx.SWEEP_IMAGES, weights=w)
+    b = other.best(grid, todo, here, sight, sx.SWEEP_IMAGES, weights=w)
+    assert a is not None and b is not None
+    assert (tuple(a.xy), a.gain, a.share) == (tuple(b.xy), b.gain, b.share)
+    assert len(views) - before < before

@@ -36,7 +36,10 @@ class Explorer:
         """The built map's viewpoint scorer (made on first use)."""
         if self._scorer is None:
             c = self.ctx
-            self._scorer = sx.ViewpointScorer(c.occluders, c.seen.points, c.spec, c.time_model)
+            views = c.maps.views if c.built is None else None  # the given map never changes
+            self._scorer = sx.ViewpointScorer(
+                c.occluders, c.seen.points, c.spec, c.time_model, views
+            )
         return self._scorer
 
     def todo(self, rng: float, zmax: float | None = None) -> np.ndarray:

@@ -14,7 +14,7 @@ robot is given; the behaviours read only ``RoomMaps``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -76,6 +76,9 @@ class RoomMaps:
     top: float = 3.0
     occluders: Occluders | None = None  # what blocks the view on the given map
     rooms: RoomLabels | None = None  # the given map's rooms (the plan's); None on the built map
+    # The given map's viewpoint views, kept for every policy run in the room (the occluders and
+    # the lattice do not change: agent.search.viewpoints.ViewpointScorer's ``views``)
+    views: dict = field(default_factory=dict, compare=False, repr=False)
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
         """An empty map of the robot's own over the footprint (``built``), None on a given map."""

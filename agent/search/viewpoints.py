@@ -59,6 +59,7 @@ BIN_CELLS = 2
 BOUND_SLACK = 1e-9
 VISITED_RADIUS = 0.4  # m: a viewpoint this near an earlier sweep's is not chosen again
 HEAD_S = 0.6  # s: mean head slew per image
+VIEWS_KEPT = 1024  # kept views (``ViewpointScorer._kept_shown``) at most: ~6,000 points each
 
 
 @dataclass(frozen=True)
@@ -151,10 +152,22 @@ class Occupancy(Protocol):
 
 class ViewpointScorer:
     """Gains and seconds of candidate viewpoints on a map whose occupied cells block the view
-    (``built``: the robot's own map, or the given map's occluders; module docstring)."""
+    (``built``: the robot's own map, or the given map's occluders; module docstring).
 
-    def __init__(self, built: Occupancy, points: np.ndarray, spec: RobotSpec, tm: TimeModel):
+    ``views``: where what blocks the view never changes (the given map's occluders), a dict
+    that keeps each candidate's view, every lattice point within a range that a sweep there
+    shows, traced once (``_kept_shown``); the scorers of the policies run in one room share it
+    (``maps.RoomMaps.views``). A later trace of a kept view only reads which of its points are
+    still to be seen, and ``best`` traces such a candidate without bounding it first. The gains
+    and weights are the same numbers as tracing the todo points afresh. None: the map changes
+    (the robot's own), nothing is kept."""
+
+    def __init__(
+        self, built: Occupancy, points: np.ndarray, spec: RobotSpec, tm: TimeModel,
+        views: dict[tuple[float, float, float, float], np.ndarray] | None = None,
+    ):  # fmt: skip
         self.built, self.points, self.spec, self.tm = built, points, spec, tm
+        self._views = views  # ``_kept_shown``
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
         self._gains: dict[Hashable, dict[tuple[float, float], int]] = {}  # best(): last gains
@@ -246,17 +259,18 @@ class ViewpointScorer:
         ids = [(round(float(x), 3), round(float(y), 3)) for x, y in cand]
         upper, mass, exact = self._bin_bounds(cand, sub, sight, w, [cache.get(i, -1) for i in ids])
         heap = _heap(mass / left / seconds, upper, exact)
+        kept = None if self._views is None else (todo, np.cumsum(todo) - 1)  # and their ranks
         while heap:
             neg, i, fine = heapq.heappop(heap)
             if best is not None and -neg < best.rate:
                 break
-            if not fine:  # a bin's bound: the points' bound takes its place
+            if not fine and not self._has_view(cand[i], sight):  # the points' bound replaces
                 up, m = self._bounds(cand[i : i + 1], pts, sight, w)
                 if up[0] >= MIN_GAIN:
                     heapq.heappush(heap, (-float(m[0] / left / seconds[i]), i, True))
                 continue
             blocked = blocked or coarse_blocked(self.built)
-            g, m = self._gain(blocked, cand[i], sight, sub, pts, w)
+            g, m = self._gain(blocked, cand[i], sight, sub, pts, w, kept)
             cache[ids[i]] = g
             v = Viewpoint(cand[i], g, m / left, float(seconds[i]))
             if g >= MIN_GAIN and (best is None or _order(v) < _order(best)):
@@ -357,11 +371,18 @@ class ViewpointScorer:
                 mass[k : k + 16] = (near * f * w).sum(1)
         return upper, mass
 
-    def _gain(self, blocked, xy, sight: Sight, sub, pts, weights=None) -> tuple[int, float]:
+    def _gain(
+        self, blocked, xy, sight: Sight, sub, pts, weights=None, kept=None
+    ) -> tuple[int, float]:
         """The todo points (``sub``, at ``pts``) a sweep at ``xy`` shows: their count and their
         weight (``weights`` over ``sub``, times ``sight.found`` at their distance; None: the
-        count)."""
-        shown, dist = self._shown(blocked, xy, sight, sub, pts)
+        count). ``kept``: (the todo mask, each todo point's position in ``sub``) where views
+        are kept (``_kept_shown``)."""
+        hit = None if kept is None else self._kept_shown(blocked, xy, sight, *kept)
+        if hit is None:
+            shown, dist = self._shown(blocked, xy, sight, sub, pts)
+            hit = shown, dist[shown]
+        shown, dist = hit
         g = len(shown)
         if g == 0:
             return 0, 0.0
@@ -369,20 +390,53 @@ class ViewpointScorer:
             return g, float(g)
         if sight.found is None:
             return g, float(weights[shown].sum())
-        return g, float((weights[shown] * sight.found(dist[shown])).sum())
+        return g, float((weights[shown] * sight.found(dist)).sum())
+
+    def _distances(self, pts: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Each of ``pts``' distance from the camera at ``xy``: the norm of pts - cam, summed in
+        the order np.linalg.norm takes (the same numbers, point by point)."""
+        dx, dy = pts[:, 0] - xy[0], pts[:, 1] - xy[1]
+        dz = pts[:, 2] - self.spec.camera_height
+        return np.sqrt(dx * dx + dy * dy + dz * dz)
 
     def _shown(self, blocked, xy, sight: Sight, sub, pts) -> tuple[np.ndarray, np.ndarray]:
         """(positions in ``sub`` of the points a sweep at ``xy`` shows, none if fewer than
         ``MIN_GAIN``; every point's distance from the camera)."""
         rng = min(sight.range, MAX_VIEW)
-        # the norm of pts - cam, summed in the order np.linalg.norm takes (the same numbers)
-        dx, dy = pts[:, 0] - xy[0], pts[:, 1] - xy[1]
-        dz = pts[:, 2] - self.spec.camera_height
-        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dist = self._distances(pts, xy)
         near = np.flatnonzero(dist <= rng)
         if len(near) < MIN_GAIN:
             return near[:0], dist
         return near[self._visible(blocked, xy, rng, sub[near])], dist
+
+    def _has_view(self, xy: np.ndarray, sight: Sight) -> bool:
+        """Whether ``xy``'s view for ``sight``'s range is kept (``_kept_shown``)."""
+        return self._views is not None and self._view_key(xy, sight) in self._views
+
+    def _view_key(self, xy: np.ndarray, sight: Sight) -> tuple[float, float, float, float]:
+        return (float(xy[0]), float(xy[1]), min(sight.range, MAX_VIEW), self.spec.camera_height)
+
+    def _kept_shown(self, blocked, xy, sight: Sight, todo: np.ndarray, rank: np.ndarray):
+        """``_shown`` from the candidate's kept view (``views``): (positions among the todo
+        points (``todo`` (N,) bool; ``rank``: each todo point's position) of those a sweep at
+        ``xy`` shows, their distances). The view, every point within range in a cell the rays
+        reach, is traced over all points on first use; a point's visibility and distance do not
+        depend on the others, so the todo points it holds are those ``_shown`` finds. None
+        where fewer than ``MIN_GAIN`` are left: ``_shown``'s test on the points within range
+        decides then."""
+        assert self._views is not None
+        key = self._view_key(xy, sight)
+        view = self._views.get(key)
+        if view is None:
+            if len(self._views) >= VIEWS_KEPT:
+                self._views.clear()
+            every = np.arange(len(self.points))
+            view = self._shown(blocked, xy, sight, every, self.points)[0].astype(np.int32)
+            self._views[key] = view
+        shown = view[todo[view]]
+        if len(shown) < MIN_GAIN:
+            return None
+        return rank[shown], self._distances(self.points[shown], xy)
 
     def sweep_finds(self, xy: np.ndarray, sight: Sight, todo: np.ndarray):
         """(point indices, P(found) of each) of a sweep at ``xy`` for ``sight`` among the points
