@@ -1,5 +1,5 @@
 """What an examination's images could show: the views the evidence log keeps for the corrected
-interval (``--interval corrected``, knowledge.corrected; issue 28).
+interval (``--interval corrected``, knowledge.corrected).
 
 For every relation volume v_rel(A) of the examined object and every catalog type B:
 
@@ -7,7 +7,7 @@ For every relation volume v_rel(A) of the examined object and every catalog type
   apart, at most ``MAX_PER_AXIS`` per axis) that at least one of the examination's images showed
   (``PinholeCamera.visible`` on its depth image), of P(a B centred there is counted): P(at least
   one of the images reports it), each image reporting it with the detector preset's recall at
-  the pixels and distance it would have there (``belief.DetectionCurve``, read
+  the pixels and distance it would have there (``agent.sight.DetectionCurve``, read
   through the function the detector simulation draws with), zero where the image does not show
   the point, and zero where that recall is below ``min_score`` (a true detection scores its
   recall). A point no image showed may be inside solid furniture (no B stands there) or hidden
@@ -46,8 +46,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ctxsearch.agent.search.belief import DetectionCurve
-from ctxsearch.agent.search.space import mean_face_area
+from ctxsearch.agent.sight import DetectionCurve, mean_face_area
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import DetectorModel, false_positive_sites
 from ctxsearch.knowledge import geometry

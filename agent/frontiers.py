@@ -25,7 +25,8 @@ Measured on apartments 0-3 (full exploration, ``ctxsearch bench sim --style apar
 
 A look-around is ``LOOK_PANS_DEG`` at two tilts: ``LOOK_TILT`` (furniture, desk tops, far floor)
 and ``NEAR_TILT`` (the floor from about 0.1 m to 2.2 m, which the first tilt misses: without it
-the robot could never know the floor around itself free).
+the robot could never know the floor around itself free; agent.sight, shared with the search's
+exploration).
 """
 
 from __future__ import annotations
@@ -42,11 +43,11 @@ from ctxsearch.agent.grid_costs import GridCosts
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid, plan_path
+from ctxsearch.agent.sight import NEAR_TILT
 from ctxsearch.envs.robot_spec import TimeModel
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import FrontierRule, values
 
-NEAR_TILT = -1.0  # rad: the second look-around tilt (the floor near the robot)
 FRONTIER_RULES = values(FrontierRule)
 
 

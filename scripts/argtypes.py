@@ -8,57 +8,19 @@ from pathlib import Path
 
 from ctxsearch.knowledge.options import IntervalMethod
 
-# Sane upper bounds: far beyond any run on one machine, small enough that nothing sized by a count
-# (a list of room seeds, a table of episodes) can exhaust memory before it is needed.
-MAX_COUNT = 1_000_000
-MAX_SEED = 2**32 - 1
-MAX_PIXELS = 4096  # an image side
+# The integer types live in scripts.integers (shared with scripts.sweep); re-exported here.
+from ctxsearch.scripts.integers import (  # noqa: F401
+    MAX_COUNT,
+    MAX_PIXELS,
+    MAX_SEED,
+    non_negative_int,
+    pixels,
+    positive_int,
+    seed,
+)
+
+# A sane upper bound on seconds, like the integers' bounds (scripts.integers).
 MAX_SECONDS = 1e9
-
-
-def _int(text: str) -> int | None:
-    try:
-        return int(text)
-    except ValueError:
-        return None
-
-
-def _count(text: str, minimum: int) -> int:
-    v = _int(text)
-    if v is None or v < minimum:
-        what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-    if v > MAX_COUNT:
-        raise argparse.ArgumentTypeError(f"expected at most {MAX_COUNT:_}, got {v:_}")
-    return v
-
-
-def positive_int(text: str) -> int:
-    """An integer in [1, MAX_COUNT] (rooms, seeds per strategy, episodes, examinations...)."""
-    return _count(text, 1)
-
-
-def non_negative_int(text: str) -> int:
-    """An integer in [0, MAX_COUNT] (a minimum number of examinations)."""
-    return _count(text, 0)
-
-
-def seed(text: str) -> int:
-    """A random seed: an integer in [0, 2**32 - 1]."""
-    v = _int(text)
-    if v is None or not 0 <= v <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"expected a seed in [0, {MAX_SEED}], got {text!r}")
-    return v
-
-
-def pixels(text: str) -> int:
-    """An image side in pixels: an integer in [16, MAX_PIXELS]."""
-    v = _int(text)
-    if v is None or not 16 <= v <= MAX_PIXELS:
-        raise argparse.ArgumentTypeError(
-            f"expected an image size in [16, {MAX_PIXELS}] pixels, got {text!r}"
-        )
-    return v
 
 
 def out_dir(text: str) -> Path:

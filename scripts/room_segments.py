@@ -1,8 +1,9 @@
-"""The robot's rooms beside the plan's (``ctxsearch room`` with a house style; issue 27 point 1).
+"""The robot's rooms beside the plan's (``ctxsearch room`` with a house style).
 
 The robot starts where the learning loop starts it, knowing only its pose, explores the house's
 frontiers (agent.frontiers ``explore_world``) until no goal is left, building its own map from
-depth (agent.mapping.BuiltMap), and cuts that map into rooms (agent.room_segmentation). Its
+depth (agent.mapping.BuiltMap), and cuts that map into rooms (agent.room_segmentation;
+exploring and segmenting: scripts.experiments.room_segments, shared with ``bench rooms``). Its
 images for the map are ``MAP_IMAGE`` (160 x 120: the map needs depth, not detail; a quarter of
 the pixels of the default views). Written: ``rooms.png`` (left: the plan's rooms; right: the
 robot's segments, each coloured as the plan room it overlaps most, unknown space black) and
@@ -13,29 +14,15 @@ saw; the segment count; the exploration's simulated seconds).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from ctxsearch.agent.acquisition import start_pose
-from ctxsearch.agent.frontiers import explore_world
-from ctxsearch.agent.mapping import BuiltMap
-from ctxsearch.agent.navigation import OccupancyGrid
-from ctxsearch.agent.room_segmentation import (
-    built_mask,
-    plan_labels,
-    room_iou,
-    segment_rooms,
-    wall_mask,
-)
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
-from ctxsearch.envs.world import World
 from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.scripts.experiments.room_segments import Segmented, explore_and_segment, seen_share
 
-MAP_IMAGE = (160, 120)
 PIXELS_PER_CELL = 3  # rooms.png: each 5 cm map cell drawn as a 3 x 3 block
 # Colours (BGR) for rooms 0, 1, ...: distinct, none black (unknown) or white (walls).
 PALETTE = np.array(
@@ -43,44 +30,6 @@ PALETTE = np.array(
      (75, 86, 140), (194, 119, 227), (34, 189, 188), (207, 190, 23), (127, 127, 127)],
     np.uint8,
 )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Segmented:
-    """A house explored and segmented: the robot's segments and the plan's rooms on the built
-    map's cells, the room space it saw, the IoU and seen share per plan room."""
-
-    labels: np.ndarray
-    truth: np.ndarray
-    mask: np.ndarray
-    true_space: np.ndarray  # the plan's room space on the same cells (walls excluded)
-    iou: dict[int, float]
-    sim_s: float
-
-
-def explore_and_segment(layout: RoomLayout, catalog: Catalog) -> Segmented:
-    """Explore ``layout`` from the learning loop's start pose and segment the built map."""
-    spec, tm = RobotSpec(), TimeModel()
-    start = start_pose(layout, OccupancyGrid.from_layout(layout, spec))
-    w, h = MAP_IMAGE
-    with World(layout, catalog, width=w, height=h, spec=spec, time_model=tm) as world:
-        world.reset_pose(start)
-        built = BuiltMap.for_layout(layout, spec, start)
-        ex = explore_world(world, built, tm)
-    mask = built_mask(built.floor, built.occupied, built.top_z)
-    walls = wall_mask(layout, built.resolution)  # the built map's cells (the layout's footprint)
-    truth = plan_labels(layout, walls)
-    labels = segment_rooms(mask, built.resolution)
-    return Segmented(labels, truth, mask, walls.free, room_iou(labels, truth, mask), ex.sim_s)
-
-
-def seen_share(seg: Segmented) -> dict[int, float]:
-    """Per plan room: the share of its room space (walls excluded) the robot's map holds."""
-    out = {}
-    for r in np.unique(seg.truth[seg.truth >= 0]):
-        room = seg.true_space & (seg.truth == r)
-        out[int(r)] = float((room & seg.mask).sum() / max(1, room.sum()))
-    return out
 
 
 def draw(seg: Segmented) -> np.ndarray:

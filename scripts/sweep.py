@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.scripts import argtypes
+from ctxsearch.scripts.integers import positive_int
 
 U = TypeVar("U")
 R = TypeVar("R")
@@ -61,7 +61,7 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
     """``--workers N`` and ``--ray-address ADDR`` for a command whose units can run in parallel."""
     p.add_argument(
         "--workers",
-        type=argtypes.positive_int,
+        type=positive_int,
         default=1,
         metavar="N",
         help="run the independent units as Ray tasks on N local CPUs (default: 1, serial, no Ray); "

@@ -1,12 +1,14 @@
 """Where the target is, as search theory has it (Koopman; Stone, *Theory of Optimal Search*): a
 look is evidence weighted by the probability of detection, never a finished area.
 
-Detection curve. The robot's model of its own detector for the target type (``DetectionCurve``):
+Detection curve. The robot's model of its own detector for the target type
+(``DetectionCurve``, agent.sight, shared with the learning loop's examination views):
 one image reports an instance whose centre is in view and not hidden, at distance d, with the
 detector preset's recall (``envs.detector.DetectorModel.recall_prob``, the one function the
 detector simulation also draws with) at the pixels it would cover there, f^2 A / d^2 (f: the
 focal length in pixels, A: the type's mean face area, an orientation average:
-``space.mean_face_area``). A real robot calibrates its own curve; the preset file plays that role.
+``agent.sight.mean_face_area``). A real robot calibrates its own curve; the preset file plays
+that role.
 A search ends on a *confirmed* detection (a second image from the same pose sees it again,
 ``context.CONFIRM_RADIUS_M``; the detector draws anew), so a view finds the target at a point with
 ``found(d) = p(d)^2``.
@@ -34,95 +36,27 @@ holds) is below ``STOP_MASS``; the share at a stop is reported with the result
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ctxsearch.agent.recording import Recorder
-from ctxsearch.envs.detector import DetectorModel, load_detector
-from ctxsearch.envs.robot_spec import RobotSpec
-from ctxsearch.knowledge.catalog import ObjectType
 
-# A view is counted for the points where one confirmed detection has at least this probability:
-# beyond, an image changes the belief by less than 2% of a point's mass per image.
-P_REACH = 0.02
-MAX_REACH_M = 5.0  # the built map's depth range: nothing further is counted as seen
+# The detection curve and its constants live in agent.sight (below learning and search);
+# re-exported here for the search's callers.
+from ctxsearch.agent.sight import (  # noqa: F401
+    MAX_REACH_M,
+    MIN_FALSE_RATE,
+    P_REACH,
+    DetectionCurve,
+    detection_curve,
+)
+
 # A point whose miss probability fell below this is no longer worth a look of its own (it keeps
 # its mass in the belief; options stop counting it towards their minimum number of points).
 MISS_DONE = 0.05
 # The online search stops before its budget only when less than this share of the detectable
 # mass is left (module docstring).
 STOP_MASS = 0.02
-# The least per-image rate of false reports of a type the belief assumes (a preset without
-# false positives or confusions would otherwise make one unconfirmed report certain).
-MIN_FALSE_RATE = 1e-3
 BELIEF_CELL_M = 0.2  # the recording's floor heat map: cells of this size
-
-
-@dataclass(frozen=True)
-class DetectionCurve:
-    """P(one image reports an instance of ``typ``) against distance, from ``model``'s recall at
-    the pixels it would cover (module docstring), for a camera of focal length ``focal`` px
-    taking ``width`` x ``height`` images."""
-
-    typ: ObjectType
-    model: DetectorModel
-    focal: float
-    width: int
-    height: int
-    area: float  # m^2: the type's mean face area
-    reach: float = field(init=False)  # m: the farthest a confirmed detection has P_REACH
-
-    def __post_init__(self) -> None:
-        d = np.linspace(0.05, MAX_REACH_M, 500)
-        ok = np.flatnonzero(self.found(d) >= P_REACH)
-        object.__setattr__(self, "reach", float(d[ok[-1]]) if len(ok) else 0.05)
-
-    def p(self, distance: np.ndarray | float) -> np.ndarray:
-        """P(reported by one image) at ``distance`` m (array)."""
-        d = np.maximum(np.asarray(distance, float), 0.05)
-        pixels = self.focal**2 * self.area / (d * d)
-        return np.asarray(
-            self.model.recall_prob(self.typ, pixels, d, self.width, self.height), float
-        )
-
-    def found(self, distance: np.ndarray | float) -> np.ndarray:
-        """P(a confirmed detection from one pose): reported by both images, drawn anew."""
-        return self.p(distance) ** 2
-
-    def false_report_rate(self) -> float:
-        """P(one image reports the type where none is): the preset's clutter false positives of
-        the type (``fp_per_image`` shared among ``fp_types``) plus the look-alike types it
-        confuses with it, at their best recall; at least ``MIN_FALSE_RATE``."""
-        m, name = self.model, self.typ.name
-        rate = m.fp_per_image / len(m.fp_types) if name in m.fp_types else 0.0
-        best = m.recall.max_recall if m.recall is not None else 1.0
-        rate += sum(p * best for a, b, p in m.confusion if name in (a, b))
-        return max(rate, MIN_FALSE_RATE)
-
-    def unconfirmed_ratio(self, distance: float, radius: float) -> float:
-        """The likelihood ratio of "reported once within ``radius`` m of a place at ``distance``
-        m, not confirmed by the second image" for a target there against none there: p (1 - p)
-        over the false reports that land that near, ``false_report_rate`` times the disc's
-        share of the image's footprint at that distance (false reports stand on surface points
-        the image shows)."""
-        p = float(self.p(distance))
-        d = max(float(distance), 0.3)
-        footprint = (d * self.width / self.focal) * (d * self.height / self.focal)
-        share = min(1.0, np.pi * radius * radius / footprint)
-        return p * (1.0 - p) / (self.false_report_rate() * share)
-
-
-def detection_curve(
-    typ: ObjectType, model: DetectorModel | None, spec: RobotSpec, width: int, height: int
-) -> DetectionCurve:
-    """The curve of ``typ`` for ``model`` (None: the perfect preset) on ``spec``'s camera."""
-    from ctxsearch.agent.search.space import focal_px, mean_face_area
-
-    model = model or load_detector("perfect")
-    return DetectionCurve(
-        typ, model, focal_px(spec, height), int(width), int(height), mean_face_area(typ)
-    )
 
 
 class MissField:

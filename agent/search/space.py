@@ -66,8 +66,9 @@ import numpy as np
 from scipy import sparse
 
 from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
+from ctxsearch.agent.sight import focal_px, mean_face_area
 from ctxsearch.agent.viewplan import facing_for
-from ctxsearch.envs.camera import PinholeCamera, focal_length, frustum_mask
+from ctxsearch.envs.camera import PinholeCamera, frustum_mask
 from ctxsearch.envs.detector import min_pixels_at
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.parts import world_parts_array
@@ -105,18 +106,7 @@ SUPPORT_STRIDE = 4  # pixels between the depth points that mark supports (built 
 
 
 # =========================================================================== detectability
-def focal_px(spec: RobotSpec, height: int = 240) -> float:
-    """The head camera's focal length in pixels for images ``height`` pixels high."""
-    return focal_length(spec.fovy_deg, height)
-
-
-def mean_face_area(typ: ObjectType) -> float:
-    """The mean of the three face areas of a type's mid-range size (m^2): an orientation average
-    of the area it shows the camera."""
-    s = (np.asarray(typ.size_min, float) + np.asarray(typ.size_max, float)) / 2
-    return float((s[0] * s[1] + s[0] * s[2] + s[1] * s[2]) / 3)
-
-
+# (the focal length in pixels and a type's mean face area: agent.sight, shared with learning)
 def effective_range(
     typ: ObjectType,
     spec: RobotSpec | None = None,

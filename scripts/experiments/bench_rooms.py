@@ -1,11 +1,11 @@
-"""``ctxsearch bench rooms``: the robot's rooms against the plans (issue 27, point 1).
+"""``ctxsearch bench rooms``: the robot's rooms against the plans.
 
 For every house style and ``houses`` houses (seeds ``ROOMS_SEED`` + i, which no learning run
 uses), the camera robot starts at the learning loop's start pose knowing only that pose, explores
-until no frontier is left, and cuts its own map into rooms (``scripts.room_segments``,
+until no frontier is left, and cuts its own map into rooms (``scripts.experiments.room_segments``,
 agent.room_segmentation). Per room of the plan: the intersection over union with the segment
 that overlaps it most, and the share of its floor the robot's map holds (``seen``). A room is
-*fully seen* when ``seen`` >= ``FULLY_SEEN``; the goal (issue 27) is an IoU of at least 0.8 for
+*fully seen* when ``seen`` >= ``FULLY_SEEN``; the goal is an IoU of at least 0.8 for
 those. Writes DIR/rooms.json (per style: houses, rooms, segments, median and least IoU of the
 fully seen rooms, the share of them at >= 0.8, exploration seconds), DIR/rooms.md and
 DIR/rooms.csv (one row per house room).
@@ -20,8 +20,8 @@ import numpy as np
 
 from ctxsearch.agent.learning import style_layouts
 from ctxsearch.knowledge.catalog import load_catalog
+from ctxsearch.scripts.experiments.room_segments import explore_and_segment, seen_share
 from ctxsearch.scripts.experiments.tables import write_csv
-from ctxsearch.scripts.room_segments import explore_and_segment, seen_share
 from ctxsearch.scripts.sweep import SweepOptions, run_units
 
 ROOMS_SEED = 20_000_003  # first house seed (held out of learning, truth and search draws)
