@@ -17,7 +17,8 @@ it room after room; the knowledge carries over). Faithfully to Figure 2:
   detected poses (the examined object's own pose is the reference); an object no reachable
   viewpoint can see into is marked examined without counting as a trial;
 - lines 17-20: one transaction in the evidence store and the same counts in the knowledge base
-  (intervals are derived from counts on demand, see DESIGN.md); with the camera perception the
+  (intervals are derived from the counts on demand, so every pair of the examined type sees
+  its new n_S, not only the observed pairs Figure 2's line 20 updates); with the camera perception the
   examination's row carries what its images could show (agent.exam_views: per relation volume
   and type, the expected recall and false-report rate), which ``--interval corrected`` reads;
 - line 21: UNEXAMINED := (UNEXAMINED + RELATED-OBJECTS) - EXAMINED.

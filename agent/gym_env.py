@@ -70,11 +70,11 @@ from gymnasium import spaces
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
 from ctxsearch.agent.search import measures
+from ctxsearch.agent.search.config import DEFAULT_BUDGET_S
 from ctxsearch.agent.search.context import confirming_detection
 from ctxsearch.agent.search.draw import DrawSpec, draw_episodes
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, episode_layout
 from ctxsearch.agent.search.priors import open_knowledge
-from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import Detection, DetectorModel, SimDetector, default_or_named
 from ctxsearch.envs.floorplan import generate_layout

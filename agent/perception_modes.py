@@ -276,7 +276,7 @@ class CameraPerception:
     the robot sees: a weak detection still makes an object a candidate to examine); with
     ``confirm_reference`` k > 1, an object may be the reference of an examination (``reference``)
     only once k images of this room detected it, under the type most of them reported: a false
-    positive is drawn anew in every image, so it is almost never detected twice (issue 28; the
+    positive is drawn anew in every image, so it is almost never detected twice (the
     detections of one object are associated by its id, a tracker's perfect data association)."""
 
     name = "camera"

@@ -1,4 +1,4 @@
-"""Rooms from a map (issue 27, point 1): the robot cuts its own map into rooms at the doors.
+"""Rooms from a map: the robot cuts its own map into rooms at the doors.
 
 Method: distance-transform segmentation, the "distance" method of Bormann, Jordan, Li, Hampp and
 Hägele (2016), "Room segmentation: survey, implementation, and analysis" (ICRA), as their

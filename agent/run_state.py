@@ -120,7 +120,7 @@ class LearnConfig:
     detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
     detections scored at least that confidence (0: any detection counts); ``confirm_reference``:
     an object may be the reference of an examination once that many images of the room detected
-    it (1: at once, as published; issue 28: a false positive, drawn anew in every image, then
+    it (1: at once, as published; a false positive, drawn anew in every image, then
     almost never is); ``exam_recall``: camera mode plans examinations to see (agent.exam_views:
     the gaze planner's viewpoints stay within the distance at which the catalog's object types
     are detected with that mean single-image recall; None: the planner's own range, as before).

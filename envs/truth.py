@@ -206,7 +206,7 @@ def sample_counts_and_rooms(
 
 @dataclass(frozen=True)
 class RoomTruth:
-    """Room context from the true plans (issue 27): ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
+    """Room context from the true plans: ``same_room[(F, T)]`` = P(SAME-ROOM-AS-F(T)),
     the share of the rooms holding furniture type F that hold at least one T (T = F: a second
     F), and ``room_share[T]`` = the share of the plans' rooms with furniture holding at least one
     T. Counted by ``knowledge.room_context.RoomContext``, as the robot's own rooms are (the room

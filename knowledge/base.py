@@ -11,7 +11,8 @@ the per-relation offsets. A type never examined with a related object costs noth
 
 Intervals are derived from the counts whenever they are asked for, for every (rel, B) pair, not
 only for the pairs observed in the last examination (Figure 2 line 20 updates only those, though
-n_S changed for all pairs of S; see DESIGN.md).
+n_S changed for all pairs of S: deriving them on demand keeps every pair's interval true to
+its counts).
 
 The HIF score of a type A (Figure 2, line 11) averages impact(y_{rel,t}, n_A) over rel in
 RELATIONS(A) and all t in TYPES. Most y are 0, so the average is

@@ -1,4 +1,4 @@
-"""Intervals that know what the detector could see (``--interval corrected``, issue 28).
+"""Intervals that know what the detector could see (``--interval corrected``).
 
 The paper counts an examination of an A as a trial of rel(B) that failed whenever no B was
 reported in v_rel(A). With a detector that misses (the realistic preset's recall of a pen at 2 m

@@ -32,7 +32,7 @@ members of a class differ, the less a member borrows. Backoff goes one level up 
 class's pooled counts), not recursively. Entries whose relation maps onto nothing, and types in
 no class, keep the paper's interval.
 
-On the corrected intervals (``--backoff --interval corrected``; knowledge.corrected, issue 28):
+On the corrected intervals (``--backoff --interval corrected``; knowledge.corrected):
 the same, on effective counts. A type's own (y, n) become the corrected interval's (y', n') of
 the entry (the examinations that could have shown a B, over the room clustering's shrink, and
 the corrected estimate times that), and p_C the class's other members' pooled effective counts,

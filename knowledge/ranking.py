@@ -56,7 +56,7 @@ class ProbabilitySource:
 
     def same_room(self, ref_type: str, type_name: str) -> float | None:
         """P(SAME-ROOM-AS-ref(T)): the probability that the room of an instance of furniture
-        type ``ref_type`` holds an instance of ``type_name`` (issue 27's room context); None
+        type ``ref_type`` holds an instance of ``type_name`` (room context); None
         where this source knows no room context."""
         return None
 

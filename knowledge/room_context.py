@@ -1,4 +1,4 @@
-"""Room context learned by the robot (issue 27): SAME-ROOM-AS-F relations with the paper's
+"""Room context learned by the robot: SAME-ROOM-AS-F relations with the paper's
 counts and Wilson intervals, from what the rooms of its own map held.
 
 At the end of a house visit done to the end, the learner cuts its map into rooms

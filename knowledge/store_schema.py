@@ -81,7 +81,7 @@ _VIEWS_SQL = """CREATE TABLE views (
     PRIMARY KEY (examination_id, relation)
 ) WITHOUT ROWID"""
 VIEW_SCALE = 65535
-# Version 6: what a house visit's rooms held (issue 27, knowledge.room_context): per segment of
+# Version 6: what a house visit's rooms held (knowledge.room_context): per segment of
 # the robot's map at the end of a visit done to the end, how many instances of each type it
 # recognized there (a segment is listed only with its types; only segments holding furniture).
 _ROOM_CONTENTS_SQL = """CREATE TABLE room_contents (

@@ -145,19 +145,17 @@ def _scenarios(args: argparse.Namespace):
     return parse_scenarios(args.scenarios, overrides)
 
 
-def _search_base(args: argparse.Namespace, style: str, **extra):
-    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig
+def _search_base(args: argparse.Namespace, style: str | None, extra: dict | None = None):
+    """The search configuration the curve's and the transfer's searches start from (``extra``:
+    more dotted keys)."""
+    from ctxsearch.agent.search.config import SearchConfig
 
-    return SearchBenchConfig(
-        style=style,
-        policies=(),
-        seed=args.seed,
-        budget_s=args.budget_seconds,
-        truth_samples=args.truth_samples,
-        detector=args.detector,
-        episodes=args.episodes,
-        **extra,
-    )
+    given = {
+        "style": style, "seed": args.seed, "budget_s": args.budget_seconds,
+        "knowledge.truth_samples": args.truth_samples, "detector": args.detector,
+        "episodes": args.episodes, **(extra or {}),
+    }  # fmt: skip
+    return SearchConfig().updated({k: v for k, v in given.items() if v is not None})
 
 
 def _report(res) -> int:
@@ -178,7 +176,9 @@ def run_curve(args: argparse.Namespace) -> int:
 
     marks = parse_room_marks(args.rooms)
     truth = Path(args.truth) if args.truth else None
-    base = _search_base(args, args.style, truth=truth, interval=args.interval)
+    base = _search_base(
+        args, args.style, {"knowledge.truth": truth, "knowledge.interval": args.interval}
+    )
     config = CurveConfig(base, marks, _scenarios(args), perception=args.perception)
     res = bench_curve(
         config,
@@ -202,7 +202,7 @@ def run_transfer(args: argparse.Namespace) -> int:
         raise CtxsearchError(f"--rooms: {exc}") from None
     styles = tuple(x.strip() for x in args.styles.split(",") if x.strip())
     intervals = tuple(x.strip() for x in args.intervals.split(",") if x.strip())
-    base = _search_base(args, styles[0] if styles else "")
+    base = _search_base(args, styles[0] if styles else None)
     config = TransferConfig(base, styles, rooms, _scenarios(args), intervals,
                             args.probe_rooms, args.perception)  # fmt: skip
     res = bench_transfer(

@@ -5,13 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ctxsearch.agent.search.registry import (
-    DEFAULT_BUDGET_S,
-    POLICIES,
-    Role,
-    default_policies,
-    with_role,
-)
+from ctxsearch.agent.search import config as cfg
+from ctxsearch.agent.search.config import ConfigError, SearchConfig
+from ctxsearch.agent.search.registry import POLICIES, Role, default_policies, with_role
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import (
     Estimate,
@@ -22,97 +18,150 @@ from ctxsearch.knowledge.options import (
     Targets,
     values,
 )
-from ctxsearch.knowledge.ranking import DEFAULT_ESTIMATE, DEFAULT_MIN_EVIDENCE, DEFAULT_RANK
 from ctxsearch.scripts import argtypes
 from ctxsearch.scripts.sweep import add_sweep_arguments
 
-# The policies' facts and the modes come from light modules (no MuJoCo, no scipy), so building
-# the parser (``ctxsearch --help``, ``kb show``) stays fast.
+# The policies' facts, the modes and the configuration's defaults come from light modules (no
+# MuJoCo, no scipy), so building the parser (``ctxsearch --help``, ``kb show``) stays fast.
 POLICY_NAMES = tuple(POLICIES)
-MAP_MODES = values(MapMode)
 DEFAULT_POLICIES = {m: ",".join(default_policies(m)) for m in MapMode}
 DEFAULT_POLICY = {m: with_role(m, Role.CONTEXT) for m in MapMode}  # `search --policy`
-RANK_MODES = values(Rank)
-ESTIMATES = values(Estimate)
+
+# Each flag that sets a configuration key: argparse's dest -> the key (agent.search.config).
+# A flag not given leaves the key as the defaults and --config set it; --set comes last.
+FLAG_KEYS = {
+    "style": "style",
+    "seed": "seed",
+    "episodes": "episodes",
+    "budget_seconds": "budget_s",
+    "targets": "targets",
+    "detector": "detector",
+    "draw_cache": "draw_cache",
+    "kb": "knowledge.kb",
+    "rank": "knowledge.rank",
+    "estimate": "knowledge.estimate",
+    "min_evidence": "knowledge.min_evidence",
+    "interval": "knowledge.interval",
+    "room_context": "knowledge.room_context",
+    "truth": "knowledge.truth",
+    "truth_samples": "knowledge.truth_samples",
+    "map": "map.scenario",
+}
 
 
-def add_budget_argument(p: argparse.ArgumentParser) -> None:
+def add_budget_argument(p: argparse.ArgumentParser, default: float | None = None) -> None:
     """``--budget-seconds``: an episode's simulated-time budget."""
     p.add_argument(
         "--budget-seconds",
         type=argtypes.seconds,
-        default=DEFAULT_BUDGET_S,
+        default=default,
         metavar="B",
-        help=f"simulated seconds before an episode counts as failed (default: {DEFAULT_BUDGET_S:.0f})",
+        help="simulated seconds before an episode counts as failed "
+        f"(default: {cfg.DEFAULT_BUDGET_S:.0f})",
     )
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
-    add_budget_argument(p)
+    """The flags ``search`` and ``bench search`` share: each sets a key of the configuration
+    (``FLAG_KEYS``); ``--config`` and ``--set`` reach every key."""
     p.add_argument(
-        "--rank",
-        choices=RANK_MODES,
-        default=DEFAULT_RANK,
-        help=f"which part of the interval ranks candidate regions (default: {DEFAULT_RANK}, "
-        "chosen by measurement, see README)",
+        "--kb", type=Path, default=None, help="knowledge store made by `ctxsearch learn`"
     )
+    add_budget_argument(p)
+    p.add_argument("--rank", choices=values(Rank), default=None, help=cfg.help_of("knowledge.rank"))
     p.add_argument(
-        "--estimate",
-        choices=ESTIMATES,
-        default=DEFAULT_ESTIMATE,
-        help="P(rel(T)) from each type's own evidence (flat, the paper's; default) or, for "
-        "reference types with fewer than --min-evidence examinations, from their class "
-        "(backoff: the type hierarchy's empirical-Bayes estimate)",
+        "--estimate", choices=values(Estimate), default=None, help=cfg.help_of("knowledge.estimate")
     )
     p.add_argument(
         "--min-evidence",
         type=argtypes.non_negative_int,
-        default=DEFAULT_MIN_EVIDENCE,
+        default=None,
         metavar="N",
-        help=f"with --estimate backoff: types examined fewer than N times back off "
-        f"(default: {DEFAULT_MIN_EVIDENCE})",
+        help=cfg.help_of("knowledge.min_evidence"),
     )
     p.add_argument(
-        "--truth",
-        type=Path,
-        default=None,
-        metavar="FILE.json",
-        help="ground truth from `ctxsearch truth` for the oracle-prior policies "
-        "(default: estimated over --truth-samples rooms)",
+        "--truth", type=Path, default=None, metavar="FILE.json", help=cfg.help_of("knowledge.truth")
     )
     p.add_argument(
         "--truth-samples",
         type=argtypes.positive_int,
-        default=200,
-        help="rooms sampled for the ground truth when --truth is not given (default: 200)",
+        default=None,
+        help=cfg.help_of("knowledge.truth_samples"),
     )
     p.add_argument(
         "--room-context",
         action="store_true",
+        default=None,
         help="the context policies also use room context, P(SAME-ROOM-AS-F(T)) on the rooms of "
         "the map (the plan's on the given map, the robot's segmentation of its own on the built "
         "map): the learned ones the store's intervals (learned in houses), the oracle-prior ones "
-        "the truth over the --truth-samples worlds",
+        "the truth over the --truth-samples worlds; refused for a run in which a policy with "
+        "knowledge cannot use it (indirect on the given map) or none uses it",
     )
-    p.add_argument(
-        "--targets",
-        choices=values(Targets),
-        default=Targets.TYPE.value,
-        help="what an episode asks for: type (any instance of the target type ends the search; "
-        "default) or instance (the world keeps one instance of the target, the others taken "
-        "out: 'find my phone')",
-    )
+    p.add_argument("--targets", choices=values(Targets), default=None, help=cfg.help_of("targets"))
     argtypes.add_detector_argument(p)
-    argtypes.add_interval_argument(p)
+    p.add_argument(
+        "--interval",
+        default=None,
+        choices=values(IntervalMethod),
+        help=argtypes.INTERVAL_HELP,
+    )
     p.add_argument(
         "--map",
-        choices=MAP_MODES,
+        choices=values(MapMode),
         default=None,
         help="the map scenario: built (the robot knows nothing at the start and maps as it "
         "searches: frontier, indirect, oracle-prior-indirect, oracle) or given (the furniture "
         "poses are known: map-only, location, oracle-prior, oracle, exhaustive); default: built "
         "(in houses; single-room styles, the small-world reference, default to given)",
     )
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="read the whole configuration from FILE: TOML (keys and [sections]: see "
+        "--show-config) or a result's search.json (its config entry: the run again); the flags "
+        "given and --set override it",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set any configuration key, e.g. --set online.lookahead=true, --set "
+        "map.depth_range_m=10, --set belief.stop_mass=0.01 (repeatable; after --config and "
+        f"the flags; default: none). Keys: {', '.join(cfg.keys())}",
+    )
+    p.add_argument(
+        "--show-config",
+        action="store_true",
+        help="print the configuration these arguments give, as TOML, and exit",
+    )
+
+
+def config_from_args(args: argparse.Namespace) -> SearchConfig:
+    """The configuration of a ``search`` or ``bench search`` command line: the defaults, then
+    ``--config``, then the flags given, then each ``--set``; one-line errors naming the key."""
+    config = cfg.load_file(args.config) if args.config is not None else SearchConfig()
+    for dest, key in FLAG_KEYS.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            flag = "--" + dest.replace("_", "-")
+            config = config.updated({key: value}, flag)
+    policies = getattr(args, "policies", None) or getattr(args, "policy", None)
+    if policies is not None:
+        config = config.updated({"policies": policies}, "--policies")
+    for assignment in args.overrides:
+        config = cfg.apply_set(config, assignment)
+    return config
+
+
+def show_config(config: SearchConfig) -> int:
+    """``--show-config``: the configuration as TOML on stdout."""
+    print(cfg.to_toml(config), end="")
+    return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -127,12 +176,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the ranked candidate regions, the path and every camera view.",
     )
     p.add_argument(
-        "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
-    )
-    p.add_argument(
         "--style",
-        required=True,
-        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path",
+        default=None,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
+        "(required unless --config gives it)",
     )
     p.add_argument("--target", required=True, help="the object type to find (e.g. Cup)")
     p.add_argument(
@@ -144,7 +191,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed",
         type=argtypes.seed,
-        default=0,
+        default=None,
         help="which held-out room and start pose (default: 0)",
     )
     p.add_argument(
@@ -155,57 +202,51 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_search)
 
 
-def map_of(args: argparse.Namespace) -> str:
-    """The map scenario: ``--map``, else the style's default (episodes.default_map)."""
-    if args.map is not None:
-        return args.map
+def _scenario(config: SearchConfig):
+    """The configuration's map scenario, the style's default when it names none."""
+    if config.map.scenario is not None:
+        return config.map.scenario
     from ctxsearch.agent.search.runner import default_map
     from ctxsearch.envs.houses import resolve_style
 
-    return default_map(resolve_style(args.style))
+    return default_map(resolve_style(config.style))
 
 
-def _config_fields(args: argparse.Namespace) -> dict:
-    """The SearchConfig fields ``search`` and ``bench search`` share, from their flags (``map``
-    resolved)."""
-    return {
-        "map": map_of(args),
-        "style": args.style,
-        "seed": args.seed,
-        "budget_s": args.budget_seconds,
-        "rank": args.rank,
-        "truth": args.truth,
-        "truth_samples": args.truth_samples,
-        "estimate": args.estimate,
-        "min_evidence": args.min_evidence,
-        "detector": args.detector,
-        "interval": args.interval,
-        "targets": args.targets,
-        "rooms": args.room_context,
-    }
-
-
-def _forgetting_knowledge(args: argparse.Namespace):
-    """The store at --kb read with --forget on its last day (knowledge.drift), and the room seeds
-    it learned in (held out of the search)."""
+def _forgetting_knowledge(args: argparse.Namespace, config: SearchConfig):
+    """The configuration's store read with --forget on its last day (knowledge.drift), and the
+    room seeds it learned in (held out of the search)."""
     from ctxsearch.agent.search.priors import learned_seeds
     from ctxsearch.knowledge.catalog import load_catalog
     from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
     from ctxsearch.knowledge.store import EvidenceStore
 
-    if args.interval != IntervalMethod.WILSON:
+    k = config.knowledge
+    if k.kb is None:
+        raise CtxsearchError(f"--forget {args.forget} needs a knowledge store (--kb)")
+    if k.interval != IntervalMethod.WILSON:
         raise CtxsearchError(
-            f"--forget {args.forget} does not combine with --interval {args.interval}"
+            f"--forget {args.forget} does not combine with --interval {k.interval}"
         )
-    with EvidenceStore.open(args.kb, load_catalog(), read_only=True) as store:
+    with EvidenceStore.open(k.kb, load_catalog(), read_only=True) as store:
         ev = evidence_of(store.examinations())
         if not store.examinations_count():
-            raise CtxsearchError(f"{args.kb}: the store holds no examinations yet")
+            raise CtxsearchError(f"{k.kb}: the store holds no examinations yet")
         kb = ForgetKnowledgeBase(
             store.catalog, store.alpha, ev, ev.last_day, argtypes.forgetting(args)
         )
         seeds = learned_seeds(store)
     return kb, seeds
+
+
+def _search_config(args: argparse.Namespace) -> SearchConfig:
+    """``search``'s configuration: its arguments, the scenario's context policy when none is
+    named."""
+    config = config_from_args(args)
+    if args.style is None and args.config is None:
+        raise ConfigError("--style: required (or a --config that names a style)")
+    if not config.policies:
+        config = config.updated({"policies": (DEFAULT_POLICY[_scenario(config)],)})
+    return config
 
 
 def run_search(args: argparse.Namespace) -> int:
@@ -215,21 +256,24 @@ def run_search(args: argparse.Namespace) -> int:
     from ctxsearch.envs.houses import resolve_style
     from ctxsearch.knowledge.catalog import load_catalog
 
+    config = _search_config(args)
+    if args.show_config:
+        return show_config(config)
     catalog = load_catalog()  # an impossible request is refused before the search stack loads
-    check_target(catalog, args.target, resolve_style(args.style, catalog))
-    check_budget(args.budget_seconds)
-    from ctxsearch.agent.search.runner import SearchConfig, search_once
+    check_target(catalog, args.target, resolve_style(config.style, catalog))
+    check_budget(config.budget_s)
+    from ctxsearch.agent.search.priors import KnowledgeSource
+    from ctxsearch.agent.search.runner import search_once
 
-    fields = _config_fields(args)
-    policy = args.policy or DEFAULT_POLICY[fields["map"]]
-    config = SearchConfig(policies=(policy,), **fields)
-    if args.forget == Forget.NONE:
-        one = search_once(config, args.target, kb_path=args.kb, records=[args.record])
-    else:
-        kb, seeds = _forgetting_knowledge(args)
-        one = search_once(config, args.target, kb=kb, exclude_seeds=seeds, records=[args.record])
+    source = KnowledgeSource()
+    if args.forget != Forget.NONE:
+        kb, seeds = _forgetting_knowledge(args, config)
+        source = KnowledgeSource(kb, frozenset(seeds))
+        config = config.updated({"knowledge.kb": None})
+    one = search_once(config, args.target, source=source, records=[args.record])
+    if args.forget != Forget.NONE:
         print(f"knowledge: {args.kb} read with forgetting {argtypes.forgetting(args).label} "
-              f"on day {kb.today}")  # fmt: skip
+              f"on day {source.kb.today}")  # fmt: skip
     ep, res = one.episode, one.results[0]
     s = ep.start
     print(
@@ -237,10 +281,9 @@ def run_search(args: argparse.Namespace) -> int:
         f"{s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
     )
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
-    print(
-        f"detector: {config.detector_model(load_catalog()).name}; intervals: {config.interval}; "
-        f"map: {config.map}"
-    )
+    c = one.config
+    detector = c.detector or "realistic"
+    print(f"detector: {detector}; intervals: {c.knowledge.interval}; map: {c.scenario}")
     if args.record is not None:
         print(f"recording: {args.record} (open with: rerun {args.record})")
     return 0
@@ -265,15 +308,13 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         "as Ray tasks (same files).",
     )
     p.add_argument(
-        "--kb", required=True, type=Path, help="knowledge store made by `ctxsearch learn`"
-    )
-    p.add_argument(
         "--style",
-        default="office",
-        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path (default: office)",
+        default=None,
+        help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
+        "(default: office)",
     )
     p.add_argument(
-        "--episodes", type=argtypes.positive_int, default=40, help="paired episodes (default: 40)"
+        "--episodes", type=argtypes.positive_int, default=None, help="paired episodes (default: 40)"
     )
     p.add_argument(
         "--policies",
@@ -281,8 +322,8 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         help="comma-separated policies (default with --map built: "
         f"{DEFAULT_POLICIES['built']}; with --map given: {DEFAULT_POLICIES['given']})",
     )
-    p.add_argument("--out", type=argtypes.out_dir, required=True, help="output directory")
-    p.add_argument("--seed", type=argtypes.seed, default=0, help="episode seed (default: 0)")
+    p.add_argument("--out", type=argtypes.out_dir, default=None, help="output directory (required)")
+    p.add_argument("--seed", type=argtypes.seed, default=None, help="episode seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
     p.add_argument(
         "--draw-cache",
@@ -299,23 +340,18 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch bench search``."""
+    config = config_from_args(args)
+    if args.show_config:
+        return show_config(config)
+    if args.out is None:
+        raise CtxsearchError("bench search: --out DIR is required")
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
     from ctxsearch.agent.search.episode import check_budget
 
-    check_budget(args.budget_seconds)  # refused before the benchmark's imports
-    from ctxsearch.agent.search.registry import parse_policies
-    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    check_budget(config.budget_s)  # refused before the benchmark's imports
+    from ctxsearch.scripts.experiments.bench_search import bench_search
     from ctxsearch.scripts.sweep import SweepOptions
 
-    fields = _config_fields(args)
-    names = parse_policies(args.policies or DEFAULT_POLICIES[fields["map"]])
-    config = SearchBenchConfig(
-        policies=tuple(names),
-        kb=args.kb,
-        episodes=args.episodes,
-        draw_cache=args.draw_cache,
-        **fields,
-    )
     res = bench_search(
         config,
         args.out,

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     )
     rooms = [c for counts, _ in parts for c in counts]
     truth = truth_document(style, args.samples, args.seed, catalog, rooms)
-    if isinstance(style, HouseStyle):  # room context (issue 27) over the same houses
+    if isinstance(style, HouseStyle):  # room context over the same houses
         rt = RoomTruth.of_contents([w for _, worlds in parts for w in worlds], catalog)
         truth["furnished_rooms"] = rt.counts.rooms
         truth["room_share"] = {t: s for t, s in sorted(rt.room_share.items()) if s > 0}

@@ -95,10 +95,10 @@ def _layout():
 def test_the_given_maps_supports_are_the_floor_and_the_furniture_tops(catalog):
     """Where an object can stand on the given map: the floor layer and the lattice points just
     above a part of furniture (the desk's top, the shelf's boards); free air keeps AIR_WEIGHT."""
-    from ctxsearch.agent.search.maps import RoomMaps
+    from ctxsearch.agent.search.maps import WorldMaps
     from tests.test_search_maps import DESK
 
-    seen = RoomMaps.given(_layout(), catalog, RobotSpec()).seen
+    seen = WorldMaps.given(_layout(), catalog, RobotSpec()).seen
     w = seen.standable()
     z = seen.points[:, 2]
     assert np.all(w[z < 0.1] == 1.0)
@@ -117,13 +117,13 @@ def test_the_built_map_learns_supports_from_level_surfaces_in_depth(catalog):
     """On the built map only the floor layer is known at first; a depth image of the desk marks
     the points just above its top (a level surface), not those beside the walls; a point not
     seen yet weighs the share of seen points of its height that had a surface below."""
-    from ctxsearch.agent.search.maps import RoomMaps
+    from ctxsearch.agent.search.maps import WorldMaps
     from ctxsearch.envs.robot_spec import RobotPose
     from ctxsearch.envs.world import World
     from tests.test_search_maps import DESK
 
     layout = _layout()
-    seen = RoomMaps.built(layout, catalog, RobotSpec()).seen.copy()
+    seen = WorldMaps.built(layout, catalog, RobotSpec()).seen.copy()
     w0 = seen.standable()
     assert seen.learn_support and np.all(w0[seen.points[:, 2] > 0.1] == 0.5)  # Laplace, unseen
     with World(layout, catalog) as world:

@@ -7,8 +7,9 @@ import math
 
 import pytest
 
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.scripts.experiments.belief_shares import main, measure
-from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+from ctxsearch.scripts.experiments.bench_search import bench_search
 
 
 @pytest.mark.render
@@ -17,10 +18,9 @@ def test_the_shares_are_read_at_every_decision_and_the_times_are_the_benchmarks(
 ):
     kb = desk_cup_store(tmp_path / "kb.sqlite")
     pols = ("uniform", "location")
-    config = SearchBenchConfig(
-        style="office", map="given", policies=pols, seed=3, budget_s=20.0, kb=kb, episodes=1
-    )
-    rows, times = measure(config, pols)
+    config = SearchConfig(style="office", policies=pols, seed=3, budget_s=20.0, episodes=1)
+    config = config.updated({"map.scenario": "given", "knowledge.kb": kb})
+    rows, times = measure(config)
     bench = bench_search(config, tmp_path / "b", progress=None, bar=False)
     for p in pols:  # wrapped for reading only: the benchmark's times
         assert times[p] == [r.time_to_find for r in bench.results[p]]
@@ -51,7 +51,10 @@ def test_the_room_shares_are_the_belief_in_rooms_with_a_factor_and_their_unsurve
     rooms = SimpleNamespace(factor=lambda known, built: factor)
     seen = SimpleNamespace(unseen=lambda rng: unseen)
     search = SimpleNamespace(
-        builder=None, rooms=rooms, known_objects=list, ctx=SimpleNamespace(seen=seen, built=None)
+        builder=None,
+        rooms=rooms,
+        known_objects=list,
+        ctx=SimpleNamespace(seen=seen, built=None, sight_cap=5.0),
     )
     vols, away, in_rooms, rooms_away = _shares(search, SimpleNamespace(weights=w))
     assert math.isnan(vols) and away == pytest.approx(0.4)

@@ -141,12 +141,13 @@ def test_curve_files_and_ratios(curve_dir):
 
 def test_a_policy_searches_the_same_alone_or_with_others(tmp_path, desk_cup_store):
     """What lets the curve run the baseline and the asymptote only once."""
+    from ctxsearch.agent.search.config import SearchConfig
     from ctxsearch.agent.search.draw import remembered_draws
-    from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+    from ctxsearch.scripts.experiments.bench_search import bench_search
 
     kb = desk_cup_store(tmp_path / "kb.sqlite", rooms=3)
-    base = SearchBenchConfig(style="office", policies=("exhaustive", "location"), kb=kb,
-                             episodes=3, budget_s=20.0, map="given")  # fmt: skip
+    base = SearchConfig(style="office", policies=("exhaustive", "location"), episodes=3,
+                        budget_s=20.0).updated({"knowledge.kb": kb, "map.scenario": "given"})  # fmt: skip
     with remembered_draws():  # the episodes are drawn once (as the curve does)
         both = bench_search(base, tmp_path / "a", progress=None, bar=False)
         alone = bench_search(

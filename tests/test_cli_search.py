@@ -195,14 +195,13 @@ def test_bench_search_writes_its_four_files(store, tmp_path, capsys):
 def test_the_parser_reads_the_policy_registry_and_the_modes():
     """The CLI's policy names, defaults and modes are the registry's and the enums' (read, not
     copied), and each default runs in its scenario."""
-    from ctxsearch.agent.search.registry import POLICIES, check_scenario
+    from ctxsearch.agent.search.registry import POLICIES, resolve
     from ctxsearch.knowledge.options import MapMode
     from ctxsearch.scripts import cmd_search
 
     assert tuple(POLICIES) == cmd_search.POLICY_NAMES
-    assert set(cmd_search.MAP_MODES) == {"built", "given"}
     for scenario in MapMode:
-        check_scenario(cmd_search.DEFAULT_POLICIES[scenario].split(","), scenario)
+        resolve(cmd_search.DEFAULT_POLICIES[scenario].split(","), scenario)
         assert scenario in POLICIES[cmd_search.DEFAULT_POLICY[scenario]].maps
     assert cmd_search.DEFAULT_POLICIES["built"].startswith("frontier,indirect")
 

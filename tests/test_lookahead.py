@@ -8,15 +8,18 @@ import numpy as np
 import pytest
 
 from ctxsearch.agent.search import online as on
+from ctxsearch.agent.search.config import OnlineConfig
 from ctxsearch.envs.robot_spec import RobotPose, TimeModel
 
 
-def _search(x: float = 0.0, y: float = 0.0) -> on.OnlineSearch:
-    """An OnlineSearch with only what ``choose`` reads: the robot's pose, the time model and
-    the calibration (none yet: every kind's seconds taken as estimated)."""
+def _search(x: float = 0.0, y: float = 0.0, lookahead: bool = True) -> on.OnlineSearch:
+    """An OnlineSearch with only what ``choose`` reads: the robot's pose, the time model, the
+    online settings (``online.lookahead``) and the calibration (none yet: every kind's seconds
+    taken as estimated)."""
     s = on.OnlineSearch.__new__(on.OnlineSearch)
     body = SimpleNamespace(pose=lambda: RobotPose(x, y, 0.0, 0.0, 0.0))
     s.ctx = SimpleNamespace(body=body, time_model=TimeModel())
+    s.settings = OnlineConfig(lookahead=lookahead)
     s.took = {}
     return s
 
@@ -34,25 +37,23 @@ def far_and_on_the_way():
     return far, near
 
 
-def test_greedy_takes_the_best_rate(far_and_on_the_way, monkeypatch):
+def test_greedy_takes_the_best_rate(far_and_on_the_way):
     far, near = far_and_on_the_way
-    monkeypatch.setattr(on, "LOOKAHEAD", False)
-    assert _search().choose([near, far]) == (far, None)
+    assert _search(lookahead=False).choose([near, far]) == (far, None)
+    assert OnlineConfig().lookahead is False  # greedy is the default
 
 
-def test_the_look_ahead_takes_the_look_on_the_way_first(far_and_on_the_way, monkeypatch):
+def test_the_look_ahead_takes_the_look_on_the_way_first(far_and_on_the_way):
     """Sweep then region: (0.5 + 0.3) / (24 + 0.7 * (30 - 20 + 2)) = 0.0247 per second; region
     then sweep: 0.8 / (30 + 0.5 * (24 - 18 + 2)) = 0.0235; either beats the region alone."""
     far, near = far_and_on_the_way
-    monkeypatch.setattr(on, "LOOKAHEAD", True)
     best, then = _search().choose([far, near])
     assert (best, then) == (near, far)
     assert best is _search().choose([near, far])[0]  # the order the options come in is moot
 
 
-def test_the_look_ahead_leaves_a_lone_or_far_better_option_first(far_and_on_the_way, monkeypatch):
+def test_the_look_ahead_leaves_a_lone_or_far_better_option_first(far_and_on_the_way):
     far, near = far_and_on_the_way
-    monkeypatch.setattr(on, "LOOKAHEAD", True)
     assert _search().choose([far]) == (far, None)
     # behind the robot, 9 m the other way: no detour pays
     behind = _option("sweep", 0.3, 24.0, (-9.0, 0.0), "explore")
@@ -70,7 +71,7 @@ def test_found_is_the_rate_times_the_seconds():
     assert np.isclose(o.rate, 0.25 / 8.0)
 
 
-def test_what_the_second_look_finds_is_what_the_first_leaves(far_and_on_the_way, monkeypatch):
+def test_what_the_second_look_finds_is_what_the_first_leaves(far_and_on_the_way):
     """m_b is b's own find times the share of it that a leaves: a sweep that finds most of a
     region's points first leaves the region little, so the plan of both is not counted twice."""
     weights = np.array([0.4, 0.4, 0.2])
@@ -80,29 +81,9 @@ def test_what_the_second_look_finds_is_what_the_first_leaves(far_and_on_the_way,
     elsewhere = (np.array([2]), np.array([0.5]))
     assert on._left_after(region, elsewhere, weights) == 1.0
     far, near = far_and_on_the_way
-    monkeypatch.setattr(on, "LOOKAHEAD", True)
     s = _search()
     # the sweep on the way shows the region's points as well as the look would: no plan pays
     # for it, and the region alone is the better rate
     far_f = replace(far, finds=region)
     near_f = replace(near, finds=region)
     assert s.choose([far_f, near_f], weights) == (far_f, None)
-
-
-def test_the_experiment_runs_the_benchmark_with_the_look_ahead_on(monkeypatch, capsys, tmp_path):
-    from ctxsearch.scripts.experiments import lookahead
-
-    seen = {}
-
-    def bench(config, out, progress=None, bar=False):
-        seen.update(on=on.LOOKAHEAD, map=config.map.value, rooms=config.rooms, out=out)
-        return SimpleNamespace(table="(table)")
-
-    monkeypatch.setattr(lookahead, "bench_search", bench)
-    argv = ["--kb", "k.sqlite", "--map", "built", "--episodes", "3", "--out", str(tmp_path)]
-    assert lookahead.main(argv) == 0
-    assert seen == {"on": True, "map": "built", "rooms": False, "out": tmp_path}
-    assert on.LOOKAHEAD is False  # greedy stays the default outside the run
-    assert "(table)" in capsys.readouterr().out
-    assert lookahead.main(["--kb", "k.sqlite", "--episodes", "0", "--out", "o"]) == 2
-    assert "--episodes must be at least 1" in capsys.readouterr().err

@@ -212,13 +212,15 @@ def test_a_learning_run_is_one_named_recording_laid_out_by_its_blueprint(catalog
 
 @pytest.mark.render
 def test_searches_side_by_side_in_one_recording(catalog, tmp_path, desk_cup_store):
-    from ctxsearch.agent.search.runner import SearchConfig, search_once
+    from ctxsearch.agent.search.config import SearchConfig
+    from ctxsearch.agent.search.runner import search_once
     from tests.rrd_files import read_rrd
 
     kb = desk_cup_store(tmp_path / "kb.sqlite")
     rrd = tmp_path / "search.rrd"
-    config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0, map="given")
-    one = search_once(config, "Cup", kb_path=kb, record=rrd, catalog=catalog)
+    config = SearchConfig("office", ("location", "exhaustive"), budget_s=25.0)
+    config = config.updated({"map.scenario": "given", "knowledge.kb": kb})
+    one = search_once(config, "Cup", record=rrd, catalog=catalog)
     assert one.files == [rrd]
     f = read_rrd(rrd)
     assert len(f.recordings) == 1 and f.recordings[0].application_id == "ctxsearch-search"

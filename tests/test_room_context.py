@@ -151,29 +151,31 @@ def learned(tmp_path_factory):
 
 
 def test_the_search_reads_the_stores_room_context_with_the_flag_only(learned, tmp_path, catalog):
-    from ctxsearch.agent.search.priors import KnowledgeSource, PriorSettings, make_priors
+    from ctxsearch.agent.search.config import KnowledgeConfig
+    from ctxsearch.agent.search.priors import make_priors
+    from ctxsearch.agent.search.registry import resolve
     from ctxsearch.envs.houses import resolve_style
-    from ctxsearch.knowledge.options import MapMode
 
     style = resolve_style("apartment", catalog)
-    src = KnowledgeSource(path=learned)
-    off = make_priors(("location",), MapMode.GIVEN, style, catalog, PriorSettings(), src)
-    assert off.for_name("location").room_share("Cup") is None
-    on = make_priors(("location",), MapMode.GIVEN, style, catalog, PriorSettings(rooms=True), src)
+    (loc,) = resolve(("location",), "given")
+    off = make_priors((loc,), style, catalog, KnowledgeConfig(kb=learned))
+    assert off.for_policy(loc).room_share("Cup") is None
+    on = make_priors((loc,), style, catalog, KnowledgeConfig(kb=learned, room_context=True))
     with EvidenceStore.open(learned, catalog, read_only=True) as s:
         rc = s.room_context()
-    probs = on.for_name("location")
+    probs = on.for_policy(loc)
     assert probs.room_share("Cup") == rc.room_share("Cup") is not None
     assert probs.same_room("Fridge", "Cup") == rc.same_room("Fridge", "Cup", Rank.LOW)
     old = tmp_path / "old.sqlite"  # the same evidence without room contents (schema 5)
     old.write_bytes(learned.read_bytes())
     as_version(old, 5)
     with pytest.raises(CtxsearchError, match="holds no room context"):
-        make_priors(("location",), MapMode.GIVEN, style, catalog, PriorSettings(rooms=True),
-                    KnowledgeSource(path=old))  # fmt: skip
+        make_priors((loc,), style, catalog, KnowledgeConfig(kb=old, room_context=True))
     # the oracle-prior policies need no store's room context
-    make_priors(("uniform",), MapMode.GIVEN, style, catalog,
-                PriorSettings(rooms=True, truth_samples=2), KnowledgeSource(path=old))  # fmt: skip
+    uniform = resolve(("uniform",), "given")
+    make_priors(
+        uniform, style, catalog, KnowledgeConfig(kb=old, room_context=True, truth_samples=2)
+    )
 
 
 def test_a_learning_visit_records_what_its_rooms_held(learned, catalog):

@@ -8,7 +8,7 @@ import pytest
 
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.room_segmentation import RoomLabels, wall_mask
-from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.maps import WorldMaps
 from ctxsearch.agent.search.room_prior import MAX_FACTOR, MIN_FACTOR, RoomPrior
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
@@ -67,16 +67,16 @@ def _table(same: dict, share: dict) -> TableProbabilities:
 
 
 def test_the_factor_is_the_best_furniture_ratio_clipped_and_one_elsewhere(house, catalog):
-    maps = RoomMaps.given(house, catalog, RobotSpec())
+    maps = WorldMaps.given(house, catalog, RobotSpec())
     rooms = _rooms_of(house, catalog)
     fridge_room = next(house.room_of[o.id] for o in house.objects if o.type == "Fridge")
     others = [r for r in rooms if r != fridge_room]
     bed_room = next(house.room_of[o.id] for o in house.objects if o.type == "Bed")
     same = {("Fridge", "Cup"): 0.9, ("Bed", "Cup"): 0.0}
     probs = _table(same, {"Cup": 0.3})
-    rp = RoomPrior.for_search(probs, "Cup", catalog, maps.seen.points, maps.rooms)
+    rp = RoomPrior.for_search(probs, "Cup", catalog, maps.seen.points, maps.plan_rooms)
     f = rp.factor(list(maps.furniture), None)
-    where = maps.rooms.at(maps.seen.points)
+    where = maps.plan_rooms.at(maps.seen.points)
     assert np.allclose(f[where == fridge_room], 0.9 / 0.3)
     if bed_room != fridge_room:
         assert np.allclose(f[where == bed_room], MIN_FACTOR)  # ruled out, but not to zero
@@ -85,7 +85,7 @@ def test_the_factor_is_the_best_furniture_ratio_clipped_and_one_elsewhere(house,
     assert others  # the house has more than the kitchen
     # the largest probability of a room's furniture counts, capped
     probs = _table({("Fridge", "Cup"): 0.1, ("Counter", "Cup"): 1.0}, {"Cup": 0.05})
-    f = RoomPrior(probs, "Cup", catalog, maps.seen.points, maps.rooms).factor(
+    f = RoomPrior(probs, "Cup", catalog, maps.seen.points, maps.plan_rooms).factor(
         list(maps.furniture), None
     )
     counter_room = next(house.room_of[o.id] for o in house.objects if o.type == "Counter")
@@ -93,13 +93,17 @@ def test_the_factor_is_the_best_furniture_ratio_clipped_and_one_elsewhere(house,
 
 
 def test_no_room_context_without_room_probabilities_or_furniture(house, catalog):
-    maps = RoomMaps.given(house, catalog, RobotSpec())
+    maps = WorldMaps.given(house, catalog, RobotSpec())
     pts = maps.seen.points
-    assert RoomPrior.for_search(None, "Cup", catalog, pts, maps.rooms) is None
-    assert RoomPrior.for_search(UniformProbabilities(), "Cup", catalog, pts, maps.rooms) is None
-    assert RoomPrior.for_search(TableProbabilities({}), "Cup", catalog, pts, maps.rooms) is None
+    assert RoomPrior.for_search(None, "Cup", catalog, pts, maps.plan_rooms) is None
+    assert (
+        RoomPrior.for_search(UniformProbabilities(), "Cup", catalog, pts, maps.plan_rooms) is None
+    )
+    assert (
+        RoomPrior.for_search(TableProbabilities({}), "Cup", catalog, pts, maps.plan_rooms) is None
+    )
     rp = RoomPrior.for_search(_table({("Fridge", "Cup"): 0.9}, {"Cup": 0.3}), "Cup", catalog,
-                              pts, maps.rooms)  # fmt: skip
+                              pts, maps.plan_rooms)  # fmt: skip
     assert rp.factor([], None) is None  # nothing known yet
     assert rp.factor([o for o in house.objects if o.type == "Cup"], None) is None  # no furniture
 
@@ -107,7 +111,7 @@ def test_no_room_context_without_room_probabilities_or_furniture(house, catalog)
 def test_on_the_built_map_the_rooms_are_its_segmentation_as_it_grows(house, catalog):
     spec = RobotSpec()
     built = BuiltMap.for_layout(house, spec, RobotPose(0.0, 0.0, 0.0))
-    seen = RoomMaps.built(house, catalog, spec).seen
+    seen = WorldMaps.built(house, catalog, spec).seen
     fridge = next(o for o in house.objects if o.type == "Fridge")
     rp = RoomPrior(_table({("Fridge", "Cup"): 0.9}, {"Cup": 0.3}), "Cup", catalog, seen.points,
                    None)  # fmt: skip
@@ -141,39 +145,32 @@ def test_the_oracle_priors_know_room_context_only_when_asked(catalog):
     assert rooms.p("ON-TOP-OF-COUNTER", "Cup") == plain.p("ON-TOP-OF-COUNTER", "Cup")
 
 
-def test_plan_rooms_gives_the_built_map_the_plans_rooms_and_nothing_else(house, catalog, capsys):
-    from unittest import mock
-
-    from ctxsearch.scripts.experiments import plan_rooms
+def test_plan_segments_give_the_built_map_the_plans_rooms_and_nothing_else(house, catalog):
+    from ctxsearch.agent.search.config import MapConfig, Segments
 
     spec = RobotSpec()
-    plain = RoomMaps.built(house, catalog, spec)
-    assert plain.rooms is None
-    with mock.patch.object(RoomMaps, "built", classmethod(plan_rooms._with_plan_rooms)):
-        got = RoomMaps.built(house, catalog, spec)
-    assert np.array_equal(got.rooms.labels, RoomLabels.of_plan(house).labels)
+    plain = WorldMaps.built(house, catalog, spec)
+    assert plain.plan_rooms is None
+    got = WorldMaps.built(house, catalog, spec, None, MapConfig(segments=Segments.PLAN))
+    assert np.array_equal(got.plan_rooms.labels, RoomLabels.of_plan(house).labels)
     assert (
         got.furniture == ()
         and got.map == plain.map
         and np.array_equal(got.grid.free, plain.grid.free)
     )
-    assert RoomMaps.built(house, catalog, spec).rooms is None  # the patch is gone
-    assert plan_rooms.main(["--kb", "x.sqlite", "--episodes", "0", "--out", "o"]) == 2
-    assert "--episodes must be at least 1" in capsys.readouterr().err
 
 
-def test_map_range_sets_the_depth_range_of_every_built_map_and_the_sight_cap_for_the_run(capsys):
-    from ctxsearch.agent.search import viewpoints as sx
-    from ctxsearch.scripts.experiments import map_range
+def test_the_depth_range_reaches_every_built_map(house, catalog):
+    from ctxsearch.agent.search.config import MapConfig
 
     spec = RobotSpec()
-    start = RobotPose(0.0, 0.0, 0.0)
-    before = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
-    with map_range.depth_range(9.5):
-        m = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
-        assert m.max_range == 9.5 and sx.MAX_VIEW == 9.5
-        assert m.resolution == before.resolution  # the other defaults kept
-    after = BuiltMap((-1.0, -1.0, 1.0, 1.0), spec, start)
-    assert before.max_range == after.max_range == 5.0 and sx.MAX_VIEW == 5.0
-    assert map_range.main(["--kb", "x.sqlite", "--range", "0.2", "--out", "o"]) == 2
-    assert "--range must be in" in capsys.readouterr().err
+    far = WorldMaps.built(house, catalog, spec, None, MapConfig(depth_range_m=9.5))
+    assert far.depth_range == 9.5
+    m = far.new_built_map(RobotPose(0.0, 0.0, 0.0), spec)
+    assert (
+        m.max_range == 9.5
+        and m.resolution == BuiltMap((-1, -1, 1, 1), spec, RobotPose(0, 0, 0)).resolution
+    )
+    plain = WorldMaps.built(house, catalog, spec)
+    assert plain.new_built_map(RobotPose(0.0, 0.0, 0.0), spec).max_range == 5.0
+    assert np.array_equal(far.grid.free, plain.grid.free)  # the same allocation

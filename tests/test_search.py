@@ -12,13 +12,13 @@ import pytest
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.search import episode as S
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.context import SearchContext
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
-from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.maps import WorldMaps
 from ctxsearch.agent.search.measures import bootstrap_ci
-from ctxsearch.agent.search.policies import make_policy
-from ctxsearch.agent.search.registry import POLICIES, parse_policies
-from ctxsearch.agent.search.runner import EpisodeRoom, EpisodeSet, run_episodes
+from ctxsearch.agent.search.policies import SearchPolicy
+from ctxsearch.agent.search.registry import POLICIES, parse_policies, resolve
+from ctxsearch.agent.search.runner import EpisodeWorld, PolicyRun, WorldRuns, search_world
 from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from ctxsearch.knowledge.base import KnowledgeBase
@@ -32,6 +32,12 @@ DESK = ObjectInstance("Desk", 1, (0.0, 1.55, 0.37), -math.pi / 2, (0.7, 1.4, 0.7
 SHELF = ObjectInstance("Shelf", 2, (-2.2, -0.2, 0.8), 0.0, (0.35, 1.0, 1.6))
 CUP = ObjectInstance("Cup", 3, (0.2, 1.5, 0.79), 0.0, (0.08, 0.08, 0.10))
 START = RobotPose(0.0, -0.6, math.pi / 2)  # 2.1 m south of the desk, facing it
+
+
+def prepare_named(er: EpisodeWorld, ep, name: str, probs=None, rec=None):
+    """``er.prepare`` of policy ``name`` in the room's scenario."""
+    (spec,) = resolve((name,), er.config.scenario)
+    return er.prepare(ep, PolicyRun(spec, probs), rec)
 
 
 def room(*objects: ObjectInstance) -> RoomLayout:
@@ -287,18 +293,20 @@ def test_episodes_are_deterministic_and_skip_excluded_rooms(catalog):
 
 def test_unknown_policy_and_rank_are_one_line_errors():
     with pytest.raises(CtxsearchError, match="unknown search policy 'psychic'"):
-        make_policy("psychic", MapMode.GIVEN)
+        resolve(("psychic",), MapMode.GIVEN)
     with pytest.raises(CtxsearchError, match="unknown rank"):
         parse_policies("location@middle")
     assert parse_policies("exhaustive, location@low") == ["exhaustive", "location@low"]
 
 
 # =========================================================================== policies (rendered)
-def _episode_room(layout: RoomLayout, catalog, world, mode=MapMode.GIVEN) -> EpisodeRoom:
+def _episode_room(layout: RoomLayout, catalog, world, mode=MapMode.GIVEN) -> EpisodeWorld:
     """The hand-made room in scenario ``mode`` (perfect detector), as the episode runner builds
     it."""
-    maps = RoomMaps.for_mode(mode, layout, catalog, world.spec)
-    return EpisodeRoom(layout, catalog, world, maps, RoomMaps.given(layout, catalog, world.spec))
+    maps = WorldMaps.for_mode(mode, layout, catalog, world.spec)
+    config = SearchConfig().with_scenario(mode)
+    given = WorldMaps.given(layout, catalog, world.spec)
+    return EpisodeWorld(layout, catalog, world, maps, config, given)
 
 
 def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, world=None, mode=None):
@@ -308,8 +316,10 @@ def _run(policy: str, layout: RoomLayout, catalog, probs=None, budget=120.0, wor
     own = world is None
     world = world or World(layout, catalog)
     try:
-        er = _episode_room(layout, catalog, world, mode or POLICIES[policy].maps[-1])
-        pol, ctx = er.prepare(ep, policy, probs)
+        mode = mode or POLICIES[policy].maps[-1]
+        er = _episode_room(layout, catalog, world, mode)
+        (spec,) = resolve((policy,), mode)
+        pol, ctx = er.prepare(ep, PolicyRun(spec, probs))
         return er.judged(pol.run(ctx)), ctx
     finally:
         if own:
@@ -372,7 +382,7 @@ def test_location_puts_the_belief_where_the_store_ranks_highest(catalog, tmp_pat
         with World(layout, catalog) as world:
             er = _episode_room(layout, catalog, world, "given")
             ep = S.Episode(0, "test", 0, "Cup", START, 30.0)
-            _, ctx = er.prepare(ep, "location", probs)
+            _, ctx = prepare_named(er, ep, "location", probs)
             w = OnlineSearch(ctx, probs).belief().weights
         rels = {r.name: r for t in ("Shelf", "Desk") for r in catalog.type(t).relations}
         shelf = ctx.seen.in_box(relation_volume(rels["ON-SHELF"], SHELF))
@@ -397,35 +407,41 @@ def test_paired_benchmark_gives_every_policy_the_same_episodes(catalog, monkeypa
     style = load_style("office", catalog)
     eps = make_episodes(DrawSpec.make(style, 2, 11, catalog, budget_s=6.0), catalog)
     seen: list[tuple] = []
-    orig = SearchContext.__init__
+    orig = SearchPolicy.run
 
-    def spy(self, episode, cat, body, perception, maps, **kw):
-        orig(self, episode, cat, body, perception, maps, **kw)
-        p = body.pose()
+    def spy(self, ctx):
+        episode, p, maps = ctx.episode, ctx.body.pose(), ctx.maps
         seen.append(
             (
-                kw.get("policy"),
+                self.name,
                 episode.index,
                 episode.room_seed,
                 episode.target,
                 (episode.start.x, episode.start.y),
                 (round(p.x, 4), round(p.y, 4), round(p.yaw, 4)),
-                len(self.known),
-                self.seen.seen_fraction(99.0),
+                len(ctx.known),
+                ctx.seen.seen_fraction(99.0),
                 tuple(sorted(o.id for o in maps.furniture)),
-                round(self.elapsed, 6),
+                round(ctx.elapsed, 6),
             )
         )
+        return orig(self, ctx)
 
-    monkeypatch.setattr(SearchContext, "__init__", spy)
+    monkeypatch.setattr(SearchPolicy, "run", spy)
     kb = KnowledgeBase(catalog)
     kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
     policies = ["exhaustive", "location", "oracle"]
 
-    def probs_for(base, rank):
-        return ss.KBProbabilities(kb, rank or "p0") if base == "location" else None
-
-    results = run_episodes(eps, catalog, EpisodeSet(style, tuple(policies), probs_for))
+    specs = resolve(policies, MapMode.GIVEN)
+    config = SearchConfig(style.name, tuple(policies)).with_scenario(MapMode.GIVEN)
+    probs = {"location": ss.KBProbabilities(kb, "p0")}
+    runs = tuple(PolicyRun(s, probs.get(s.name)) for s in specs)
+    results = {p: [] for p in policies}
+    for ep in eps:
+        for p, r in zip(
+            policies, search_world(ep, style, catalog, WorldRuns(runs, config)), strict=True
+        ):
+            results[p].append(r)
     assert [len(results[p]) for p in policies] == [2, 2, 2]
     for i, ep in enumerate(eps):
         rows = [r for r in seen if r[1] == i]
@@ -470,7 +486,7 @@ def test_search_recording_shows_candidates_path_and_camera_views(catalog, tmp_pa
     with World(layout, catalog) as world, Recorder(path) as rec:
         rec.log_room(layout, catalog)
         er = _episode_room(layout, catalog, world)
-        pol, ctx = er.prepare(ep, "location", probs, rec)
+        pol, ctx = prepare_named(er, ep, "location", probs, rec)
         res = er.judged(pol.run(ctx))
     assert res.success
     entities = {c.entity_path for c in rr.chunk.RrdReader(path).stream()}
@@ -500,7 +516,7 @@ def test_a_detection_of_the_target_ends_the_search_only_once_a_second_image_conf
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Cup", START, 120.0)
         er = _episode_room(layout, catalog, world)
-        pol, ctx = er.prepare(ep, "exhaustive", None)
+        pol, ctx = prepare_named(er, ep, "exhaustive", None)
         real = ctx.perception.detector
         calls = []
 

@@ -16,10 +16,11 @@ import pytest
 from ctxsearch.agent.search import episode as S
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.frontier import Explorer
-from ctxsearch.agent.search.maps import RoomMaps
-from ctxsearch.agent.search.registry import check_scenario, default_policies
-from ctxsearch.agent.search.runner import EpisodeRoom
+from ctxsearch.agent.search.maps import WorldMaps
+from ctxsearch.agent.search.registry import default_policies, resolve
+from ctxsearch.agent.search.runner import EpisodeWorld, PolicyRun
 from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec, TimeModel
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -32,6 +33,12 @@ SHELF = ObjectInstance("Shelf", 2, (-2.2, -0.2, 0.8), 0.0, (0.35, 1.0, 1.6))
 CUP = ObjectInstance("Cup", 3, (0.2, 1.5, 0.79), 0.0, (0.08, 0.08, 0.10))
 PEN = ObjectInstance("Pen", 4, (-0.2, 1.6, 0.75), 0.3, (0.14, 0.012, 0.012))
 START = RobotPose(0.0, -1.2, -math.pi / 2)  # facing away from the desk: nothing in view
+
+
+def prepare_named(er: EpisodeWorld, ep, name: str, probs=None, rec=None):
+    """``er.prepare`` of policy ``name`` in the room's scenario."""
+    (spec,) = resolve((name,), er.config.scenario)
+    return er.prepare(ep, PolicyRun(spec, probs), rec)
 
 
 def room(*objects: ObjectInstance) -> RoomLayout:
@@ -48,26 +55,29 @@ def room(*objects: ObjectInstance) -> RoomLayout:
     )
 
 
-def _room(layout, catalog, world, scenario="built") -> EpisodeRoom:
+def _room(layout, catalog, world, scenario="built") -> EpisodeWorld:
     """The hand-made room in ``scenario`` (perfect detector), as the episode runner builds it."""
-    maps = RoomMaps.for_mode(MapMode(scenario), layout, catalog, world.spec)
-    return EpisodeRoom(layout, catalog, world, maps, RoomMaps.given(layout, catalog, world.spec))
+    maps = WorldMaps.for_mode(MapMode(scenario), layout, catalog, world.spec)
+    config = SearchConfig().with_scenario(scenario)
+    return EpisodeWorld(
+        layout, catalog, world, maps, config, WorldMaps.given(layout, catalog, world.spec)
+    )
 
 
 def _run(policy, layout, catalog, world, target="Cup", probs=None, scenario="built", budget=200.0):
     ep = S.Episode(0, "test", 0, target, START, budget)
     er = _room(layout, catalog, world, scenario)
-    pol, ctx = er.prepare(ep, policy, probs)
+    pol, ctx = prepare_named(er, ep, policy, probs)
     return er.judged(pol.run(ctx)), ctx
 
 
 # =========================================================================== pure parts
 def test_built_scenario_knows_no_furniture_and_no_free_cell(catalog):
     layout = room(DESK, SHELF, CUP)
-    maps = RoomMaps.built(layout, catalog, RobotSpec())
+    maps = WorldMaps.built(layout, catalog, RobotSpec())
     assert maps.map == "built" and maps.furniture == ()
     assert not maps.grid.free.any()
-    given = RoomMaps.given(layout, catalog, RobotSpec())
+    given = WorldMaps.given(layout, catalog, RobotSpec())
     assert given.map == "given" and {o.id for o in given.furniture} == {DESK.id, SHELF.id}
     # The built seen map's lattice does not know where the furniture's solid parts are.
     assert len(maps.seen) > len(given.seen)
@@ -95,14 +105,14 @@ def test_efficiency_model_predicts_a_gain_only_for_a_related_easier_type(catalog
 
 def test_policy_scenario_mismatch_is_a_one_line_error():
     with pytest.raises(CtxsearchError, match="policy 'location' needs --map given"):
-        check_scenario(["frontier", "location@low"], "built")
+        resolve(["frontier", "location@low"], "built")
     with pytest.raises(CtxsearchError, match="policy 'frontier' needs --map built"):
-        check_scenario(["frontier"], "given")
+        resolve(["frontier"], "given")
     with pytest.raises(CtxsearchError, match="unknown map"):
-        check_scenario(["oracle"], "drawn")
-    check_scenario(["indirect", "oracle"], "given")  # both scenarios
+        resolve(["oracle"], "drawn")
+    resolve(["indirect", "oracle"], "given")  # both scenarios
     for scenario in MapMode:
-        check_scenario(default_policies(scenario), scenario)
+        resolve(default_policies(scenario), scenario)
 
 
 def test_cli_policy_scenario_mismatch_exits_2_with_one_line(tmp_path):
@@ -140,7 +150,7 @@ def test_frontier_finds_a_cup_out_of_view_and_its_map_starts_unknown(catalog):
     layout = room(DESK, SHELF, CUP)
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Cup", START, 200.0)
-        _, ctx = _room(layout, catalog, world).prepare(ep, "frontier", None)
+        _, ctx = prepare_named(_room(layout, catalog, world), ep, "frontier", None)
         assert ctx.built is not None and ctx.built.unknown.mean() > 0.95
         assert ctx.known == {} and ctx.furniture_map() == []
         res, ctx = _run("frontier", layout, catalog, world)
@@ -208,7 +218,7 @@ def _looked_around(catalog):
     layout = room(DESK, SHELF, CUP, PEN)
     with World(layout, catalog) as world:
         ep = S.Episode(0, "test", 0, "Pen", START, 200.0)
-        _, ctx = _room(layout, catalog, world).prepare(ep, "frontier", None)
+        _, ctx = prepare_named(_room(layout, catalog, world), ep, "frontier", None)
         ex = Explorer(ctx)
         ex.look_around()
         yield ctx, ex
@@ -517,7 +527,7 @@ def test_kept_views_give_the_gains_and_choices_of_tracing_afresh(catalog):
 
     spec, tm = RobotSpec(), TimeModel()
     layout = generate_layout(resolve_style("apartment", catalog), 7, catalog)
-    maps = RoomMaps.given(layout, catalog, spec)
+    maps = WorldMaps.given(layout, catalog, spec)
     pts, grid = maps.seen.points, maps.grid
     sight = sx.Sight(3.0, lambda d: np.exp(-np.asarray(d) / 2.0))
     fresh = sx.ViewpointScorer(maps.occluders, pts, spec, tm)

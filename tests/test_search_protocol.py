@@ -15,15 +15,16 @@ from ctxsearch.agent.search import draw as D
 from ctxsearch.agent.search import draw_store
 from ctxsearch.agent.search import episode as S
 from ctxsearch.agent.search import oracle as O
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import DrawSpec, draw_world
-from ctxsearch.agent.search.runner import EpisodeSet, run_episode
+from ctxsearch.agent.search.registry import resolve
+from ctxsearch.agent.search.runner import PolicyRun, WorldRuns, search_world
 from ctxsearch.envs.detector import SimDetector, load_detector
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.robot_spec import RobotPose
 from ctxsearch.envs.styles import load_style
 from ctxsearch.envs.world import World
 from ctxsearch.scripts.experiments.bench_search import (
-    SearchBenchConfig,
     aggregate,
     bench_search,
     detect_group,
@@ -39,7 +40,9 @@ def draw(style, n, seed, catalog, budget, *, detector=None, cache=None):
 
 def run_ep(ep, policies, catalog, style, detector):
     """Every policy of ``policies`` on ``ep`` (no probabilities), on the given map."""
-    return run_episode(ep, catalog, EpisodeSet(style, tuple(policies), lambda b, r: None, detector))
+    config = SearchConfig(style.name, tuple(policies)).with_scenario("given")
+    runs = tuple(PolicyRun(s) for s in resolve(policies, "given"))
+    return search_world(ep, style, catalog, WorldRuns(runs, config, detector))
 
 
 def res(policy: str, t: float, found: bool = True, budget: float = 100.0) -> S.SearchResult:
@@ -192,16 +195,9 @@ def test_no_policy_beats_the_oracle(tmp_path, detector, n, map_mode, desk_cup_st
     map: 0 violations, measured by hand)."""
     policies = {"given": ("exhaustive", "location", "oracle"),
                 "built": ("frontier", "indirect", "oracle")}[map_mode]  # fmt: skip
-    config = SearchBenchConfig(
-        style="office",
-        map=map_mode,
-        policies=policies,
-        seed=3,
-        budget_s=15.0,
-        detector=detector,
-        kb=desk_cup_store(tmp_path / "kb.sqlite"),
-        episodes=n,
-    )
+    config = SearchConfig(
+        style="office", policies=policies, seed=3, budget_s=15.0, detector=detector, episodes=n
+    ).updated({"map.scenario": map_mode, "knowledge.kb": desk_cup_store(tmp_path / "kb.sqlite")})
     out = tmp_path / detector
     r = bench_search(config, out, progress=None, bar=False)
     doc = json.loads((out / "search.json").read_text())

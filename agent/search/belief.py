@@ -30,7 +30,7 @@ belief mass it would find, sum_x b(x) found(d(x, view)), per expected second (ag
 
 Stopping. A policy stops before its budget only when the *detectable mass left*
 (``mass_left``: the prior's share over the points not given up on that the miss field still
-holds) is below ``STOP_MASS``; the share at a stop is reported with the result
+holds) is below the configuration's ``belief.stop_mass`` (agent.search.config); the share at a stop is reported with the result
 (``SearchResult.mass_left``).
 """
 
@@ -53,9 +53,6 @@ from ctxsearch.agent.sight import (  # noqa: F401
 # A point whose miss probability fell below this is no longer worth a look of its own (it keeps
 # its mass in the belief; options stop counting it towards their minimum number of points).
 MISS_DONE = 0.05
-# The online search stops before its budget only when less than this share of the detectable
-# mass is left (module docstring).
-STOP_MASS = 0.02
 BELIEF_CELL_M = 0.2  # the recording's floor heat map: cells of this size
 
 

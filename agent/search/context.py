@@ -25,8 +25,9 @@ from ctxsearch.agent.navigation import OccupancyGrid, plan_path
 from ctxsearch.agent.recording import Recorder
 from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.episode import Episode, GazeRecord, SearchResult
-from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.maps import WorldMaps
 from ctxsearch.agent.viewplan import Gaze, face_gaze
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import Detection
@@ -81,7 +82,8 @@ class SearchContext:
     """One policy's run of one episode: the body (an agent.interfaces ``Body``), what it senses
     (``perception``: its ``see`` reads an image, ``last_detections`` what it reported), the maps
     it was given (``maps``; on the built map it also builds its own, ``built``), the knowledge
-    source (``probs``), the clock, the trace and the recording.
+    source (``probs``), the configuration the behaviours read (``config``: agent.search.config),
+    the clock, the trace and the recording.
 
     Public state the behaviours share: ``seen`` (the seen map), ``known`` (objects detected so
     far, by instance id), ``looked_into`` (candidate regions looked into) and ``waiting``
@@ -97,13 +99,18 @@ class SearchContext:
         catalog: Catalog,
         body: Body,
         perception: Perception,
-        maps: RoomMaps,
+        maps: WorldMaps,
         *,
         probs: ss.ProbabilitySource | None = None,
         recorder: Recorder | None = None,
-        policy: str = "?",
+        config: SearchConfig | None = None,
     ):
         self.episode, self.catalog, self.maps = episode, catalog, maps
+        # the settings the behaviours read (``online``, ``belief``, ``map``)
+        self.config = config or SearchConfig()
+        # called at each online decision (agent.search.online.OnlineSearch): (search, belief,
+        # chosen option); read-only, for diagnostics (None: nothing)
+        self.observer: Callable | None = None
         self.spec: RobotSpec = body.spec
         self.time_model: TimeModel = body.time_model
         self.body = _PathMeter(body)
@@ -111,7 +118,7 @@ class SearchContext:
         self.built: BuiltMap | None = maps.new_built_map(episode.start, self.spec)
         self.probs = probs
         self.recorder = recorder or Recorder(None)
-        self.policy = policy
+        self.policy = "?"  # the policy's name, set when it runs (SearchPolicy.run)
         self.width, self.height = int(body.width), int(body.height)
         self.seen = maps.seen.copy()
         self.target = episode.target
@@ -139,6 +146,11 @@ class SearchContext:
         self.mass_left: float | None = None  # the belief's detectable mass left (online search)
         # the belief as it stands (set by a search that holds one): recorded after every image
         self.belief_now: Callable[[], np.ndarray | None] | None = None
+
+    @property
+    def sight_cap(self) -> float:
+        """m: nothing further than this counts as seen (the built map's depth range)."""
+        return self.config.map.depth_range_m
 
     @property
     def occluders(self):

@@ -72,8 +72,8 @@ class DrawSpec:
     exclude_seeds: tuple[int, ...] = ()
     target: str | None = None
     detector: DetectorModel | None = None
-    # ``instance``: the world keeps one instance of the target, drawn after the target (set with
-    # dataclasses.replace; ``type``, the default, draws exactly as before the option)
+    # ``instance``: the world keeps one instance of the target, drawn after the target (``type``,
+    # the default, draws any instance)
     targets: Targets = Targets.TYPE
     # ``first_view`` False: the draw asks only whether the oracle finds the target within the
     # budget, not its soonest view (``oracle_view(soonest=False)``): the same worlds, targets and
@@ -92,16 +92,18 @@ class DrawSpec:
         exclude_seeds: Iterable[int] = (),
         target: str | None = None,
         detector: DetectorModel | None = None,
+        **more,
     ) -> DrawSpec:
         """The spec with ``catalog``'s fingerprint and, of the excluded seeds, those the draw
         can meet (the room seeds of its ``world_limit`` worlds), sorted: the draw is the same,
         and so is its key, for every store whose learning rooms it never meets (the curve's
-        snapshots, the transfer's stores: one draw, not one per store)."""
+        snapshots, the transfer's stores: one draw, not one per store). ``more``: the other
+        fields by name (``targets``, ``first_view``)."""
         worlds = draw_worlds(int(seed), int(episodes))
         exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds.keys()))
         return cls(
             style, int(episodes), int(seed), catalog.fingerprint, float(budget_s), exclude,
-            target, detector,
+            target, detector, **more,
         )  # fmt: skip
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ctxsearch.agent.navigation import OccupancyGrid, nearest_free
 from ctxsearch.agent.search import measures
-from ctxsearch.agent.search.registry import DEFAULT_BUDGET_S
+from ctxsearch.agent.search.config import DEFAULT_BUDGET_S
 from ctxsearch.agent.viewplan import Gaze
 from ctxsearch.envs.houses import WorldStyle
 from ctxsearch.envs.layout import RoomLayout

@@ -12,12 +12,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ctxsearch.agent.frontiers import NEAR_TILT
 from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.coverage import belief_sweep, sweep
+from ctxsearch.agent.sight import NEAR_TILT
 
 
 class Explorer:
@@ -38,7 +38,7 @@ class Explorer:
             c = self.ctx
             views = c.maps.views if c.built is None else None  # the given map never changes
             self._scorer = sx.ViewpointScorer(
-                c.occluders, c.seen.points, c.spec, c.time_model, views
+                c.occluders, c.seen.points, c.spec, c.time_model, views, c.sight_cap
             )
         return self._scorer
 

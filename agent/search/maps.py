@@ -1,15 +1,15 @@
 """What the robot is given of a world before it searches it: the two map scenarios.
 
-- ``built`` (``RoomMaps.built``, the default in houses): the robot knows nothing at the start:
+- ``built`` (``WorldMaps.built``, the default in houses): the robot knows nothing at the start:
   no furniture, no free cell. Each policy's context builds its own agent.mapping ``BuiltMap``
   from its depth images (the same map and rules as learning's ``--map built``: it plans only
   through cells seen to be floor with nothing within the clearance), objects are known only once
   detected, and the seen map's lattice covers the footprint without knowing the furniture.
-- ``given`` (``RoomMaps.given``): the furniture poses and the true layout's grid are known (a
+- ``given`` (``WorldMaps.given``): the furniture poses and the true layout's grid are known (a
   home robot's map from an earlier visit).
 
 These constructors and the episode runner's sensor are where the true layout becomes what the
-robot is given; the behaviours read only ``RoomMaps``.
+robot is given; the behaviours read only ``WorldMaps``.
 """
 
 from __future__ import annotations
@@ -23,12 +23,15 @@ from ctxsearch.agent.navigation import OccupancyGrid, obstacle_boxes
 from ctxsearch.agent.room_segmentation import RoomLabels
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.config import MapConfig, Segments
 from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import MapMode
+
+_DEFAULT_MAP = MapConfig()
 
 
 @dataclass(frozen=True)
@@ -55,7 +58,7 @@ class Occluders:
 
 
 @dataclass(frozen=True)
-class RoomMaps:
+class WorldMaps:
     """What the robot is given of a room before it searches it, built once and shared by the
     policies run in it: the occupancy grid, the seen map's lattice (each policy gets a copy),
     the furniture poses the location constraint may assume, the detector preset its images
@@ -75,16 +78,19 @@ class RoomMaps:
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     top: float = 3.0
     occluders: Occluders | None = None  # what blocks the view on the given map
-    rooms: RoomLabels | None = None  # the given map's rooms (the plan's); None on the built map
+    # the plan's rooms, where the robot is given them: on the given map; on the built map None
+    # (the robot segments its own map) or, with ``MapConfig.segments`` plan, the plan's (a bound)
+    plan_rooms: RoomLabels | None = None
     # The given map's viewpoint views, kept for every policy run in the room (the occluders and
     # the lattice do not change: agent.search.viewpoints.ViewpointScorer's ``views``)
     views: dict = field(default_factory=dict, compare=False, repr=False)
+    depth_range: float = _DEFAULT_MAP.depth_range_m  # m: how far a built map reads depth
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
         """An empty map of the robot's own over the footprint (``built``), None on a given map."""
         if self.map is not MapMode.BUILT:
             return None
-        return BuiltMap(self.bounds, spec, start, top=self.top)
+        return BuiltMap(self.bounds, spec, start, max_range=self.depth_range, top=self.top)
 
     @classmethod
     def built(
@@ -93,13 +99,18 @@ class RoomMaps:
         catalog: Catalog,
         spec: RobotSpec,
         detector: DetectorModel | None = None,
-    ) -> RoomMaps:
+        config: MapConfig = _DEFAULT_MAP,
+    ) -> WorldMaps:
         """The ``built`` map scenario: the robot knows nothing at the start, no furniture, no
         free cell (``grid`` is all unknown); only the footprint's extent (the map's allocation,
         as in learning's built map) and height bound the seen map's lattice. Objects become
-        known when detected; the robot plans on what its depth images mapped."""
+        known when detected; the robot plans on what its depth images mapped, read up to
+        ``config.depth_range_m``; its rooms are its own segmentation's, or the plan's with
+        ``config.segments`` plan."""
         hw, hd = layout.width / 2, layout.depth / 2
-        empty = BuiltMap((-hw, -hd, hw, hd), spec, RobotPose(0.0, 0.0, 0.0))
+        empty = BuiltMap(
+            (-hw, -hd, hw, hd), spec, RobotPose(0.0, 0.0, 0.0), max_range=config.depth_range_m
+        )
         empty.floor[:] = False
         grid = OccupancyGrid(
             free=np.zeros_like(empty.floor), x0=empty.x0, y0=empty.y0,
@@ -107,7 +118,11 @@ class RoomMaps:
         )  # fmt: skip
         size = sx.WorldSize(layout.width * layout.depth, max(1, len(layout.rooms)))
         seen = ss.SeenMap.for_footprint(layout)
-        return cls(grid, seen, (), detector, MapMode.BUILT, size, _bounds(layout), layout.height)
+        plan = RoomLabels.of_plan(layout) if config.segments is Segments.PLAN else None
+        return cls(
+            grid, seen, (), detector, MapMode.BUILT, size, _bounds(layout), layout.height,
+            plan_rooms=plan, depth_range=config.depth_range_m,
+        )  # fmt: skip
 
     @classmethod
     def given(
@@ -116,8 +131,10 @@ class RoomMaps:
         catalog: Catalog,
         spec: RobotSpec,
         detector: DetectorModel | None = None,
-    ) -> RoomMaps:
-        """The ``given`` map scenario: the maps of the true layout (walls, furniture poses).
+        config: MapConfig = _DEFAULT_MAP,
+    ) -> WorldMaps:
+        """The ``given`` map scenario: the maps of the true layout (walls, furniture poses);
+        ``config.depth_range_m`` caps what counts as seen.
         The furniture poses are read from the true layout here and nowhere else in the
         behaviour."""
         furniture = tuple(o for o in layout.objects if catalog.type(o.type).is_furniture)
@@ -127,6 +144,7 @@ class RoomMaps:
         return cls(
             grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height,
             Occluders.from_layout(layout, spec), RoomLabels.of_plan(layout),
+            depth_range=config.depth_range_m,
         )  # fmt: skip
 
     @classmethod
@@ -137,10 +155,11 @@ class RoomMaps:
         catalog: Catalog,
         spec: RobotSpec,
         detector: DetectorModel | None = None,
-    ) -> RoomMaps:
+        config: MapConfig = _DEFAULT_MAP,
+    ) -> WorldMaps:
         """The maps of scenario ``mode``."""
         make = cls.built if mode is MapMode.BUILT else cls.given
-        return make(layout, catalog, spec, detector)
+        return make(layout, catalog, spec, detector, config)
 
 
 def _bounds(layout: RoomLayout) -> tuple[float, float, float, float]:

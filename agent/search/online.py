@@ -13,13 +13,13 @@ so far would have missed of a target there, by the detector's recall at that dis
 volume's value is its mass times the probability that the planned gazes find it; a sweep's is
 the mass times P(found) at each point's distance. No point is ever done: a distant glance
 leaves most of a volume's mass, so the robot goes close. The search stops before its budget
-only when less than ``belief.STOP_MASS`` of the detectable mass is left, or when no option is
+only when less than ``belief.stop_mass`` (agent.search.config) of the detectable mass is left, or when no option is
 left after mapping the floor around (``Explorer.unstick``); the share left is reported.
 
 The options' seconds come from different estimates (a sweep's drive and images, a volume's
 planned gazes, the efficiency model's look), which err differently: each kind's expected seconds
 are scaled by the ratio of the seconds its actions took so far in this episode to the seconds
-they were expected to take (``CALIBRATION_PRIOR_S`` of prior weight at ratio 1). The robot
+they were expected to take (``online.calibration_prior_s`` of prior weight at ratio 1). The robot
 corrects its own estimates; nothing is fitted offline.
 """
 
@@ -40,13 +40,6 @@ from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.room_prior import RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
-
-# The calibration of each option kind's expected seconds starts at 1 (estimates taken as they
-# are) and holds this many expected seconds of weight: after that much of a kind was done, its
-# measured ratio weighs as much as the prior.
-CALIBRATION_PRIOR_S = 30.0
-# Choose by a two-step look-ahead (``OnlineSearch.choose``) rather than greedily.
-LOOKAHEAD = False
 
 
 @dataclass(frozen=True)
@@ -104,7 +97,9 @@ class Belief:
 
 class OnlineSearch:
     """One episode's online decision for ``ctx`` with knowledge ``probs`` (None: no context, the
-    ``frontier`` policy) and intermediate types ``vias``."""
+    ``frontier`` policy) and intermediate types ``vias``. At each decision, before the chosen
+    option acts, the context's ``observer`` (if any) is called with the search, the belief the
+    options were valued on and the chosen option: a read-only hook for diagnostics."""
 
     def __init__(
         self,
@@ -113,11 +108,13 @@ class OnlineSearch:
         vias: Sequence[ViaOption] = (),
     ):
         self.ctx, self.probs, self.vias = ctx, probs, list(vias)
+        self.settings = ctx.config.online  # look-ahead, calibration
+        self.stop_mass = ctx.config.belief.stop_mass
         self.explorer = Explorer(ctx)
         self.builder = ss.RegionBuilder(ctx.catalog, probs, ctx.seen, ctx.target) if probs else None
         # room context, where the knowledge source has it (agent.search.room_prior)
         self.rooms = RoomPrior.for_search(
-            probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.rooms
+            probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms
         )
         self.gains = {v.type: v.gain for v in self.vias}
         self.via_spent: dict[str, float] = {}  # seconds spent looking for each intermediate type
@@ -128,8 +125,8 @@ class OnlineSearch:
 
     def run(self) -> None:
         """Look around (on the built map: its first images map the floor), then take the best
-        option until none is left or the belief's detectable mass left is below
-        ``belief.STOP_MASS``; the share left is the context's ``mass_left``. On a given map a
+        option until none is left or the belief's detectable mass left is below the configured
+        ``belief.stop_mass``; the share left is the context's ``mass_left``. On a given map a
         sweep where the robot stands is one of the options, taken when it is worth its seconds."""
         ctx = self.ctx
         first = self.belief()
@@ -141,7 +138,7 @@ class OnlineSearch:
             b = self.belief()
             ctx.mass_left = b.left
             self.record(b)
-            if b.left < belief.STOP_MASS:
+            if b.left < self.stop_mass:
                 ctx.note(f"{100 * b.left:.1f}% of the detectable mass left: stop")
                 return
             options = self.region_options(b)
@@ -159,6 +156,8 @@ class OnlineSearch:
             ctx.note(
                 f"{best.label} ({best.rate / f:.4f}/s, time x{f:.2f}; {len(options)} options{ahead})"
             )
+            if ctx.observer is not None:
+                ctx.observer(self, b, best)
             t0 = ctx.elapsed
             best.act()
             sums = self.took.setdefault(best.kind, [0.0, 0.0])
@@ -171,7 +170,7 @@ class OnlineSearch:
         """The option to take now, and the one the plan takes after it (None: none); ``weights``:
         the belief the options were valued on.
 
-        Without ``LOOKAHEAD``: the most probability per expected second (calibrated). With it, a
+        Without ``online.lookahead``: the most probability per expected second (calibrated). With it, a
         two-step look-ahead (a close look costs a drive first, which greedy choice weighs
         against the look alone): option a followed by option b finds the target with
         probability m_a + m_b in expected seconds
@@ -182,7 +181,7 @@ class OnlineSearch:
         detour, which looks for another type, overlaps nothing). Each a is worth its best plan,
         a alone or a then some b, per second; the best a is taken and the next step decided
         again (receding horizon)."""
-        if not LOOKAHEAD or len(options) < 2:
+        if not self.settings.lookahead or len(options) < 2:
             best = max(options, key=lambda o: o.rate / self.scale(o.kind))
             return best, None
         here = self.ctx.body.pose().xy
@@ -214,9 +213,12 @@ class OnlineSearch:
             rec.log_scalar(f"search/mass_left/{self.ctx.policy}", b.left)
 
     def scale(self, kind: str) -> float:
-        """The calibration of ``kind``'s expected seconds: measured over expected so far."""
+        """The calibration of ``kind``'s expected seconds: measured over expected so far, starting
+        at 1 with ``online.calibration_prior_s`` expected seconds of weight (after that much of
+        a kind was done, its measured ratio weighs as much as the prior)."""
         exp_s, got_s = self.took.get(kind, (0.0, 0.0))
-        return (got_s + CALIBRATION_PRIOR_S) / (exp_s + CALIBRATION_PRIOR_S)
+        w = self.settings.calibration_prior_s
+        return (got_s + w) / (exp_s + w)
 
     def belief(self) -> Belief:
         """Where the target may be (``Belief``): the prior (the known objects' relation volumes
@@ -234,7 +236,7 @@ class OnlineSearch:
             every = self.builder.regions(self.known_objects())
             skip = ctx.looked_into | ctx.waiting
             regions = [r for r in every if r.key not in skip]
-            dens = ss.target_density(every, ~ctx.seen.unseen(sx.MAX_VIEW), stand)
+            dens = ss.target_density(every, ~ctx.seen.unseen(ctx.sight_cap), stand)
         prior = stand if dens is None else dens
         f = self.rooms.factor(self.known_objects(), ctx.built) if self.rooms else None
         if f is not None:  # the rooms of known furniture (agent.search.room_prior)
@@ -268,7 +270,7 @@ class OnlineSearch:
         at = (float(v.xy[0]), float(v.xy[1]))
         act = lambda: ex.explore_target(v, weights)  # noqa: E731
         finds = None
-        if LOOKAHEAD:
+        if self.settings.lookahead:
             finds = ex.scorer().sweep_finds(v.xy, ex.target_sight(), ex.target_todo())
         return Option(v.rate, label, act, "explore", v.seconds, at, at, finds)
 
@@ -305,7 +307,7 @@ class OnlineSearch:
 
     def region_options(self, belief: Belief) -> list[Option]:
         """Look into a candidate region of the belief, re-costed with planned gazes: the best
-        one (greedy choice), or each one re-costed (``LOOKAHEAD``: the plan may take another
+        one (greedy choice), or each one re-costed (``online.lookahead``: the plan may take another
         first)."""
         ctx = self.ctx
         if not belief.regions:
@@ -331,7 +333,7 @@ class OnlineSearch:
             if belief.weights is not None:
                 r.score = float((belief.weights[finds[0]] * finds[1]).sum())
             planned.append((r.score / max(cost, 1e-6), cost, r, gz, finds))
-        if not LOOKAHEAD and planned:
+        if not self.settings.lookahead and planned:
             planned = [max(planned, key=lambda x: (x[0], -x[1]))]
         return [self._region(*p) for p in planned]
 

@@ -38,7 +38,7 @@ from ctxsearch.agent.search.context import SearchContext, SearchStopped
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS, cover, estimate_cover_seconds
 from ctxsearch.agent.search.episode import SearchResult
 from ctxsearch.agent.search.online import OnlineSearch, ViaOption
-from ctxsearch.agent.search.registry import check_scenario
+from ctxsearch.agent.search.registry import PolicySpec
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
 from ctxsearch.knowledge.options import MapMode
@@ -150,7 +150,7 @@ class IndirectOnline(SearchPolicy):
         best candidate's."""
         cat = ctx.catalog
         cands = candidate_types(ctx, probs)
-        ranges = {n: ctx.range_of(n) for n in [ctx.target, *cands]}
+        ranges = {n: min(ctx.range_of(n), ctx.sight_cap) for n in [ctx.target, *cands]}
         plan = sx.predicted_plan(
             ctx.target, cat, probs, ctx.maps.size, ranges, ctx.time_model, cands
         )
@@ -266,11 +266,10 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
 }
 
 
-def make_policy(name: str, mode: MapMode) -> SearchPolicy:
-    """Policy ``name`` (a base name) as it runs in scenario ``mode``; one-line errors for an
-    unknown name, a scenario it does not run in, and the oracle (which the runner builds)."""
-    check_scenario([name], mode)
-    cls = _CLASSES.get(name)
+def make_policy(spec: PolicySpec) -> SearchPolicy:
+    """Policy ``spec`` as it runs in its scenario, named as the run names it; a one-line error
+    for the oracle (which the runner builds)."""
+    cls = _CLASSES.get(spec.base)
     if cls is None:
-        raise CtxsearchError(f"policy '{name}' reads the truth: the episode runner builds it")
-    return (cls[mode] if isinstance(cls, dict) else cls)(name)
+        raise CtxsearchError(f"policy '{spec.base}' reads the truth: the episode runner builds it")
+    return (cls[spec.scenario] if isinstance(cls, dict) else cls)(spec.name)

@@ -10,14 +10,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.registry import check_scenario, info, split_name
+from ctxsearch.agent.search.config import KnowledgeConfig
+from ctxsearch.agent.search.registry import PolicySpec
 from ctxsearch.envs.houses import WorldStyle
 from ctxsearch.envs.truth import ground_truth, load_truth, room_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
-from ctxsearch.knowledge.options import Estimate, IntervalMethod, MapMode, Needs, Rank, parse
+from ctxsearch.knowledge.options import Estimate, IntervalMethod, Needs, Rank
 from ctxsearch.knowledge.pooling import PooledCounts
 from ctxsearch.knowledge.room_context import RoomContext
 from ctxsearch.knowledge.store import EvidenceStore
@@ -105,23 +106,6 @@ def truth_probabilities(
 
 
 @dataclass(frozen=True)
-class PriorSettings:
-    """How the learned knowledge is read: the rank of policies named without one, the estimate
-    (flat or backoff with its ``min_evidence``) and the interval method; the ground truth's
-    file or sample count."""
-
-    rank: Rank = Rank(ss.DEFAULT_RANK)
-    estimate: Estimate = Estimate(ss.DEFAULT_ESTIMATE)
-    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
-    interval: IntervalMethod = IntervalMethod.WILSON
-    truth: Path | None = None  # ground-truth JSON of `ctxsearch truth`
-    truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
-    # room context (issue 27): the store's learned SAME-ROOM intervals for the learned policies,
-    # the ground truth's (room_truth) for the oracle-prior ones
-    rooms: bool = False
-
-
-@dataclass(frozen=True)
 class Priors:
     """Where each policy's probabilities come from: the learned knowledge or the ground truth."""
 
@@ -131,86 +115,80 @@ class Priors:
     truth: ss.ProbabilitySource | None
     pooled: PooledCounts | None = None  # evidence over the hierarchy: the backoff estimate
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
-    room_context: RoomContext | None = None  # learned room context (with --room-context)
+    room_context: RoomContext | None = None  # learned room context (knowledge.room_context)
 
-    def check(self, names: list[str] | tuple[str, ...]) -> None:
+    def check(self, specs: tuple[PolicySpec, ...]) -> None:
         """A one-line error if a policy needs a knowledge store and none was given."""
-        for name in names:
-            base, _ = split_name(name)
-            if info(base).needs is Needs.KB and self.kb is None:
-                raise CtxsearchError(f"policy '{base}' needs a knowledge store (--kb)")
+        for s in specs:
+            if s.needs is Needs.KB and self.kb is None:
+                raise CtxsearchError(f"policy '{s.base}' needs a knowledge store (--kb)")
 
-    def for_policy(self, base: str, r: Rank | None) -> ss.ProbabilitySource | None:
-        """The probabilities policy ``base`` ranks by (rank ``r`` or the default), if any."""
-        needs = info(base).needs
-        if needs is Needs.KB:
+    def for_policy(self, spec: PolicySpec) -> ss.ProbabilitySource | None:
+        """The probabilities policy ``spec`` ranks by (its rank or the run's), if any."""
+        if spec.needs is Needs.KB:
             rooms = len(self.learned) or None
+            r = spec.rank or self.rank
             if self.pooled is not None:
-                probs = ss.BackoffProbabilities(
-                    self.kb, self.pooled, r or self.rank, rooms, self.min_evidence
-                )
+                probs = ss.BackoffProbabilities(self.kb, self.pooled, r, rooms, self.min_evidence)
             else:
-                probs = ss.KBProbabilities(self.kb, r or self.rank, rooms=rooms)
+                probs = ss.KBProbabilities(self.kb, r, rooms=rooms)
             return probs.with_room_context(self.room_context)
-        if needs is Needs.TRUTH:
+        if spec.needs is Needs.TRUTH:
             return self.truth
         return None
-
-    def for_name(self, name: str) -> ss.ProbabilitySource | None:
-        """``for_policy`` of a name that may carry a rank (``location@p0``)."""
-        return self.for_policy(*split_name(name))
 
 
 @dataclass(frozen=True)
 class KnowledgeSource:
-    """The knowledge a search is given: a KnowledgeBase in memory, or the store at ``path``,
-    and room seeds never to search besides the store's."""
+    """Knowledge given in memory (a KnowledgeBase) instead of the configuration's store, and
+    room seeds never to search besides the store's."""
 
     kb: KnowledgeBase | None = None
-    path: Path | str | None = None
     exclude_seeds: frozenset[int] = frozenset()
 
 
+NO_KNOWLEDGE = KnowledgeSource()  # the configuration's store alone
+
+
 def make_priors(
-    policies: tuple[str, ...],
-    mode: MapMode,
+    specs: tuple[PolicySpec, ...],
     style: WorldStyle,
     catalog: Catalog,
-    settings: PriorSettings,
-    source: KnowledgeSource = KnowledgeSource(),
+    knowledge: KnowledgeConfig,
+    source: KnowledgeSource = NO_KNOWLEDGE,
     progress: bool = False,
 ) -> Priors:
-    """The priors of ``policies`` in scenario ``mode``: the knowledge of ``source`` (a store's
-    learning rooms join its ``exclude_seeds``), and the ground truth if an oracle-prior policy
-    runs (estimated with a progress bar on stderr if ``progress``). With the backoff estimate
-    the evidence is also pooled over the hierarchy (from the store's log, or from the knowledge
-    base's counts)."""
-    estimate = parse(Estimate, settings.estimate)
-    check_scenario(policies, mode)
+    """The priors of the policies ``specs``: the knowledge of ``source`` or else of the store
+    ``knowledge.kb`` (whose learning rooms join ``source.exclude_seeds``), read as
+    ``knowledge`` says, and the ground truth if an oracle-prior policy runs (estimated with a
+    progress bar on stderr if ``progress``). With the backoff estimate the evidence is also
+    pooled over the hierarchy (from the store's log, or from the knowledge base's counts)."""
     learned = set(source.exclude_seeds)
-    kb, pooled = source.kb, None
-    if kb is None and source.path is not None:
-        kb, seeds = open_knowledge(source.path, catalog, interval=settings.interval)
+    kb, pooled, path = source.kb, None, knowledge.kb
+    backoff = knowledge.estimate is Estimate.BACKOFF
+    if kb is None and path is not None:
+        kb, seeds = open_knowledge(path, catalog, interval=knowledge.interval)
         learned |= seeds
-        if estimate is Estimate.BACKOFF:
-            pooled = open_pooled(source.path, catalog)
-    elif kb is not None and estimate is Estimate.BACKOFF:
+        if backoff:
+            pooled = open_pooled(path, catalog)
+    elif kb is not None and backoff:
         pooled = PooledCounts.from_knowledge_base(kb)
     truth = None
-    if any(info(split_name(n)[0]).needs is Needs.TRUTH for n in policies):
+    if any(s.needs is Needs.TRUTH for s in specs):
         truth = truth_probabilities(
-            style, catalog, settings.truth_samples, path=settings.truth, progress=progress,
-            rooms=settings.rooms,
+            style, catalog, knowledge.truth_samples, path=knowledge.truth, progress=progress,
+            rooms=knowledge.room_context,
         )  # fmt: skip
-    rank = parse(Rank, settings.rank)
     rooms = None
-    if settings.rooms and source.path is not None and kb is not None:
-        rooms = open_room_context(source.path, catalog)
-        if rooms.rooms == 0 and any(info(split_name(n)[0]).needs is Needs.KB for n in policies):
+    if knowledge.room_context and path is not None and kb is not None:
+        rooms = open_room_context(path, catalog)
+        if rooms.rooms == 0 and any(s.needs is Needs.KB for s in specs):
             raise CtxsearchError(
-                f"{source.path}: --room-context: the store holds no room context (it is "
+                f"{path}: --room-context: the store holds no room context (it is "
                 "learned in houses, by ctxsearch learn from schema 6 on)"
             )
-    priors = Priors(kb, frozenset(learned), rank, truth, pooled, settings.min_evidence, rooms)
-    priors.check(policies)
+    priors = Priors(
+        kb, frozenset(learned), knowledge.rank, truth, pooled, knowledge.min_evidence, rooms
+    )
+    priors.check(specs)
     return priors

@@ -5,7 +5,8 @@ it to build its parser without importing MuJoCo or scipy; the behaviours are in
 ``agent.search.policies`` (and ``agent.search.oracle``).
 
 A policy name may carry a rank, ``location@low``: which value of the interval ranks its candidate
-regions (``split_name``).
+regions. A run's names are resolved once (``resolve``) into ``PolicySpec``s, which the priors, the
+runner and the behaviours read; nothing downstream parses a name again.
 """
 
 from __future__ import annotations
@@ -16,8 +17,6 @@ from enum import StrEnum
 
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode, Needs, Rank, parse, values
-
-DEFAULT_BUDGET_S = 300.0  # simulated seconds an episode may take before it counts as failed
 
 
 class Role(StrEnum):
@@ -40,6 +39,8 @@ class PolicyInfo:
     needs: Needs = Needs.NONE  # where its probabilities come from
     reads_truth: bool = False  # plans on the true layout and the detector's draws (the oracle)
     summary: str = ""
+    # the scenarios in which its belief takes room context (P(SAME-ROOM-AS-F(T))) when it is on
+    room_context: tuple[MapMode, ...] = ()
 
     def role(self, mode: MapMode) -> Role | None:
         """Its role in scenario ``mode`` (None: not run there by default)."""
@@ -56,13 +57,15 @@ REGISTRY: tuple[PolicyInfo, ...] = (
     PolicyInfo("map-only", (_G,), ((_G, Role.REFERENCE),),
                summary="no context: every relation volume of the known furniture, a short tour"),
     PolicyInfo("location", (_G,), ((_G, Role.CONTEXT),), Needs.KB,
-               summary="location constraint: the belief over relation volumes by P(rel(T))"),
+               summary="location constraint: the belief over relation volumes by P(rel(T))",
+               room_context=(_G,)),
     PolicyInfo("indirect", (_B, _G), ((_B, Role.CONTEXT),), Needs.KB,
-               summary="detectability-driven: intermediate types, volumes and frontier"),
+               summary="detectability-driven: intermediate types, volumes and frontier",
+               room_context=(_B,)),
     PolicyInfo("oracle-prior", (_G,), ((_G, Role.ASYMPTOTE),), Needs.TRUTH,
-               summary="location with the true probabilities"),
+               summary="location with the true probabilities", room_context=(_G,)),
     PolicyInfo("oracle-prior-indirect", (_B, _G), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
-               summary="indirect with the true probabilities"),
+               summary="indirect with the true probabilities", room_context=(_B,)),
     PolicyInfo("oracle", (_B, _G), ((_B, Role.BOUND), (_G, Role.BOUND)), reads_truth=True,
                summary="knows the target and the detector's draws: the lower bound"),
     PolicyInfo("exhaustive", (_G,), ((_G, Role.REFERENCE),),
@@ -92,6 +95,68 @@ def with_role(mode: MapMode, role: Role) -> str:
     raise CtxsearchError(f"no policy is the {role} of the {mode} map")
 
 
+@dataclass(frozen=True)
+class PolicySpec:
+    """A policy of a run, resolved once: the name as given (``location@low``, what results and
+    recordings are keyed by), the registry's facts of its base name, its rank (None: the run's
+    default) and the map scenario it runs in."""
+
+    name: str
+    info: PolicyInfo
+    rank: Rank | None
+    scenario: MapMode
+
+    @property
+    def base(self) -> str:
+        """The registry's name (``location``)."""
+        return self.info.name
+
+    @property
+    def needs(self) -> Needs:
+        """Where its probabilities come from."""
+        return self.info.needs
+
+    @property
+    def uses_room_context(self) -> bool:
+        """Whether its belief takes room context in its scenario."""
+        return self.scenario in self.info.room_context
+
+
+def resolve(
+    names: Sequence[str], mode: MapMode | str, room_context: bool = False
+) -> tuple[PolicySpec, ...]:
+    """The policies ``names`` (each ``name`` or ``name@rank``) of a run in scenario ``mode``,
+    resolved; one-line errors for an unknown policy or rank, a policy listed twice or one that
+    does not run in ``mode``, and for room context (``room_context``) asked of a run in which a
+    policy with knowledge cannot use it, or no policy uses it at all. (The no-context baselines
+    run unchanged beside room context: they are the context policies' twins.)"""
+    mode = parse(MapMode, mode, "map")
+    if not names:
+        raise CtxsearchError("no search policy given")
+    if len(set(names)) != len(names):
+        raise CtxsearchError(f"a policy is listed twice in '{','.join(names)}'")
+    specs = []
+    for name in names:
+        base, rank = split_name(name)
+        p = info(base)
+        if mode not in p.maps:
+            raise CtxsearchError(f"policy '{base}' needs --map {p.maps[0]}")
+        specs.append(PolicySpec(name, p, rank, mode))
+    if room_context:
+        for s in specs:
+            if s.needs is not Needs.NONE and not s.uses_room_context:
+                raise CtxsearchError(
+                    f"policy '{s.base}' cannot use room context on the {mode} map "
+                    "(knowledge.room_context / --room-context)"
+                )
+        if not any(s.uses_room_context for s in specs):
+            raise CtxsearchError(
+                f"no policy of {','.join(names)} uses room context (knowledge.room_context / "
+                "--room-context): it applies to the context policies"
+            )
+    return tuple(specs)
+
+
 def split_name(name: str) -> tuple[str, Rank | None]:
     """``location@low`` -> ("location", Rank.LOW); ``location`` -> ("location", None); one-line
     errors for an unknown policy or rank."""
@@ -116,15 +181,3 @@ def parse_policies(text: str) -> list[str]:
     if len(set(names)) != len(names):
         raise CtxsearchError(f"a policy is listed twice in '{text}'")
     return names
-
-
-def check_scenario(names: Sequence[str], mode: MapMode | str) -> MapMode:
-    """Scenario ``mode`` parsed; one-line errors for an unknown scenario or a policy that does
-    not run in it."""
-    mode = parse(MapMode, mode, "map")
-    for n in names:
-        base, _ = split_name(n)
-        maps = info(base).maps
-        if mode not in maps:
-            raise CtxsearchError(f"policy '{base}' needs --map {maps[0]}")
-    return mode

@@ -1,4 +1,4 @@
-"""Room context in the belief (issue 27, point 3): the room a piece of furniture stands in tells
+"""Room context in the belief: the room a piece of furniture stands in tells
 the robot how likely the target is anywhere in that room, before it looks there.
 
 For a known furniture instance of type F standing in room R of the robot's map, the source's
@@ -29,7 +29,7 @@ rooms out, section 2.1), each stated so it can be measured:
   are segmented from its own map and may join two of the plan's, and a learned interval's
   zero is never certain. The cap ``MAX_FACTOR`` bounds a rare type's ratio.
 
-Rooms: on the given map the plan's (``RoomMaps.rooms``); on the built map the segmentation of
+Rooms: on the given map the plan's (``WorldMaps.plan_rooms``); on the built map the segmentation of
 the robot's map as it stands (agent.room_segmentation, recomputed when the map has new images),
 so the rooms of furniture seen beyond the mapped floor are not known yet and their points keep
 f = 1.

@@ -2,6 +2,10 @@
 ``ctxsearch search``'s one episode, with their rerun recordings. Shared by the CLI, the benchmarks
 and the demo.
 
+A run starts from a ``SearchConfig`` (agent.search.config), made ready once by ``prepare``
+(``SearchRun``: the policies resolved, their priors, the detector); each policy's context carries
+the configuration to the behaviours.
+
 For each episode the world is built once and shared by the policies (the robot put back at the
 same start pose for each, with a fresh seen map and nothing known). The runner is where the true
 layout meets the behaviour: it builds the simulated sensor from it (``EpisodeSensor``, the
@@ -12,6 +16,7 @@ its own root entity, on the same simulated seconds.
 
 from __future__ import annotations
 
+import importlib.metadata
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -19,32 +24,31 @@ from pathlib import Path
 
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.navigation import OccupancyGrid
-from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
 from ctxsearch.agent.recording import Recorder, open_stream
 from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
+from ctxsearch.agent.search.draw_store import code_digest
 from ctxsearch.agent.search.episode import (
-    DEFAULT_BUDGET_S,
     Episode,
     SearchResult,
     check_budget,
     check_target,
     episode_layout,
 )
-from ctxsearch.agent.search.maps import RoomMaps
+from ctxsearch.agent.search.maps import WorldMaps
 from ctxsearch.agent.search.oracle import Oracle, OracleEye
 from ctxsearch.agent.search.policies import SearchPolicy, make_policy
-from ctxsearch.agent.search.priors import KnowledgeSource, Priors, PriorSettings, make_priors
-from ctxsearch.agent.search.registry import PolicyInfo, info, split_name
+from ctxsearch.agent.search.priors import NO_KNOWLEDGE, KnowledgeSource, Priors, make_priors
+from ctxsearch.agent.search.registry import PolicySpec, default_policies, resolve
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import (
     Detection,
     DetectorModel,
     SimDetector,
-    default_or_named,
     load_detector,
 )
 from ctxsearch.envs.floorplan import generate_layout
@@ -52,89 +56,87 @@ from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.world import World
 from ctxsearch.knowledge import geometry
-from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
-from ctxsearch.knowledge.options import (
-    Estimate,
-    IntervalMethod,
-    MapMode,
-    Rank,
-    Targets,
-    parse,
-)
-
-ProbsFor = Callable[[str, Rank | None], ss.ProbabilitySource | None]
+from ctxsearch.knowledge.options import MapMode
 
 
-@dataclass(frozen=True)
-class SearchConfig:
-    """The policies to run and how: the settings ``search``, ``bench search`` and the demo share."""
-
-    style: str
-    policies: tuple[str, ...]
-    seed: int = 0
-    budget_s: float = DEFAULT_BUDGET_S
-    rank: Rank = Rank(ss.DEFAULT_RANK)
-    truth: Path | None = None  # ground-truth JSON of `ctxsearch truth` for the oracle-prior ones
-    truth_samples: int = 200  # rooms sampled for the ground truth when ``truth`` is None
-    # flat (the paper's intervals) or backoff (the class's estimate for reference types with
-    # fewer than ``min_evidence`` examinations: knowledge.ranking.BackoffProbabilities)
-    estimate: Estimate = Estimate(ss.DEFAULT_ESTIMATE)
-    min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
-    detector: str | None = None  # the detector preset (name or file; None: realistic)
-    interval: IntervalMethod = IntervalMethod.WILSON  # how the learned intervals are read
-    # The map scenario: built (the default: the robot knows nothing at the start and maps as it
-    # searches) or given (the furniture poses are known). The CLI passes given for single-room
-    # styles unless --map says otherwise (default_map).
-    map: MapMode = MapMode.BUILT
-    # type: any instance of the target type ends a search; instance: the world keeps one
-    targets: Targets = Targets.TYPE
-    # Room context (issue 27): P(SAME-ROOM-AS-F(T)) on the rooms of the robot's map
-    # (agent.search.room_prior), learned (the store's) or true (the oracle-prior policies')
-    rooms: bool = False
-
-    def __post_init__(self) -> None:
-        # the modes parsed once, here (a one-line error for an unknown one)
-        object.__setattr__(self, "rank", parse(Rank, self.rank))
-        object.__setattr__(self, "estimate", parse(Estimate, self.estimate))
-        object.__setattr__(self, "interval", parse(IntervalMethod, self.interval))
-        object.__setattr__(self, "map", parse(MapMode, self.map))
-        object.__setattr__(self, "targets", parse(Targets, self.targets))
-
-    def detector_model(self, catalog: Catalog) -> DetectorModel:
-        """The detector preset, loaded and checked against the catalog (one-line errors)."""
-        return default_or_named(self.detector, catalog, DEFAULT_DETECTOR)
-
-    def prior_settings(self) -> PriorSettings:
-        """How the priors are read (agent.search.priors)."""
-        return PriorSettings(
-            self.rank, self.estimate, self.min_evidence, self.interval, self.truth,
-            self.truth_samples, self.rooms,
-        )  # fmt: skip
+def code_version() -> dict:
+    """The code a result was made with: the package's version and the digest of the sources
+    an episode runs (agent.search.draw_store.code_digest)."""
+    try:
+        version = importlib.metadata.version("ctxsearch")
+    except importlib.metadata.PackageNotFoundError:  # run from a source tree, not installed
+        version = None
+    return {"package": version, "sources_sha256": code_digest()}
 
 
 def default_map(style: WorldStyle) -> MapMode:
-    """The map scenario a style is searched in when ``--map`` is not given: ``built`` in houses,
-    ``given`` in single rooms (the small-world reference of the earlier results)."""
+    """The map scenario a style is searched in when the configuration names none: ``built`` in
+    houses, ``given`` in single rooms (the small-world reference of the earlier results)."""
     return MapMode.BUILT if isinstance(style, HouseStyle) else MapMode.GIVEN
 
 
-def load_priors(
+@dataclass(frozen=True)
+class SearchRun:
+    """A configuration made ready to run (``prepare``): resolved (its map scenario and
+    policies named), the style and catalog, the policies' specs, their priors and the detector
+    preset. What ``search``, ``bench search`` and the demo share."""
+
+    config: SearchConfig
+    style: WorldStyle
+    catalog: Catalog
+    specs: tuple[PolicySpec, ...]
+    priors: Priors
+    detector: DetectorModel
+    # called at each online decision of every policy (SearchContext.observer): a read-only hook
+    # for diagnostics, in this process only (None: nothing)
+    observer: Callable | None = None
+
+    def draw_spec(self, episodes: int, target: str | None = None) -> DrawSpec:
+        """The episode draw this run searches: ``episodes`` episodes (``target``: of that type
+        only), never in the worlds the knowledge was learned in."""
+        c = self.config
+        return DrawSpec.make(
+            self.style, episodes, c.seed, self.catalog, c.budget_s, self.priors.learned, target,
+            self.detector, targets=c.targets,
+        )  # fmt: skip
+
+    def runs(self, records: Sequence[Path | None] | None = None) -> tuple[PolicyRun, ...]:
+        """Each policy with its probabilities (and ``records[i]``: its own recording)."""
+        recs = list(records) if records is not None else [None] * len(self.specs)
+        return tuple(
+            PolicyRun(s, self.priors.for_policy(s), r)
+            for s, r in zip(self.specs, recs, strict=True)
+        )
+
+
+def prepare(
     config: SearchConfig,
-    style: WorldStyle,
-    catalog: Catalog,
-    kb: KnowledgeBase | None = None,
-    kb_path: Path | str | None = None,
-    exclude_seeds: set[int] | frozenset[int] = frozenset(),
+    catalog: Catalog | None = None,
+    source: KnowledgeSource = NO_KNOWLEDGE,
+    *,
+    target: str | None = None,
     progress: bool = False,
-) -> Priors:
-    """The priors of ``config``'s policies (agent.search.priors.make_priors): ``kb`` or the store
-    at ``kb_path`` (whose learning rooms join ``exclude_seeds``), and the ground truth if an
-    oracle-prior policy runs (a progress bar with ``progress``)."""
-    source = KnowledgeSource(kb, kb_path, frozenset(exclude_seeds))
-    settings = config.prior_settings()
-    return make_priors(config.policies, config.map, style, catalog, settings, source, progress)
+) -> SearchRun:
+    """``config`` made ready to run: the style resolved, the map scenario set (the style's
+    default when none is named), the policies named (the scenario's defaults when none are) and
+    resolved, the priors of the configuration's knowledge or of ``source`` (the ground truth
+    with a progress bar if ``progress``), the detector preset loaded. One-line errors, before
+    anything heavy, for an unknown style, ``target``, policy or preset and a bad budget."""
+    catalog = catalog or load_catalog()
+    style = resolve_style(config.style, catalog)
+    if target is not None:
+        check_target(catalog, target, style)
+    check_budget(config.budget_s)
+    mode = config.map.scenario or default_map(style)
+    config = config.with_scenario(mode)
+    if not config.policies:
+        config = replace(config, policies=default_policies(mode))
+    specs = resolve(config.policies, mode, config.knowledge.room_context)
+    detector = config.detector_model(catalog)
+    priors = make_priors(specs, style, catalog, config.knowledge, source, progress)
+    return SearchRun(config, style, catalog, specs, priors, detector)
 
 
 class EpisodeSensor:
@@ -170,61 +172,70 @@ class EpisodeSensor:
         """Nothing to release: the world belongs to the episode."""
 
 
+@dataclass(frozen=True)
+class PolicyRun:
+    """One policy to run in an episode's world: its spec, the probabilities it ranks by (None:
+    none) and its own rerun recording (None: none)."""
+
+    spec: PolicySpec
+    probs: ss.ProbabilitySource | None = None
+    record: Path | None = None
+
+
 @dataclass
-class EpisodeRoom:
-    """An episode's room, built once and shared by the policies that search it."""
+class EpisodeWorld:
+    """An episode's world, built once and shared by the policies that search it, with the
+    configuration they run under."""
 
     layout: RoomLayout
     catalog: Catalog
     world: World
-    maps: RoomMaps  # the scenario's maps, with the detector preset (None: perfect)
-    given: RoomMaps | None = None  # the true layout's maps for the oracle (built scenario)
+    maps: WorldMaps  # the scenario's maps, with the detector preset (None: perfect)
+    config: SearchConfig
+    given: WorldMaps | None = None  # the true layout's maps for the oracle (built scenario)
+    observer: Callable | None = None  # SearchContext.observer
 
-    def maps_for(self, policy: PolicyInfo) -> RoomMaps:
-        """The maps ``policy`` searches on (the oracle plans on the true layout's)."""
-        if policy.reads_truth and self.given is not None:
+    def maps_for(self, spec: PolicySpec) -> WorldMaps:
+        """The maps policy ``spec`` searches on (the oracle plans on the true layout's)."""
+        if spec.info.reads_truth and self.given is not None:
             return self.given
         return self.maps
 
-    def policy(self, name: str, ep: Episode, maps: RoomMaps) -> SearchPolicy:
-        """Policy ``name`` (a base name) for episode ``ep``; the oracle gets its view of the
-        truth: the world rendered without charging time, the true layout and its grid."""
-        if info(name).reads_truth:
+    def policy(self, spec: PolicySpec, ep: Episode, maps: WorldMaps) -> SearchPolicy:
+        """Policy ``spec`` for episode ``ep``; the oracle gets its view of the truth: the world
+        rendered without charging time, the true layout and its grid."""
+        if spec.info.reads_truth:
             eye = OracleEye(self.world, self.layout, self.catalog, maps.detector, ep.target)
-            return Oracle(name, eye, OccupancyGrid.from_layout(self.layout, self.world.spec))
-        return make_policy(name, maps.map)
+            return Oracle(spec.name, eye, OccupancyGrid.from_layout(self.layout, self.world.spec))
+        return make_policy(spec)
 
-    def sensor(self, maps: RoomMaps) -> EpisodeSensor:
-        """The simulated detector of this room with ``maps``' preset, its clock from now."""
+    def sensor(self, maps: WorldMaps) -> EpisodeSensor:
+        """The simulated detector of this world with ``maps``' preset, its clock from now."""
         model = maps.detector or load_detector("perfect")
         sim = SimDetector(model, self.layout, self.catalog, self.layout.seed)
         return EpisodeSensor(self.world, sim, self.catalog, self.world.sim_time)
 
     def prepare(
-        self,
-        ep: Episode,
-        name: str,
-        probs: ss.ProbabilitySource | None,
-        recorder: Recorder | None = None,
+        self, ep: Episode, run: PolicyRun, recorder: Recorder | None = None
     ) -> tuple[SearchPolicy, SearchContext]:
-        """Policy ``name`` (maybe with a rank) and its context for episode ``ep`` in this room,
-        sensing through the room's simulated detector."""
-        base, _ = split_name(name)
-        maps = self.maps_for(info(base))
-        policy = self.policy(base, ep, maps)
+        """The policy of ``run`` and its context for episode ``ep`` in this world, sensing
+        through the world's simulated detector."""
+        maps = self.maps_for(run.spec)
+        policy = self.policy(run.spec, ep, maps)
         ctx = SearchContext(
-            ep, self.catalog, self.world, self.sensor(maps), maps, probs=probs,
-            recorder=recorder, policy=name,
+            ep, self.catalog, self.world, self.sensor(maps), maps, probs=run.probs,
+            recorder=recorder, config=self.config,
         )  # fmt: skip
+        ctx.observer = self.observer
         return policy, ctx
 
     def judged(self, res: SearchResult) -> SearchResult:
-        """``res`` with ``found`` judged against the room's instances of the target."""
+        """``res`` with ``found`` judged against the world's instances of the target."""
         res.found = measures.judge(res.found_id, self.true_ids(res.target))
         return res
 
     def true_ids(self, target: str) -> set[int]:
-        """The instances of ``target`` in the room: what a search must have found."""
+        """The instances of ``target`` in the world: what a search must have found."""
         return {o.id for o in self.layout.objects if o.type == target}
 
 
@@ -250,67 +261,64 @@ def _recorder(
     return Recorder(None)
 
 
-def run_policy(
-    ep: Episode,
-    name: str,
-    room: EpisodeRoom,
-    probs: ss.ProbabilitySource | None,
-    rec_path: Path | None = None,
-    stream=None,
-) -> SearchResult:
-    """Policy ``name`` searches episode ``ep`` in ``room`` (a rerun recording to ``rec_path``, or
-    under the policy's root in the open rerun ``stream``); the result, judged."""
-    layout, catalog = room.layout, room.catalog
-    with _recorder(ep, name, layout, rec_path, stream) as rec:
+def run_policy(ep: Episode, run: PolicyRun, world: EpisodeWorld, stream=None) -> SearchResult:
+    """The policy of ``run`` searches episode ``ep`` in ``world`` (a rerun recording to
+    ``run.record``, or under the policy's root in the open rerun ``stream``); the result,
+    judged."""
+    layout, catalog, name = world.layout, world.catalog, run.spec.name
+    with _recorder(ep, name, layout, run.record, stream) as rec:
         rec.log_room(layout, catalog)
         rec.log_text(f"episode: room {ep.style}/{ep.room_seed}, target {ep.target}, policy {name}")
-        policy, ctx = room.prepare(ep, name, probs, rec)
-        res = room.judged(policy.run(ctx))
-    res.policy = name
-    return res
+        policy, ctx = world.prepare(ep, run, rec)
+        return world.judged(policy.run(ctx))
 
 
 @dataclass(frozen=True)
-class RoomRuns:
-    """What to run in an episode's room: (policy, probabilities, recording) in order (a policy
-    may appear twice with other probabilities), the detector preset (None: perfect), the map
-    scenario, and one recording of them all side by side (``shared``)."""
+class WorldRuns:
+    """What to run in an episode's world: the policies in order (one may appear twice with
+    other probabilities), the configuration they run under (its map scenario and the
+    behaviours' settings), the detector preset (None: perfect), and one recording of them all
+    side by side (``shared``)."""
 
-    runs: tuple[tuple[str, ss.ProbabilitySource | None, Path | None], ...]
+    runs: tuple[PolicyRun, ...]
+    config: SearchConfig
     detector: DetectorModel | None = None
-    map: MapMode = MapMode.GIVEN
     shared: Path | None = None
+    observer: Callable | None = None  # SearchContext.observer
 
 
-def search_room(
+def search_world(
     ep: Episode,
     style: WorldStyle,
     catalog: Catalog,
-    what: RoomRuns,
+    what: WorldRuns,
     progress: Callable[[str], None] | None = None,
 ) -> list[SearchResult]:
-    """Build ``ep``'s room once and run each of ``what.runs`` in it; results in that order."""
+    """Build ``ep``'s world once and run each of ``what.runs`` in it; results in that order."""
     layout = episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
     stream = None
     if what.shared is not None:
-        names = [name for name, _, _ in what.runs]
+        names = [r.spec.name for r in what.runs]
         stream = open_stream(
             what.shared,
             SEARCH_APP,
             name=f"search: {ep.style} room {ep.room_seed}, {ep.target}: {' vs '.join(names)}",
             blueprint=search_blueprint(layout, [(recording_root(n), n) for n in names]),
         )
+    m = what.config.map
     try:
         with World(layout, catalog) as world:
-            given = RoomMaps.given(layout, catalog, world.spec, what.detector)
-            if what.map is MapMode.BUILT:
-                built = RoomMaps.built(layout, catalog, world.spec, what.detector)
-                room = EpisodeRoom(layout, catalog, world, built, given)
+            given = WorldMaps.given(layout, catalog, world.spec, what.detector, m)
+            if what.config.scenario is MapMode.BUILT:
+                built = WorldMaps.built(layout, catalog, world.spec, what.detector, m)
+                here = EpisodeWorld(
+                    layout, catalog, world, built, what.config, given, what.observer
+                )
             else:
-                room = EpisodeRoom(layout, catalog, world, given)
+                here = EpisodeWorld(layout, catalog, world, given, what.config, None, what.observer)
             out = []
-            for name, probs, rec_path in what.runs:
-                res = run_policy(ep, name, room, probs, rec_path, stream)
+            for run in what.runs:
+                res = run_policy(ep, run, here, stream)
                 out.append(res)
                 if progress is not None:
                     progress(
@@ -323,41 +331,22 @@ def search_room(
     return out
 
 
-@dataclass(frozen=True)
-class EpisodeSet:
-    """Episodes to run every policy on: the style they were drawn in, the policies (by name,
-    each maybe with a rank), where each policy's probabilities come from, the detector preset
-    (None: perfect) and the map scenario."""
-
-    style: WorldStyle
-    policies: tuple[str, ...]
-    probs_for: ProbsFor
-    detector: DetectorModel | None = None
-    map: MapMode = MapMode.GIVEN
-
-
 def run_episode(
-    ep: Episode,
-    catalog: Catalog,
-    what: EpisodeSet,
-    progress: Callable[[str], None] | None = None,
+    ep: Episode, run: SearchRun, progress: Callable[[str], None] | None = None
 ) -> list[SearchResult]:
-    """Every policy of ``what`` on episode ``ep`` (one World, shared by the policies), in order."""
-    runs = tuple((name, what.probs_for(*split_name(name)), None) for name in what.policies)
-    return search_room(ep, what.style, catalog, RoomRuns(runs, what.detector, what.map), progress)
+    """Every policy of ``run`` on episode ``ep`` (one World, shared by the policies), in order."""
+    what = WorldRuns(run.runs(), run.config, run.detector, observer=run.observer)
+    return search_world(ep, run.style, run.catalog, what, progress)
 
 
 def run_episodes(
-    episodes: Sequence[Episode],
-    catalog: Catalog,
-    what: EpisodeSet,
-    progress: Callable[[str], None] | None = None,
+    episodes: Sequence[Episode], run: SearchRun, progress: Callable[[str], None] | None = None
 ) -> dict[str, list[SearchResult]]:
-    """Every policy of ``what`` on every episode: results by policy, in episode order."""
-    results: dict[str, list[SearchResult]] = {p: [] for p in what.policies}
+    """Every policy of ``run`` on every episode: results by policy name, in episode order."""
+    results: dict[str, list[SearchResult]] = {s.name: [] for s in run.specs}
     for ep in episodes:
-        for name, res in zip(what.policies, run_episode(ep, catalog, what, progress), strict=True):
-            results[name].append(res)
+        for s, res in zip(run.specs, run_episode(ep, run, progress), strict=True):
+            results[s.name].append(res)
     return results
 
 
@@ -368,42 +357,26 @@ class OneSearch:
     episode: Episode
     results: list[SearchResult]
     files: list[Path] = field(default_factory=list)
+    config: SearchConfig | None = None  # as resolved
 
 
 def search_once(
     config: SearchConfig,
     target: str,
     *,
-    kb: KnowledgeBase | None = None,
-    kb_path: Path | str | None = None,
+    source: KnowledgeSource = NO_KNOWLEDGE,
     records: Sequence[Path | None] | None = None,
-    exclude_seeds: set[int] | frozenset[int] = frozenset(),
     catalog: Catalog | None = None,
     record: Path | None = None,
 ) -> OneSearch:
-    """Search for ``target`` in the first held-out room (for ``config.seed``) of ``config.style``
-    that holds one, with each of ``config.policies`` in turn from the same start pose
-    (``records[i]``: policy i's rerun recording, or None; ``record``: one recording of all of
-    them side by side). ``kb`` (a KnowledgeBase) or ``kb_path`` (a store) gives the learned
-    probabilities."""
-    catalog = catalog or load_catalog()
-    style = resolve_style(config.style, catalog)
-    check_target(catalog, target, style)  # both before any draw: refused in a second
-    check_budget(config.budget_s)
-    names = list(config.policies)
-    for n in names:
-        split_name(n)
-    priors = load_priors(config, style, catalog, kb, kb_path, exclude_seeds)
-    detector = config.detector_model(catalog)
-    spec = DrawSpec.make(
-        style, 1, config.seed, catalog, config.budget_s, priors.learned, target, detector
-    )
-    spec = replace(spec, targets=config.targets)
-    ep = make_episodes(spec, catalog)[0]
-    records = list(records) if records is not None else [None] * len(names)
-    runs = tuple(
-        (name, priors.for_name(name), rec) for name, rec in zip(names, records, strict=True)
-    )
-    out = search_room(ep, style, catalog, RoomRuns(runs, detector, config.map, record))
-    files = [Path(p) for p in records if p is not None]
-    return OneSearch(ep, out, files + ([Path(record)] if record is not None else []))
+    """Search for ``target`` in the first held-out world (for ``config.seed``) of
+    ``config.style`` that holds one, with each of ``config``'s policies in turn from the same
+    start pose (``records[i]``: policy i's rerun recording, or None; ``record``: one recording
+    of all of them side by side). The knowledge is ``config.knowledge``'s store, or
+    ``source``'s in memory."""
+    run = prepare(config, catalog, source, target=target)
+    ep = make_episodes(run.draw_spec(1, target), run.catalog)[0]
+    what = WorldRuns(run.runs(records), run.config, run.detector, record)
+    out = search_world(ep, run.style, run.catalog, what)
+    files = [Path(p) for p in records or () if p is not None]
+    return OneSearch(ep, out, files + ([Path(record)] if record is not None else []), run.config)

@@ -40,6 +40,7 @@ import numpy as np
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.config import DEFAULT_DEPTH_RANGE_M
 from ctxsearch.envs.robot_spec import RobotSpec, TimeModel
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
@@ -47,7 +48,6 @@ from ctxsearch.knowledge.geometry import ObjectInstance, relation_volume
 RAY_COUNT = 120
 COARSE = ss.LATTICE_XY  # m: the visibility cells (the seen map's lattice spacing)
 EXHAUST_RADIUS = 1.5  # m
-MAX_VIEW = 5.0  # m: the built map's depth range; nothing further is counted as seen
 # Occlusion in 2-D with two heights (``Blockers``): points below LOW_Z are hidden by anything
 # occupied, points above it only by obstacles reaching agent.mapping.TALL_M (the camera is at
 # 1.2 m).
@@ -157,7 +157,7 @@ class ViewpointScorer:
     ``views``: where what blocks the view never changes (the given map's occluders), a dict
     that keeps each candidate's view, every lattice point within a range that a sweep there
     shows, traced once (``_kept_shown``); the scorers of the policies run in one room share it
-    (``maps.RoomMaps.views``). A later trace of a kept view only reads which of its points are
+    (``maps.WorldMaps.views``). A later trace of a kept view only reads which of its points are
     still to be seen, and ``best`` traces such a candidate without bounding it first. The gains
     and weights are the same numbers as tracing the todo points afresh. None: the map changes
     (the robot's own), nothing is kept."""
@@ -165,8 +165,10 @@ class ViewpointScorer:
     def __init__(
         self, built: Occupancy, points: np.ndarray, spec: RobotSpec, tm: TimeModel,
         views: dict[tuple[float, float, float, float], np.ndarray] | None = None,
+        max_view: float = DEFAULT_DEPTH_RANGE_M,
     ):  # fmt: skip
         self.built, self.points, self.spec, self.tm = built, points, spec, tm
+        self.max_view = max_view  # m: nothing further counts as seen (the map's depth range)
         self._views = views  # ``_kept_shown``
         self.origin = (built.x0, built.y0)
         self.cells = np.floor((points[:, :2] - np.array(self.origin)) / COARSE).astype(np.int64)
@@ -195,9 +197,9 @@ class ViewpointScorer:
     def visible_points(self, blocked: Blockers, xy: np.ndarray, rng: float) -> np.ndarray:
         """(N,) bool: lattice points within ``rng`` of the camera at ``xy`` in a visible cell."""
         cam = np.array([xy[0], xy[1], self.spec.camera_height])
-        near = np.flatnonzero(np.linalg.norm(self.points - cam, axis=1) <= min(rng, MAX_VIEW))
+        near = np.flatnonzero(np.linalg.norm(self.points - cam, axis=1) <= min(rng, self.max_view))
         m = np.zeros(len(self.points), bool)
-        m[near[self._visible(blocked, xy, min(rng, MAX_VIEW), near)]] = True
+        m[near[self._visible(blocked, xy, min(rng, self.max_view), near)]] = True
         return m
 
     def _visible(self, blocked: Blockers, xy: np.ndarray, rng: float, idx: np.ndarray):
@@ -319,7 +321,7 @@ class ViewpointScorer:
             upper[new], mass[new] = 0, 0.0
             return upper, mass, exact
         d2 = self._bin_d2(cand[new], live)
-        near = d2 <= min(sight.range, MAX_VIEW) ** 2 * (1.0 + BOUND_SLACK)
+        near = d2 <= min(sight.range, self.max_view) ** 2 * (1.0 + BOUND_SLACK)
         upper[new] = near @ count
         if w is None:
             mass[new] = upper[new]
@@ -352,7 +354,7 @@ class ViewpointScorer:
         ``sight.found`` at its distance; None: the count)."""
         upper = np.zeros(len(cand), np.int64)
         mass = np.zeros(len(cand))
-        view2 = min(sight.range, MAX_VIEW) ** 2
+        view2 = min(sight.range, self.max_view) ** 2
         cams = np.column_stack([cand, np.full(len(cand), self.spec.camera_height)])
         x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
         for k in range(0, len(cand), 16):  # the todo points within range of each camera
@@ -402,7 +404,7 @@ class ViewpointScorer:
     def _shown(self, blocked, xy, sight: Sight, sub, pts) -> tuple[np.ndarray, np.ndarray]:
         """(positions in ``sub`` of the points a sweep at ``xy`` shows, none if fewer than
         ``MIN_GAIN``; every point's distance from the camera)."""
-        rng = min(sight.range, MAX_VIEW)
+        rng = min(sight.range, self.max_view)
         dist = self._distances(pts, xy)
         near = np.flatnonzero(dist <= rng)
         if len(near) < MIN_GAIN:
@@ -414,7 +416,12 @@ class ViewpointScorer:
         return self._views is not None and self._view_key(xy, sight) in self._views
 
     def _view_key(self, xy: np.ndarray, sight: Sight) -> tuple[float, float, float, float]:
-        return (float(xy[0]), float(xy[1]), min(sight.range, MAX_VIEW), self.spec.camera_height)
+        return (
+            float(xy[0]),
+            float(xy[1]),
+            min(sight.range, self.max_view),
+            self.spec.camera_height,
+        )
 
     def _kept_shown(self, blocked, xy, sight: Sight, todo: np.ndarray, rank: np.ndarray):
         """``_shown`` from the candidate's kept view (``views``): (positions among the todo
@@ -498,9 +505,10 @@ def area_cover_seconds(
     area: float, rooms: int, rng: float, tm: TimeModel, images_per_site: float
 ) -> float:
     """Seconds to cover a footprint of ``area`` m^2 in ``rooms`` rooms for detection range
-    ``rng``: sites of radius 0.8 min(rng, MAX_VIEW) but at least one per room, the legs between
-    them (a square lattice's spacing) and ``images_per_site`` images at each."""
-    reach = 0.8 * min(rng, MAX_VIEW)
+    ``rng`` (capped by what counts as seen): sites of radius 0.8 ``rng`` but at least one per
+    room, the legs between them (a square lattice's spacing) and ``images_per_site`` images at
+    each."""
+    reach = 0.8 * rng
     rooms = max(1, rooms)
     per_room = max(1.0, (area / rooms) / (math.pi * reach * reach))
     sites = rooms * per_room

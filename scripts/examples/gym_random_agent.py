@@ -24,9 +24,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is first imported
 import gymnasium
 
 from ctxsearch.agent.gym_env import ENV_ID, ObjectSearchEnv
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.episode import SearchResult
-from ctxsearch.agent.search.maps import RoomMaps
-from ctxsearch.agent.search.runner import EpisodeRoom, run_policy
+from ctxsearch.agent.search.maps import WorldMaps
+from ctxsearch.agent.search.registry import resolve
+from ctxsearch.agent.search.runner import EpisodeWorld, PolicyRun, run_policy
 from ctxsearch.knowledge.errors import CtxsearchError
 
 
@@ -50,9 +52,11 @@ def exhaustive_on_env(env: gymnasium.Env, seed: int) -> SearchResult:
     (judged as the benchmark judges it)."""
     env.reset(seed=seed)
     base: ObjectSearchEnv = env.unwrapped
-    maps = RoomMaps.given(base.layout, base.catalog, base.robot_spec, base.detector_model)
-    room = EpisodeRoom(base.layout, base.catalog, base.world, maps)
-    return run_policy(base.episode, "exhaustive", room, None)
+    maps = WorldMaps.given(base.layout, base.catalog, base.robot_spec, base.detector_model)
+    config = SearchConfig().with_scenario("given")
+    world = EpisodeWorld(base.layout, base.catalog, base.world, maps, config)
+    (exhaustive,) = resolve(("exhaustive",), "given")
+    return run_policy(base.episode, PolicyRun(exhaustive), world)
 
 
 def _size(text: str) -> tuple[int, int]:

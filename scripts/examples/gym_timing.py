@@ -1,4 +1,4 @@
-"""How long the Gymnasium task's reset and step take (issue 29):
+"""How long the Gymnasium task's reset and step take:
 
     python scripts/examples/gym_timing.py [--style office] [--detector realistic] [--seeds 20]
                                           [--size 64x48]

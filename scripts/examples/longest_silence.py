@@ -1,4 +1,4 @@
-"""How long a command stays silent (issue 29: no silence over ~5 s):
+"""How long a command stays silent (no silence over ~5 s):
 
     python scripts/examples/longest_silence.py ctxsearch bench search --kb K --style office ...
 

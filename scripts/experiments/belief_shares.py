@@ -1,4 +1,4 @@
-"""Where the online search's belief holds its mass when it decides (issue 26's diagnosis):
+"""Where the online search's belief holds its mass when it decides:
 
     python -m ctxsearch.scripts.experiments.belief_shares --kb K --style apartment \\
         --map built --episodes 20 --policies frontier,oracle-prior-indirect
@@ -7,18 +7,19 @@ Runs ``bench search`` itself (serially; same seed, same episodes, its files in a
 directory); at every decision of the online search (``agent.search.online``) it reads the
 belief (prior times miss field, normalised over the points still worth a look) and records its
 share in the known objects' relation volumes (what context can point at), its share in points
-not yet seen from within the built map's depth range (what only exploring can reach), and the
-share the chosen option expects to find (the first two overlap where a volume is not yet
-surveyed; a policy without knowledge has no volumes). With ``--room-context`` (issue 27) also
-the share in rooms whose known furniture sets a room factor (``agent.search.room_prior``) and,
-of it, the part not yet surveyed: room context pays before the robot has entered. Prints, per
-policy, the decisions' medians and quartiles of those shares and the episodes' median time to
-find; ``--csv FILE`` writes one row per decision. Nothing is written into tracked files.
+not yet seen from within the map's depth range (what only exploring can reach), and the share
+the chosen option expects to find (the first two overlap where a volume is not yet surveyed; a
+policy without knowledge has no volumes). With ``--room-context`` also the share in rooms whose
+known furniture sets a room factor (``agent.search.room_prior``) and, of it, the part not yet
+surveyed: room context pays before the robot has entered. Prints, per policy, the decisions'
+medians and quartiles of those shares and the episodes' median time to find; ``--csv FILE``
+writes one row per decision. Nothing is written into tracked files.
 
-The belief is read through the online search's own ``belief()`` and its options (wrapped for the
-run; nothing in the behaviour changes: the episodes' times are the benchmark's). The share an
-option expects is its rate times its seconds (P(find) of a sweep, the planned gazes' share of a
-look into a volume); a detour for an intermediate type states none.
+The belief is read through the online search's decision hook (``SearchContext.observer``: the
+search, the belief its options were valued on, the chosen option), which changes nothing in
+the behaviour: the episodes' times are the benchmark's. The share an option expects is its rate
+times its seconds (P(find) of a sweep, the planned gazes' share of a look into a volume); a
+detour for an intermediate type states none.
 """
 
 from __future__ import annotations
@@ -27,18 +28,14 @@ import argparse
 import csv
 import sys
 import tempfile
-from contextlib import ExitStack
-from dataclasses import replace
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
 from ctxsearch.agent.search import online as on
-from ctxsearch.agent.search import viewpoints as sx
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import MapMode, parse
-from ctxsearch.scripts.experiments.bench_search import SearchBenchConfig, bench_search
+from ctxsearch.scripts.experiments.bench_search import bench_search
 
 FIELDS = (
     "policy", "episode", "target", "t_s", "kind", "volumes", "unexplored", "rooms",
@@ -59,7 +56,7 @@ def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float, float,
         every = search.builder.regions(search.known_objects())
         if every:
             vols = float(w[np.unique(np.concatenate([r.points for r in every]))].sum())
-    away = search.ctx.seen.unseen(sx.MAX_VIEW)
+    away = search.ctx.seen.unseen(search.ctx.sight_cap)
     rooms = rooms_away = nan  # without room context
     if search.rooms is not None:
         f = search.rooms.factor(search.known_objects(), search.ctx.built)
@@ -68,52 +65,27 @@ def _shares(search: on.OnlineSearch, b: on.Belief) -> tuple[float, float, float,
     return vols, float(w[away].sum()), rooms, rooms_away
 
 
-def measure(config: SearchBenchConfig, policies: tuple[str, ...]) -> tuple[list[dict], dict]:
-    """(one row per decision, policy -> times to find): ``bench search`` itself, serially, its
-    files in a temporary directory, with the online search's belief and options wrapped for
-    reading (each decision's row is written when the chosen option acts)."""
+def measure(config: SearchConfig) -> tuple[list[dict], dict]:
+    """(one row per decision, policy -> times to find): ``bench search`` of ``config`` itself,
+    serially, its files in a temporary directory, each decision read by the online search's
+    hook (``SearchContext.observer``) before the chosen option acts."""
     rows: list[dict] = []
-    shares: dict[
-        int, tuple[float, float, float, float]
-    ] = {}  # the search (by id): its last belief's shares
-    real_belief = on.OnlineSearch.belief
 
-    def belief(self: on.OnlineSearch) -> on.Belief:
-        b = real_belief(self)
-        shares[id(self)] = _shares(self, b)
-        return b
+    def observe(search: on.OnlineSearch, b: on.Belief, o: on.Option) -> None:
+        ctx = search.ctx
+        vols, unexplored, rooms, rooms_away = _shares(search, b)
+        # P(find) of a sweep or a look (rate times its seconds); a detour states none
+        expects = o.rate * o.seconds if o.kind != "via" else float("nan")
+        rows.append({
+            "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
+            "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
+            "unexplored": round(unexplored, 4), "rooms": round(rooms, 4),
+            "rooms_unexplored": round(rooms_away, 4), "expects": round(expects, 4),
+        })  # fmt: skip
 
-    def recorded(build):
-        def option(self: on.OnlineSearch, *args):
-            o = build(self, *args)
-            if isinstance(o, list):  # region_options: each one
-                return [wrap(self, x) for x in o]
-            return None if o is None else wrap(self, o)
-
-        return option
-
-    def wrap(self: on.OnlineSearch, o: on.Option) -> on.Option:
-        def act() -> None:
-            ctx, (vols, unexplored, rooms, rooms_away) = self.ctx, shares[id(self)]
-            # P(find) of a sweep or a look (rate times its seconds); a detour states none
-            expects = o.rate * o.seconds if o.kind != "via" else float("nan")
-            rows.append({
-                "policy": ctx.policy, "episode": ctx.episode.index, "target": ctx.target,
-                "t_s": round(ctx.elapsed, 1), "kind": o.kind, "volumes": round(vols, 4),
-                "unexplored": round(unexplored, 4), "rooms": round(rooms, 4),
-                "rooms_unexplored": round(rooms_away, 4), "expects": round(expects, 4),
-            })  # fmt: skip
-            o.act()
-
-        return replace(o, act=act)
-
-    with ExitStack() as stack, tempfile.TemporaryDirectory() as out:
-        stack.enter_context(mock.patch.object(on.OnlineSearch, "belief", belief))
-        for name in ("direct_option", "region_options", "via_option"):
-            build = getattr(on.OnlineSearch, name)
-            stack.enter_context(mock.patch.object(on.OnlineSearch, name, recorded(build)))
-        res = bench_search(replace(config, policies=policies), out, progress=None, bar=False)
-    times = {p: [float(r.time_to_find) for r in res.results[p]] for p in policies}
+    with tempfile.TemporaryDirectory() as out:
+        res = bench_search(config, out, progress=None, bar=False, observer=observe)
+    times = {p: [float(r.time_to_find) for r in rs] for p, rs in res.results.items()}
     return rows, times
 
 
@@ -171,12 +143,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if a.episodes < 1:
             raise CtxsearchError(f"--episodes must be at least 1 (got {a.episodes})")
-        policies = tuple(p for p in a.policies.split(",") if p)
-        config = SearchBenchConfig(
-            style=a.style, kb=a.kb, episodes=a.episodes, seed=a.seed, policies=policies,
-            map=parse(MapMode, a.map), rooms=a.room_context,
-        )  # fmt: skip
-        rows, times = measure(config, policies)
+        config = SearchConfig().updated({
+            "style": a.style, "knowledge.kb": a.kb, "episodes": a.episodes, "seed": a.seed,
+            "policies": a.policies, "map.scenario": a.map, "knowledge.room_context": a.room_context,
+        })  # fmt: skip
+        rows, times = measure(config)
     except CtxsearchError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -22,12 +22,13 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import remembered_draws
 from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.agent.search.priors import store_seeds
@@ -35,7 +36,7 @@ from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from ctxsearch.scripts.experiments.bench_search import BenchResult
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -72,7 +73,7 @@ class CurveConfig:
     scenario and snapshot. ``perception``: how the robot perceives while learning (camera, or
     the faster oracle)."""
 
-    search: SearchBenchConfig
+    search: SearchConfig
     rooms: tuple[int, ...]
     scenarios: tuple[Scenario, ...]
     perception: str = "camera"
@@ -175,7 +176,7 @@ def _search_snapshot(config, sc, point, first, out, sweep, bar) -> BenchResult:
     the context policy only afterwards)."""
     base = config.search
     kb = KnowledgeBase(load_catalog()) if point.store is None else None
-    cfg = replace(base, kb=point.store)
+    cfg = base.updated({"knowledge.kb": point.store})
     policies = sc.policies if first else (sc.context,)
     where = out / f"k={point.k:04d}" / sc.name
     return search(cfg, sc, where, policies=policies, kb=kb, sweep=sweep, bar=bar)
@@ -227,7 +228,7 @@ def curve_doc(config: CurveConfig, points: list[CurvePoint]) -> dict:
         "episodes": len(first[config.scenarios[0].name].episodes),
         "budget_s": s.budget_s,
         "detector": s.detector_model(load_catalog()).name,
-        "interval": s.interval,
+        "interval": s.knowledge.interval,
         "learning_perception": config.perception,
         "failures_counted_at_budget": True,
         "scenarios": {sc.name: sc.to_json() for sc in config.scenarios},

@@ -50,8 +50,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn, room_seed
-from ctxsearch.agent.search import runner as E
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
+from ctxsearch.agent.search.priors import KnowledgeSource, make_priors
+from ctxsearch.agent.search.registry import resolve
+from ctxsearch.agent.search.runner import PolicyRun, WorldRuns, search_world
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.styles import Drift, Style, load_style
 from ctxsearch.envs.truth import estimate, sample_counts
@@ -59,7 +62,7 @@ from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.drift import FORGET_METHODS, ForgetKnowledgeBase, Forgetting, evidence_of
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import Forget
+from ctxsearch.knowledge.options import Forget, MapMode
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units
@@ -278,18 +281,23 @@ def measure(tr: Trace, truth: Truth, status: dict, days: int, f: Forgetting) -> 
 
 def _search(st_last: Style, config: DriftBenchConfig, kbs: dict, learned: set, catalog) -> dict:
     """Each method's ``location`` search on the last day's style (one room per episode, shared)."""
-    sc = E.SearchConfig(style=st_last.name, policies=("location",), seed=config.seed,
-                        detector="perfect", map="given")  # fmt: skip
+    sc = SearchConfig(style=st_last.name, policies=("location",), seed=config.seed,
+                      detector="perfect").with_scenario(MapMode.GIVEN)  # fmt: skip
     spec = DrawSpec.make(st_last, config.episodes, config.seed, catalog, sc.budget_s, learned)
     eps = make_episodes(spec, catalog)
-    probs = {m: E.load_priors(sc, st_last, catalog, kb=kb).for_policy("location", None)
-             for m, kb in kbs.items()}  # fmt: skip
+    (location,) = resolve(sc.policies, sc.scenario)
+    probs = {
+        m: make_priors((location,), st_last, catalog, sc.knowledge, KnowledgeSource(kb)).for_policy(
+            location
+        )
+        for m, kb in kbs.items()
+    }
     times: dict[str, list[float]] = {m: [] for m in kbs}
     found: dict[str, list[bool]] = {m: [] for m in kbs}
     for ep in eps:
-        runs = E.RoomRuns(tuple(("location", probs[m], None) for m in kbs),
-                          sc.detector_model(catalog))  # fmt: skip
-        for m, res in zip(kbs, E.search_room(ep, st_last, catalog, runs), strict=True):
+        runs = WorldRuns(tuple(PolicyRun(location, probs[m]) for m in kbs), sc,
+                        sc.detector_model(catalog))  # fmt: skip
+        for m, res in zip(kbs, search_world(ep, st_last, catalog, runs), strict=True):
             times[m].append(res.time_to_find)
             found[m].append(res.success)
     return {m: {"mean_time_s": float(np.mean(times[m])), "success": float(np.mean(found[m])),

@@ -63,10 +63,13 @@ from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn
 from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
 from ctxsearch.agent.search.episode import DEFAULT_BUDGET_S, SearchResult
 from ctxsearch.agent.search.measures import bootstrap_ci, geo_cell, paired_stats
-from ctxsearch.agent.search.runner import RoomRuns, SearchConfig, load_priors, search_room
+from ctxsearch.agent.search.priors import make_priors
+from ctxsearch.agent.search.registry import resolve
+from ctxsearch.agent.search.runner import PolicyRun, WorldRuns, search_world
 from ctxsearch.agent.strategies import BackoffHIF, Choice
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.styles import Style, parse_style
@@ -297,20 +300,17 @@ def paired_search(
 ) -> dict:
     """``location`` flat vs backoff on paired episodes of ``variant`` (module docstring)."""
     sc = SearchConfig(
-        style=variant.name,
-        policies=(SEARCH_POLICY,),
-        seed=config.seed,
-        budget_s=config.budget_s,
-        rank=config.rank,
-        estimate="backoff",
-        min_evidence=config.min_evidence,
-        map="given",
-    )
-    priors = load_priors(sc, variant, catalog, kb_path=kb_path)
+        style=variant.name, policies=(SEARCH_POLICY,), seed=config.seed, budget_s=config.budget_s
+    ).updated({
+        "knowledge.kb": kb_path, "knowledge.rank": config.rank, "knowledge.estimate": "backoff",
+        "knowledge.min_evidence": config.min_evidence, "map.scenario": "given",
+    })  # fmt: skip
+    (policy,) = resolve(sc.policies, sc.scenario)
+    priors = make_priors((policy,), variant, catalog, sc.knowledge)
     rooms = len(priors.learned) or None
     probs = {
         "flat": ss.KBProbabilities(priors.kb, config.rank, rooms=rooms),
-        "backoff": priors.for_policy(SEARCH_POLICY, None),
+        "backoff": priors.for_policy(policy),
     }
     spec = DrawSpec.make(
         variant, config.episodes, config.seed, catalog, config.budget_s, priors.learned
@@ -318,8 +318,8 @@ def paired_search(
     eps = make_episodes(spec, catalog)
     results: dict[str, list[SearchResult]] = {m: [] for m in probs}
     for ep in eps:
-        runs = RoomRuns(tuple((SEARCH_POLICY, p, None) for p in probs.values()))
-        for m, res in zip(probs, search_room(ep, variant, catalog, runs), strict=True):
+        runs = WorldRuns(tuple(PolicyRun(policy, p) for p in probs.values()), sc)
+        for m, res in zip(probs, search_world(ep, variant, catalog, runs), strict=True):
             res.policy = f"{SEARCH_POLICY} ({m})"
             results[m].append(res)
             if progress is not None:

@@ -1,4 +1,4 @@
-"""Indirect search against Wixson & Ballard's efficiency model (issue 12, point 7).
+"""Indirect search against Wixson & Ballard's efficiency model.
 
 Every ``indirect`` result records the intermediate type it searched for first
 (``SearchResult.intermediate``, None when no type was worth it) and the model's predicted gain

@@ -59,7 +59,7 @@ from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 # (label, detector preset, confirm, min score, confirm reference, exam recall): the detector
 # settings compared. ``confirm2`` counts a related object once two images detected it;
 # ``score0.5`` once a detection of it scored 0.5; ``ref2`` examines an object once two images
-# detected it; ``near0.9`` plans examinations to see (``learn --exam-recall 0.9``; issue 28).
+# detected it; ``near0.9`` plans examinations to see (``learn --exam-recall 0.9``).
 SETTINGS = (("perfect", "perfect", 1, 0.0, 1, None), ("realistic", "realistic", 1, 0.0, 1, None),
             ("realistic+confirm2", "realistic", 2, 0.0, 1, None),
             ("realistic+score0.5", "realistic", 1, 0.5, 1, None),

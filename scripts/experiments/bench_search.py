@@ -1,7 +1,7 @@
 """The search benchmark: every policy on the same episodes, time to find, and the files.
 
-Paired episodes (``episodes.draw_episodes``): the episode list is drawn once: held-out rooms
-(``search.held_out_seed(seed, i)``, skipping any seed the knowledge store learned in and rooms
+Paired episodes (``agent.search.draw.draw_episodes``): the episode list is drawn once: held-out rooms
+(``agent.search.episode.held_out_seed(seed, i)``, skipping any seed the knowledge store learned in and rooms
 without a small object), a target type drawn uniformly among the small (kind=object) types present
 in the room, and a start pose (a uniformly drawn free cell, random heading) from which the target
 is **not visible** (redrawn while it is; the world dropped after ``MAX_START_TRIES``), in a world
@@ -36,7 +36,7 @@ episode and policy); with ``indirect`` and ``frontier`` also ``DIR/indirect.json
 ``DIR/indirect.md`` (each intermediate type's predicted gain against the measured paired ratio:
 bench_indirect).
 
-The map scenario (``SearchConfig.map``, ``--map``): ``built`` (the robot knows nothing at the
+The map scenario (``map.scenario`` of the configuration, ``--map``): ``built`` (the robot knows nothing at the
 start: frontier, indirect, oracle-prior-indirect, oracle) or ``given`` (the furniture poses are
 known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``map`` says which.
 
@@ -59,14 +59,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.draw import DrawSpec, WorldDraw, draw_episodes
-from ctxsearch.agent.search.episode import (
-    Episode,
-    EpisodeDraw,
-    SearchResult,
-    check_budget,
-    episode_layout,
-)
+from ctxsearch.agent.search.config import SearchConfig, to_dict
+from ctxsearch.agent.search.draw import WorldDraw, draw_episodes
+from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult, episode_layout
 from ctxsearch.agent.search.measures import (
     BOOTSTRAP_SAMPLES,
     TIE_S,
@@ -79,10 +74,10 @@ from ctxsearch.agent.search.measures import (
     r4,
     spl,
 )
-from ctxsearch.agent.search.registry import split_name
-from ctxsearch.agent.search.runner import EpisodeSet, SearchConfig, load_priors, run_episode
+from ctxsearch.agent.search.priors import KnowledgeSource
+from ctxsearch.agent.search.runner import SearchRun, code_version, prepare, run_episode
 from ctxsearch.envs.floorplan import generate_layout
-from ctxsearch.envs.houses import WorldStyle, resolve_style
+from ctxsearch.envs.houses import WorldStyle
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
@@ -104,7 +99,7 @@ BASELINES = (
 )  # fmt: skip
 ORACLE = "oracle"
 # An early stop (before the budget, nothing found) with more than this share of the belief's
-# detectable mass left counts as premature (issue 26's goal: none).
+# detectable mass left counts as premature (the aim: none).
 EARLY_STOP_MASS = 0.10
 
 
@@ -292,6 +287,7 @@ class BenchResult:
     files: list[Path] = field(default_factory=list)
     wall_s: float = 0.0
     draw: EpisodeDraw | None = None  # what the episode draw left out
+    config: SearchConfig | None = None  # the configuration as it ran (resolved)
     facts: list[dict] = field(default_factory=list)  # episode_facts, for the strata
 
 
@@ -393,55 +389,38 @@ def plot_cdf(
     fig.savefig(path)
 
 
-@dataclass(frozen=True)
-class SearchBenchConfig(SearchConfig):
-    """``bench search``: the shared search settings, the knowledge store and how many episodes."""
-
-    kb: Path | None = None  # knowledge store made by `ctxsearch learn`
-    episodes: int = 40
-    # Where the episode draw is kept for later commands (scripts.experiments.draw_store): make
-    # bench's two map scenarios search the same episodes, drawn once. None: not kept.
-    draw_cache: Path | None = None
-
-
 def bench_search(
-    config: SearchBenchConfig,
+    config: SearchConfig,
     out: Path | str,
     *,
     progress: Callable[[str], None] | None = print,
     sweep: SweepOptions | None = None,
     bar: bool = True,
     kb: KnowledgeBase | None = None,
+    observer: Callable | None = None,
 ) -> BenchResult:
-    """The benchmark (module docstring): run, aggregate, write the four files to ``out``.
-    ``progress`` gets a line per episode and policy (in episode order, as batches finish),
-    ``bar`` shows a progress bar over the sweep's units; ``kb``: the knowledge in memory
-    instead of the store ``config.kb`` (``bench curve``'s empty store at k = 0)."""
+    """The benchmark of ``config`` (module docstring): run, aggregate, write the four files to
+    ``out``. ``progress`` gets a line per episode and policy (in episode order, as batches
+    finish), ``bar`` shows a progress bar over the sweep's units; ``kb``: the knowledge in
+    memory instead of the store ``config.knowledge.kb`` (``bench curve``'s empty store at
+    k = 0); ``observer``: called at every online decision (``SearchContext.observer``; the
+    episodes then run in this process)."""
     t_wall = time.perf_counter()
-    catalog = load_catalog()
-    names = list(config.policies)
-    for n in names:
-        split_name(n)
-    if len(set(names)) != len(names):
-        raise CtxsearchError(f"a policy is listed twice in {','.join(names)}")
-    style = resolve_style(config.style, catalog)
-    check_budget(config.budget_s)  # before the priors and the draw: refused at once
-    priors = load_priors(config, style, catalog, kb=kb, kb_path=config.kb, progress=bar)
-    detector = config.detector_model(catalog)
     sweep = sweep or SweepOptions()
-    spec = DrawSpec.make(
-        style, config.episodes, config.seed, catalog, config.budget_s, priors.learned,
-        detector=detector,
-    )  # fmt: skip
-    spec = replace(spec, targets=config.targets)
+    if observer is not None and (sweep.workers > 1 or sweep.ray_address):
+        raise CtxsearchError("an observer of the decisions needs the episodes in this process")
+    run = prepare(config, source=KnowledgeSource(kb), progress=bar)
+    run = replace(run, observer=observer)
+    config = run.config
+    spec = run.draw_spec(config.episodes)
     runner = sweep_worlds(sweep, bar)
     with session(sweep, bar):  # one Ray for the draw's rounds and the searches
         draw = draw_episodes(
-            spec, catalog, workers=sweep.workers, runner=runner, cache=config.draw_cache
+            spec, run.catalog, workers=sweep.workers, runner=runner, cache=config.draw_cache
         )
         eps = draw.episodes
-        what = EpisodeSet(style, tuple(names), priors.for_policy, detector, config.map)
-        results = _run_batches(eps, what, sweep, bar)
+        results = _run_batches(eps, run, sweep, bar)
+    names = [s.name for s in run.specs]
     if progress is not None:
         for i, ep in enumerate(eps):
             for n in names:
@@ -450,11 +429,10 @@ def bench_search(
     stats = aggregate(results, seed=config.seed)
     res = BenchResult(eps, results, stats, format_table(stats, len(eps), config.budget_s))
     res.draw = draw
-    res.facts = episode_facts(style, eps, catalog)
-    res.files = _write_files(config, Path(out), style.name, priors.kb, res)
-    if (
-        "indirect" in results and "frontier" in results
-    ):  # point 7: scripts.experiments.bench_indirect
+    res.config = config
+    res.facts = episode_facts(run.style, eps, run.catalog)
+    res.files = _write_files(run, Path(out), res)
+    if "indirect" in results and "frontier" in results:  # scripts.experiments.bench_indirect
         res.files += write_indirect(Path(out), indirect_analysis(eps, results, seed=config.seed))
     res.wall_s = time.perf_counter() - t_wall
     return res
@@ -474,31 +452,31 @@ def sweep_worlds(sweep: SweepOptions, bar: bool = False):
 
 
 def _run_batches(
-    eps: list[Episode], what: EpisodeSet, sweep: SweepOptions, bar: bool
+    eps: list[Episode], run: SearchRun, sweep: SweepOptions, bar: bool
 ) -> dict[str, list[SearchResult]]:
-    """Every policy of ``what`` on every episode, ``EPISODES_PER_UNIT`` episodes per sweep
+    """Every policy of ``run`` on every episode, ``EPISODES_PER_UNIT`` episodes per sweep
     unit."""
     batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
     done = run_units(
-        functools.partial(_batch_unit, what),
+        functools.partial(_batch_unit, run),
         batches,
         workers=sweep.workers,
         ray_address=sweep.ray_address,
-        desc=f"bench search {what.style.name}",
+        desc=f"bench search {run.style.name}",
         progress=bar,
     )
-    results: dict[str, list[SearchResult]] = {n: [] for n in what.policies}
+    names = [s.name for s in run.specs]
+    results: dict[str, list[SearchResult]] = {n: [] for n in names}
     for batch in done:
         for per_policy in batch:
-            for n, r in zip(what.policies, per_policy, strict=True):
+            for n, r in zip(names, per_policy, strict=True):
                 results[n].append(r)
     return results
 
 
-def _batch_unit(what: EpisodeSet, batch: list[Episode]) -> list[list[SearchResult]]:
-    """One sweep unit: every policy of ``what`` on each episode of ``batch``."""
-    catalog = load_catalog()
-    return [run_episode(ep, catalog, what) for ep in batch]
+def _batch_unit(run: SearchRun, batch: list[Episode]) -> list[list[SearchResult]]:
+    """One sweep unit: every policy of ``run`` on each episode of ``batch``."""
+    return [run_episode(ep, run) for ep in batch]
 
 
 # episodes.csv: one row per episode and policy.
@@ -573,31 +551,28 @@ def _episode_json(ep: Episode, i: int, results: dict[str, list[SearchResult]]) -
     }
 
 
-def _write_files(
-    config: SearchBenchConfig,
-    out: Path,
-    style: str,
-    kb: KnowledgeBase | None,
-    res: BenchResult,
-) -> list[Path]:
+def _write_files(run: SearchRun, out: Path, res: BenchResult) -> list[Path]:
     """Write search.json, search.md, search.png and episodes.csv of ``res`` to ``out``; their
-    paths."""
+    paths. search.json holds the run's whole configuration and the code's version: ``bench
+    search --config search.json`` runs it again."""
     eps, results, stats, table = res.episodes, res.results, res.stats, res.table
-    catalog = load_catalog()
+    config, catalog, kb, style = run.config, run.catalog, run.priors.kb, run.style.name
     draw = res.draw or EpisodeDraw(list(eps))
     out.mkdir(parents=True, exist_ok=True)
     doc = {
+        "config": to_dict(config),
+        "code_version": code_version(),
         "style": style,
         "episodes": len(eps),
         "budget_s": config.budget_s,
         "seed": config.seed,
-        "rank": config.rank,
-        "detector": config.detector_model(catalog).name,
-        "interval": config.interval,
-        "map": config.map,  # the scenario: RoomMaps.given or RoomMaps.built
+        "rank": config.knowledge.rank,
+        "detector": run.detector.name,
+        "interval": config.knowledge.interval,
+        "map": config.scenario,  # the scenario: WorldMaps.given or WorldMaps.built
         "targets": config.targets,  # type: any instance ends a search; instance: one kept
-        "room_context": config.rooms,  # the oracle-prior policies' room context (issue 27)
-        "kb": str(config.kb) if config.kb is not None else None,
+        "room_context": config.knowledge.room_context,
+        "kb": str(config.knowledge.kb) if config.knowledge.kb is not None else None,
         "kb_examinations": kb.total_examinations if kb is not None else 0,
         "failures_counted_at_budget": True,
         "excluded": draw.excluded(),
@@ -614,22 +589,23 @@ def _write_files(
     }
     for k, entry in doc["by_target"].items():
         entry["group"] = detect_group(catalog, k)
-    if config.estimate != Estimate.FLAT:  # flat (the default) documents stay as they were
-        doc["estimate"] = {"name": config.estimate, "min_evidence": config.min_evidence}
+    k = config.knowledge
+    if k.estimate != Estimate.FLAT:  # flat (the default) documents stay as they were
+        doc["estimate"] = {"name": k.estimate, "min_evidence": k.min_evidence}
     files = [out / "search.json", out / "search.md", out / "search.png"]
     files[0].write_text(json.dumps(doc, indent=1) + "\n")
     kb_line = (
-        f"knowledge base `{config.kb}` ({doc['kb_examinations']} examinations), "
+        f"knowledge base `{k.kb}` ({doc['kb_examinations']} examinations), "
         if kb is not None
         else ""
     )
     ex = draw.excluded()
     files[1].write_text(
-        f"# Object search: {style}\n\n{kb_line}ranking by the {config.interval} interval's "
-        f"`{config.rank}`"
+        f"# Object search: {style}\n\n{kb_line}ranking by the {k.interval} interval's "
+        f"`{k.rank}`"
         + (
-            f" (backoff for types with < {config.min_evidence} examinations)"
-            if config.estimate == Estimate.BACKOFF
+            f" (backoff for types with < {k.min_evidence} examinations)"
+            if k.estimate == Estimate.BACKOFF
             else ""
         )
         + f", detector `{doc['detector']}`, map `{doc['map']}`, "

@@ -1,4 +1,4 @@
-"""``bench transfer``: context that does not fit (the paper's own example, issue 12 point 6).
+"""``bench transfer``: context that does not fit (the paper's own example).
 
 A store is learned per style (the same rooms, seed and perception; the styles' learning runs are
 the units of a sweep: serial, or Ray tasks with ``--workers N``). Then, for every searched-in
@@ -30,10 +30,11 @@ import functools
 import json
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ctxsearch.agent.learning import LearnConfig, learn
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.draw import remembered_draws
 from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.envs.houses import resolve_style
@@ -42,7 +43,7 @@ from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_curve import snapshot
-from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig
+from ctxsearch.scripts.experiments.bench_search import BenchResult
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -67,7 +68,7 @@ class TransferConfig:
     """What ``bench transfer`` learns and searches. ``search`` holds the search settings (seed,
     budget, detector, episodes); style, policies, kb and interval are set per cell."""
 
-    search: SearchBenchConfig
+    search: SearchConfig
     styles: tuple[str, ...]
     rooms: int
     scenarios: tuple[Scenario, ...]
@@ -228,7 +229,9 @@ def search_cells(
             cell = None
             for m in config.intervals:
                 for x in [y, *others]:
-                    base = replace(config.search, style=y, kb=stores[x]["store"], interval=m)
+                    base = config.search.updated(
+                        {"style": y, "knowledge.kb": stores[x]["store"], "knowledge.interval": m}
+                    )
                     first = cell is None
                     pols = (sc.baseline, sc.context) if first else (sc.context,)
                     where = out / "search" / f"{_slug(x)}_to_{_slug(y)}" / sc.name / m

@@ -32,9 +32,10 @@ from ctxsearch.agent.learning import LearnConfig, learn, room_seed, run_id
 from ctxsearch.agent.mapping import default_map_mode
 from ctxsearch.agent.perception_modes import perception_label
 from ctxsearch.agent.search import space as ss
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.episode import SearchResult, check_target
-from ctxsearch.agent.search.priors import open_knowledge
-from ctxsearch.agent.search.runner import OneSearch, SearchConfig, search_once
+from ctxsearch.agent.search.priors import KnowledgeSource, open_knowledge
+from ctxsearch.agent.search.runner import OneSearch, search_once
 from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
@@ -219,20 +220,10 @@ def _search_step(config: DemoConfig, catalog: Catalog, echo) -> _Searched:
         f"context ({CONTEXT_POLICY}) and without ({BASELINE_POLICY})"
     )
     search = SearchConfig(
-        DEMO_STYLE,
-        (CONTEXT_POLICY, BASELINE_POLICY),
-        seed=DEMO_SEED,
-        budget_s=config.budget_s,
-        map=DEMO_MAP,
-    )
-    one = search_once(
-        search,
-        target,
-        kb=kb,
-        exclude_seeds=learned_seeds,
-        catalog=catalog,
-        record=search_rrd,
-    )
+        DEMO_STYLE, (CONTEXT_POLICY, BASELINE_POLICY), seed=DEMO_SEED, budget_s=config.budget_s
+    ).with_scenario(DEMO_MAP)
+    source = KnowledgeSource(kb, frozenset(learned_seeds))
+    one = search_once(search, target, source=source, catalog=catalog, record=search_rrd)
     for r in one.results:
         echo(f"      {r.summary()}")
     return _Searched(one, kb, search_rrd)

@@ -1,4 +1,4 @@
-"""The room context a store learned against the plans' (issue 27, point 4): every
+"""The room context a store learned against the plans': every
 SAME-ROOM-AS-F interval of the store (knowledge.room_context) against P(SAME-ROOM-AS-F(T)) over
 generated worlds of the style (envs.truth.room_truth), and each type's share of furnished rooms.
 

@@ -14,18 +14,19 @@ policy won, lost and tied (agent.search.measures: within ``TIE_S`` seconds is a 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ctxsearch.agent.search import measures
+from ctxsearch.agent.search.config import SearchConfig
 from ctxsearch.agent.search.episode import Episode
 from ctxsearch.agent.search.registry import Role, parse_policies, with_role
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode
-from ctxsearch.scripts.experiments.bench_search import BenchResult, SearchBenchConfig, bench_search
+from ctxsearch.scripts.experiments.bench_search import BenchResult, bench_search
 from ctxsearch.scripts.sweep import SweepOptions
 
 SCENARIO_NAMES = tuple(m.value for m in (MapMode.BUILT, MapMode.GIVEN))
@@ -66,10 +67,12 @@ DEFAULT_SCENARIOS = {name: registry_scenario(MapMode(name)) for name in SCENARIO
 
 
 def scenario_config(
-    base: SearchBenchConfig, scenario: Scenario, policies: Sequence[str] | None = None
-) -> SearchBenchConfig:
+    base: SearchConfig, scenario: Scenario, policies: Sequence[str] | None = None
+) -> SearchConfig:
     """``base`` set up for ``scenario``: its policies (or ``policies``, a subset) and its map."""
-    return replace(base, policies=tuple(policies or scenario.policies), map=scenario.name)
+    return base.updated(
+        {"policies": tuple(policies or scenario.policies), "map.scenario": scenario.name}
+    )
 
 
 def parse_scenarios(names: str, overrides: dict[str, str | None]) -> tuple[Scenario, ...]:
@@ -155,7 +158,7 @@ def same_episodes(a: Sequence[Episode], b: Sequence[Episode], what: str) -> None
 
 
 def search(
-    base: SearchBenchConfig,
+    base: SearchConfig,
     scenario: Scenario,
     out: Path,
     *,
@@ -165,7 +168,7 @@ def search(
     bar: bool = True,
 ) -> BenchResult:
     """``bench search`` of ``scenario`` (``policies``: a subset of its policies) on the store
-    ``base.kb`` or the in-memory ``kb`` (an empty store: k = 0), files in ``out``."""
+    ``base.knowledge.kb`` or the in-memory ``kb`` (an empty store: k = 0), files in ``out``."""
     config = scenario_config(base, scenario, policies)
     return bench_search(config, out, progress=None, sweep=sweep, bar=bar, kb=kb)
 
