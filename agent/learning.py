@@ -90,14 +90,13 @@ def release_memory() -> None:
     """Free what a finished room leaves behind. Its MuJoCo model, data and renderer sit in
     reference cycles (dm_control's MJCF objects), so they are collected now rather than at
     Python's next full collection; then glibc is asked to return the freed heap to the system
-    (``malloc_trim``; without it the heap of a camera-mode run grew about 1 MB a room through
-    fragmentation: 40 Worlds built, rendered and closed in a loop held 205 -> 252 MB without it,
-    205 -> 205 MB with it). Elsewhere than glibc only the collection is done.
+    (``malloc_trim``; without it the heap of a camera-mode run grows room by room through
+    fragmentation). Elsewhere than glibc only the collection is done.
 
     The first call then freezes what survived it (``gc.freeze``: the modules, the catalog, the
-    run's store and caches), so that later collections do not walk them again: walking the
-    process's 98,000 tracked objects (mostly the libraries' functions) was 43 of each room's 55 ms
-    in an office oracle run (9% of ``bench learning``'s time). Frozen objects are still freed
+    run's store and caches), so that later collections do not walk them again: the process's
+    long-lived objects (mostly the libraries' functions) are most of what a full collection
+    walks. Frozen objects are still freed
     when their last reference goes; only a reference cycle among them would now stay."""
     global _frozen
     gc.collect()

@@ -293,8 +293,8 @@ class CameraPerception:
         rgb: bool = False,
         sensing: Sensing | None = None,
     ):
-        # Imported here: MuJoCo and dm_control add about 0.3 s to the start of every run (measured:
-        # `import envs.world` 1.1 s against 0.8 s for numpy and scipy), which oracle runs never use.
+        # Imported here: MuJoCo and dm_control slow the start of every run (`python -X importtime`),
+        # and oracle runs never use them.
         from ctxsearch.envs.world import World
 
         self.layout, self.catalog, self.spec, self.rgb = layout, catalog, spec, rgb

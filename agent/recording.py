@@ -30,9 +30,9 @@ Cameras: MuJoCo's look along their -z with +y up; rerun's pinhole is RDF (x righ
 forward), so the camera's world rotation is ``xmat @ diag(1, -1, -1)``. Segmentation images hold
 instance id + 1 (0: nothing), with an annotation context naming every instance by its type.
 
-rerun is imported inside the methods that log: importing it costs about 0.6 s (measured with
-``python -X importtime -c "import rerun"``), and ``Recorder(None)`` (every run without a
-recording) never needs it.
+rerun is imported inside the methods that log: importing it is slow (``python -X importtime -c
+"import rerun"`` shows how slow), and ``Recorder(None)`` (every run without a recording) never
+needs it.
 """
 
 from __future__ import annotations

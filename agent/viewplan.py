@@ -200,7 +200,7 @@ def plan_gazes(
     taking (the open side is against a wall), the plan is made without it. Returns [] if no
     reachable viewpoint sees any of the box.
 
-    Speed (about 1 ms for a small volume; the plans are those of scoring every pair in full):
+    Speed (the plans are those of scoring every pair in full):
     the candidate lattice is cached per grid (``OccupancyGrid.lattice_cells``) and the driving
     distances come from the grid's search cache; the greedy loop scores only the (position,
     aim) pairs that can still add ``min_gain`` (a pair's gain never grows), kept in the order of
