@@ -56,9 +56,11 @@ occupancy grid (agent.navigation) and the held-out rooms are the search's (agent
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -85,7 +87,7 @@ from ctxsearch.envs.task import CAMERA_SIZE, check_camera_size
 from ctxsearch.envs.world import World
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
-from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.errors import ArgumentTypeError, ArgumentValueError, CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.ranking import KBProbabilities, candidate_volumes
 
@@ -160,34 +162,48 @@ MAX_BUDGET_S = 1e9  # simulated seconds, as the CLI's --budget-seconds
 MAX_TOP_K = 10_000  # context rows
 
 
+@contextlib.contextmanager
+def _api_errors() -> Iterator[None]:
+    """The project's one-line errors raised inside as what Python callers catch: a bad value (an
+    unknown name, a file that is not what it should be) is also a ValueError, a bad type also a
+    TypeError (``ArgumentValueError``, ``ArgumentTypeError``)."""
+    try:
+        yield
+    except (ValueError, TypeError):
+        raise
+    except CtxsearchError as exc:
+        raise ArgumentValueError(str(exc)) from None
+
+
 def _check_arguments(style, detector, kb, budget_s, top_k, render_mode, draw_cache) -> None:
-    """A one-line CtxsearchError for an argument of the wrong type or out of range (the files
-    they name are checked by their loaders): budget_s a finite number in (0, MAX_BUDGET_S], top_k
-    a whole number in [1, MAX_TOP_K] (not a bool), names strings or paths."""
+    """A one-line error for an argument of the wrong type (``ArgumentTypeError``, a TypeError)
+    or out of range (``ArgumentValueError``, a ValueError); the files they name are checked by
+    their loaders: budget_s a finite number in (0, MAX_BUDGET_S], top_k a whole number in
+    [1, MAX_TOP_K] (not a bool), names strings or paths."""
     for name, value, kinds in (
         ("style", style, (str, Path)),
         ("detector", detector, (str, Path, type(None))),
         ("kb", kb, (str, Path, KnowledgeBase, type(None))),
         ("draw_cache", draw_cache, (str, Path, type(None))),
     ):
-        if not isinstance(value, kinds) or (isinstance(value, str) and not value):
-            raise CtxsearchError(f"{name} must be a name or a path, got {value!r}"[:300])
-    if (
-        isinstance(budget_s, bool)
-        or not isinstance(budget_s, numbers.Real)
-        or not (0 < float(budget_s) <= MAX_BUDGET_S)  # NaN and inf fail too
-    ):
-        raise CtxsearchError(
+        if not isinstance(value, kinds):
+            raise ArgumentTypeError(f"{name} must be a name or a path, got {value!r}"[:300])
+        if isinstance(value, str) and not value:
+            raise ArgumentValueError(f"{name} must be a name or a path, got {value!r}")
+    if isinstance(budget_s, bool) or not isinstance(budget_s, numbers.Real):
+        raise ArgumentTypeError(f"budget_s must be a number of seconds, got {budget_s!r}"[:300])
+    if not (0 < float(budget_s) <= MAX_BUDGET_S):  # NaN and inf fail too
+        raise ArgumentValueError(
             f"budget_s must be a number of seconds in (0, {MAX_BUDGET_S:g}], got {budget_s!r}"
         )
     if isinstance(top_k, bool) or not isinstance(top_k, numbers.Integral):
-        raise CtxsearchError(f"top_k must be a whole number, got {top_k!r}")
+        raise ArgumentTypeError(f"top_k must be a whole number, got {top_k!r}"[:300])
     if not 1 <= int(top_k) <= MAX_TOP_K:
-        raise CtxsearchError(f"top_k must be in [1, {MAX_TOP_K}], got {top_k!r}")
-    if render_mode is not None and not (
-        isinstance(render_mode, str) and render_mode in ObjectSearchEnv.metadata["render_modes"]
-    ):
-        raise CtxsearchError(f"unknown render_mode {render_mode!r} (known: rgb_array)")
+        raise ArgumentValueError(f"top_k must be in [1, {MAX_TOP_K}], got {top_k!r}")
+    if render_mode is not None and not isinstance(render_mode, str):
+        raise ArgumentTypeError(f"render_mode must be a string, got {render_mode!r}"[:300])
+    if render_mode is not None and render_mode not in ObjectSearchEnv.metadata["render_modes"]:
+        raise ArgumentValueError(f"unknown render_mode {render_mode!r} (known: rgb_array)")
 
 
 class ObjectSearchEnv(gymnasium.Env):
@@ -211,13 +227,14 @@ class ObjectSearchEnv(gymnasium.Env):
         _check_arguments(style, detector, kb, budget_s, top_k, render_mode, draw_cache)
         self.draw_cache = None if draw_cache is None else Path(draw_cache)
         self.catalog = load_catalog()
-        self.style = resolve_style(style, self.catalog)
-        self.detector_model: DetectorModel = default_or_named(
-            detector, self.catalog, DEFAULT_DETECTOR
-        )
-        self.width, self.height = check_camera_size(width, height)
+        with _api_errors():
+            self.style = resolve_style(style, self.catalog)
+            self.detector_model: DetectorModel = default_or_named(
+                detector, self.catalog, DEFAULT_DETECTOR
+            )
+            self.width, self.height = check_camera_size(width, height)
+            self.kb, self.learned = self._knowledge(kb)
         self.budget_s, self.top_k, self.render_mode = float(budget_s), int(top_k), render_mode
-        self.kb, self.learned = self._knowledge(kb)
         self.robot_spec, self.time_model = RobotSpec(), TimeModel()
         self._types = [t.name for t in self.catalog.types]
         self.action_space = spaces.Discrete(len(ACTIONS))
@@ -257,8 +274,10 @@ class ObjectSearchEnv(gymnasium.Env):
         """A new episode (see the module docstring): the observation and info."""
         super().reset(seed=seed)
         index = (options or {}).get("index", 0)
-        if not (isinstance(index, int | np.integer) and index >= 0):
-            raise CtxsearchError(f"options['index'] must be a whole number >= 0, got {index!r}")
+        if isinstance(index, bool) or not isinstance(index, int | np.integer):
+            raise ArgumentTypeError(f"options['index'] must be a whole number, got {index!r}"[:300])
+        if index < 0:
+            raise ArgumentValueError(f"options['index'] must be >= 0, got {index!r}")
         ep_seed = seed if seed is not None else int(self.np_random.integers(2**31))
         self.episode, self.layout = draw_episode(
             self.style,
@@ -294,8 +313,8 @@ class ObjectSearchEnv(gymnasium.Env):
         if self.world is None or self.episode is None:
             raise CtxsearchError("call reset() before step()")
         if not self.action_space.contains(action):
-            raise CtxsearchError(
-                f"invalid action {action!r} (0..{len(ACTIONS) - 1}: {', '.join(ACTIONS)})"
+            raise ArgumentValueError(
+                f"invalid action {action!r} (0..{len(ACTIONS) - 1}: {', '.join(ACTIONS)})"[:300]
             )
         name = ACTIONS[int(action)]
         t = self.world.sim_time

@@ -74,7 +74,7 @@ FP_MAX_SCORE = 0.5  # false positives' highest confidence when the preset does n
 CONFUSION_FIELDS = {"a", "b", "p"}
 
 
-class DetectorError(CtxsearchError):
+class DetectorError(CtxsearchError, ValueError):
     """A detector preset file is malformed or inconsistent with the catalog."""
 
     def __init__(self, path: object, message: str, *, field: str | None = None):

@@ -33,7 +33,7 @@ MAX_ROOM_HEIGHT = 10.0
 MAX_FILL = 0.6
 
 
-class StyleError(CtxsearchError):
+class StyleError(CtxsearchError, ValueError):
     """A room-style file is malformed or inconsistent with the catalog."""
 
     def __init__(self, path: object, message: str, *, field: str | None = None):

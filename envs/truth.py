@@ -277,7 +277,7 @@ def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:
 MAX_SAMPLES = 10**9
 
 
-class TruthError(CtxsearchError):
+class TruthError(CtxsearchError, ValueError):
     """A ground-truth file that cannot be used (not JSON, wrong shape, another style or catalog)."""
 
 

@@ -17,7 +17,7 @@ class CtxsearchError(Exception):
         super().__init__(printable(str(message)))
 
 
-class CatalogError(CtxsearchError):
+class CatalogError(CtxsearchError, ValueError):
     """The object-type catalog is malformed or inconsistent."""
 
     def __init__(
@@ -32,5 +32,14 @@ class CatalogError(CtxsearchError):
         self.path, self.type_name, self.field = path, type_name, field
 
 
-class StoreError(CtxsearchError):
+class ArgumentValueError(CtxsearchError, ValueError):
+    """A Python API argument with a value the project cannot use (out of range, unknown name, a
+    file that is not what it should be): ``except ValueError`` catches it too."""
+
+
+class ArgumentTypeError(CtxsearchError, TypeError):
+    """A Python API argument of the wrong type: ``except TypeError`` catches it too."""
+
+
+class StoreError(CtxsearchError, ValueError):
     """A knowledge store that cannot be used (not ours, newer schema, other catalog)."""

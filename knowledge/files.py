@@ -33,7 +33,7 @@ MAX_FILE_BYTES = 64 * 2**20  # the largest input file read (the shipped ones are
 MAX_NESTING = 64  # arrays/tables (TOML) or arrays/objects (JSON) inside each other (shipped: 3)
 
 
-class InputFileError(CtxsearchError):
+class InputFileError(CtxsearchError, ValueError):
     """An input file that cannot be read as asked: ``PATH: problem`` on one line. ``path`` and
     ``problem`` are kept apart for loaders that word it with their own error class; ``missing``
     says the file does not exist (nothing at the path, not even a symlink)."""

@@ -6,13 +6,15 @@ import heavy modules (MuJoCo, dm_control, rerun, scipy) lazily, so building the 
 ``ctxsearch --help`` or ``ctxsearch kb show`` does not load them.
 
 Errors a user can fix (bad files, unknown names, incompatible stores) are CtxsearchError: they
-print one line, ``ctxsearch: error: ...``, and exit with code 2. Ctrl-C at any moment prints one
-line, ``ctxsearch: interrupted``, and exits with 130: while a command runs it is a
-KeyboardInterrupt (the learning loop finishes its bookkeeping: at most the examination in flight
-is lost, its transaction rolled back); before it (the CLI's imports: ``scripts/__init__.py``, run
-as the console script) and after it (Python's exit) it ends the process at once (nothing is open
-then). Only a Ctrl-C in the first milliseconds, while Python itself starts and before any line of
-ctxsearch runs, gets Python's own message.
+print one line, ``ctxsearch: error: ...``, and exit with code 2. A stop signal at any moment
+(Ctrl-C, SIGTERM, SIGHUP: ``scripts/__init__.py``) prints one line, ``ctxsearch: interrupted``
+or ``ctxsearch: terminated by SIGTERM``, and exits with 128 + the signal's number: while a
+command runs it is a ``Stopped`` KeyboardInterrupt (the learning loop finishes its bookkeeping:
+at most the examination in flight is lost, its transaction rolled back; children's process
+groups are ended); before it (the CLI's imports, run as the console script) and after it
+(Python's exit) it ends the process at once (nothing is open then). Only a signal in the first
+milliseconds, while Python itself starts and before any line of ctxsearch runs, gets Python's
+own handling.
 """
 
 from __future__ import annotations
@@ -25,10 +27,19 @@ import sys
 import threading
 
 from ctxsearch.knowledge.errors import CtxsearchError, printable
-from ctxsearch.scripts import INTERRUPTED, exit_interrupted, interrupt_reported
+from ctxsearch.scripts import (
+    STOP_SIGNALS,
+    exit_interrupted,
+    handle_stop_signals,
+    interrupt_reported,
+    last_stop,
+    raise_stopped,
+    stop_code,
+    stop_line,
+)
 
 if __name__ == "__main__":  # python -m ctxsearch.scripts.cli (the console script: scripts/__init__)
-    signal.signal(signal.SIGINT, exit_interrupted)
+    handle_stop_signals(exit_interrupted)
 
 # Sub-command modules, in the order `ctxsearch --help` lists them.
 COMMAND_MODULES = [
@@ -75,11 +86,19 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``ctxsearch`` console script."""
     if threading.current_thread() is not threading.main_thread():
         return _run(argv)  # signal handlers belong to the main thread: leave them as they are
-    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    before = handle_stop_signals(raise_stopped)
     try:
-        return _run(argv)
+        code = _run(argv)
     finally:  # run as the console script, ``before`` covers Python's exit
-        signal.signal(signal.SIGINT, before)
+        for s, handler in before.items():
+            signal.signal(s, handler)
+    if interrupt_reported and before[signal.SIGINT] is exit_interrupted:
+        # Stopped, as a program of its own: everything the command opened is closed, and the
+        # libraries' exit handlers (Ray's after an interrupted start) must not change the code
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
 def _run(argv: list[str] | None) -> int:
@@ -89,12 +108,14 @@ def _run(argv: list[str] | None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", None) or last_stop()
         if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C: not in this print
-        print(INTERRUPTED, file=sys.stderr)
+            for s in STOP_SIGNALS:  # a second signal: not in this print
+                signal.signal(s, signal.SIG_IGN)
+        print(stop_line(signum), file=sys.stderr)
         interrupt_reported.append(True)
-        return 130
+        return stop_code(signum)
     except BrokenPipeError:  # e.g. `ctxsearch kb show ... | head`
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

@@ -9,7 +9,7 @@ from pathlib import Path
 from ctxsearch.agent.strategies import STRATEGIES, make_strategy
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import Forget, IntervalMethod
-from ctxsearch.scripts import INTERRUPTED, argtypes
+from ctxsearch.scripts import argtypes, last_stop, stop_code, stop_line
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
 # bench intervals' default settings (scripts.experiments.bench_intervals.DEFAULT_SETTINGS, kept
@@ -242,9 +242,10 @@ def run_learn(args: argparse.Namespace) -> int:
         print(f"recording: {f} (open with: rerun {f})")
     print(f"store: {args.kb} (see: ctxsearch kb show {args.kb})")
     if s.interrupted:  # the summary above says what was kept; the one line says why it stopped
-        print(f"{INTERRUPTED} (every examination finished is kept: the same command resumes)",
-              file=sys.stderr)  # fmt: skip
-        return 130
+        signum = last_stop()
+        print(f"{stop_line(signum)} (every examination finished is kept: the same command "
+              "resumes)", file=sys.stderr)  # fmt: skip
+        return stop_code(signum)
     return 0
 
 

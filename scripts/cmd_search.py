@@ -282,7 +282,7 @@ def run_search(args: argparse.Namespace) -> int:
     )
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
     c = one.config
-    detector = c.detector or "realistic"
+    detector = c.detector_model(catalog).name
     print(f"detector: {detector}; intervals: {c.knowledge.interval}; map: {c.scenario}")
     if args.record is not None:
         print(f"recording: {args.record} (open with: rerun {args.record})")

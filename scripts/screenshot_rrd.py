@@ -2,12 +2,13 @@
 
     python scripts/screenshot_rrd.py demo/learn.rrd demo/search.rrd --out demo/screenshots
 
-For every ``.rrd``: serve it with the rerun package's own web viewer (``rerun --web-viewer``,
-on 127.0.0.1 only), open the viewer in headless Chromium (software WebGL), wait until it has
+For every ``.rrd``: serve it with the rerun package's own web viewer (``scripts.rrd_server``,
+as ``ctxsearch view`` does, on 127.0.0.1 only), open the viewer in headless Chromium (software WebGL), wait until it has
 loaded and laid out the recording by its blueprint, and save ``OUT/<name>.png``. Chromium is
 driven over the DevTools protocol with a minimal WebSocket client (standard library only).
 Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``). Not part of the test suite:
-it checks by eye what the tests check by reading the files back.
+it checks by eye what the tests check by reading the files back. Ctrl-C, SIGTERM and SIGHUP end it
+with one line and exit code 128 + the signal, the viewer's and Chromium's process groups ended.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import base64
 import json
 import os
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -27,6 +27,10 @@ import time
 import urllib.parse
 import urllib.request
 from pathlib import Path
+
+from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import handle_stop_signals, last_stop, raise_stopped, stop_code, stop_line
+from ctxsearch.scripts.rrd_server import end_group, free_port, serve
 
 CHROMIUM_FLAGS = (
     "--headless",
@@ -41,12 +45,6 @@ CHROMIUM_FLAGS = (
     "--enable-unsafe-swiftshader",
     "--remote-allow-origins=*",
 )
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _wait_http(url: str, timeout: float) -> None:
@@ -129,65 +127,40 @@ class DevTools:
                 return msg.get("result", {})
 
 
-def _end_group(p: subprocess.Popen) -> None:
-    """End the process group this script started for ``p`` (the process and its children)."""
-    for sig, wait in ((signal.SIGTERM, 10), (signal.SIGKILL, 5)):
-        try:
-            os.killpg(p.pid, sig)
-            p.wait(wait)
-            return
-        except ProcessLookupError:
-            return
-        except subprocess.TimeoutExpired:
-            continue
-
-
 def screenshot(rrd: Path, png: Path, wait_s: float, size: tuple[int, int]) -> None:
     """Serve ``rrd`` in rerun's web viewer, open it in headless Chromium, save a PNG."""
-    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"
-    web, grpc, debug = _free_port(), _free_port(), _free_port()
-    env = {**os.environ, "BROWSER": "true"}  # rerun must not try to open a browser itself
-    server = subprocess.Popen(
-        [rerun, "--web-viewer", "--bind", "127.0.0.1", "--web-viewer-port", str(web)]
-        + ["--port", str(grpc), str(rrd)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,  # the wrapper starts the viewer binary: end the group
-    )
+    web, grpc, debug = free_port(), free_port(), free_port()
     profile = tempfile.mkdtemp(prefix="ctxsearch-chromium-")
     browser = None
     try:
-        _wait_http(f"http://127.0.0.1:{web}/", 30)
-        browser = subprocess.Popen(
-            ["chromium", *CHROMIUM_FLAGS, f"--user-data-dir={profile}"]
-            + [f"--remote-debugging-port={debug}", f"--window-size={size[0]},{size[1]}"]
-            + ["about:blank"],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,
-        )
-        _wait_http(f"http://127.0.0.1:{debug}/json/version", 30)
-        with urllib.request.urlopen(f"http://127.0.0.1:{debug}/json/list") as r:
-            page = next(t for t in json.load(r) if t["type"] == "page")
-        dt = DevTools(page["webSocketDebuggerUrl"])
-        dt.call(
-            "Emulation.setDeviceMetricsOverride",
-            width=size[0],
-            height=size[1],
-            deviceScaleFactor=1,
-            mobile=False,
-        )
-        proxy = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
-        dt.call("Page.navigate", url=f"http://127.0.0.1:{web}/?url={proxy}&renderer=webgl")
-        time.sleep(wait_s)
-        shot = dt.call("Page.captureScreenshot", format="png")
-        png.parent.mkdir(parents=True, exist_ok=True)
-        png.write_bytes(base64.b64decode(shot["data"]))
+        with serve(rrd, "127.0.0.1", web, grpc, Path(profile) / "rerun.log") as served:
+            browser = subprocess.Popen(
+                ["chromium", *CHROMIUM_FLAGS, f"--user-data-dir={profile}/chromium"]
+                + [f"--remote-debugging-port={debug}", f"--window-size={size[0]},{size[1]}"]
+                + ["about:blank"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+            _wait_http(f"http://127.0.0.1:{debug}/json/version", 30)
+            with urllib.request.urlopen(f"http://127.0.0.1:{debug}/json/list") as r:
+                page = next(t for t in json.load(r) if t["type"] == "page")
+            dt = DevTools(page["webSocketDebuggerUrl"])
+            dt.call(
+                "Emulation.setDeviceMetricsOverride",
+                width=size[0],
+                height=size[1],
+                deviceScaleFactor=1,
+                mobile=False,
+            )
+            dt.call("Page.navigate", url=f"{served.url}&renderer=webgl")
+            time.sleep(wait_s)
+            shot = dt.call("Page.captureScreenshot", format="png")
+            png.parent.mkdir(parents=True, exist_ok=True)
+            png.write_bytes(base64.b64decode(shot["data"]))
     finally:
-        for p in (browser, server):
-            if p is not None:
-                _end_group(p)
+        if browser is not None:
+            end_group(browser)
         shutil.rmtree(profile, ignore_errors=True)
 
 
@@ -200,10 +173,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="1800x1100", help="window size WxH (default 1800x1100)")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
-    for rrd in args.rrd:
-        png = args.out / f"{rrd.stem}.png"
-        screenshot(rrd, png, args.wait, (w, h))
-        print(f"wrote {png}")
+    handle_stop_signals(raise_stopped)
+    try:
+        for rrd in args.rrd:
+            png = args.out / f"{rrd.stem}.png"
+            screenshot(rrd, png, args.wait, (w, h))
+            print(f"wrote {png}")
+    except KeyboardInterrupt as exc:  # the groups are ended by now
+        signum = getattr(exc, "signum", None) or last_stop()
+        print(stop_line(signum), file=sys.stderr)
+        return stop_code(signum)
+    except CtxsearchError as exc:
+        print(f"ctxsearch: error: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -19,13 +19,16 @@ import argparse
 import contextlib
 import gc
 import os
+import signal
 import socket
 import sys
+import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.scripts import Stopped, received, reclaim_stop_signals
 from ctxsearch.scripts.integers import positive_int
 
 U = TypeVar("U")
@@ -42,6 +45,9 @@ _RAY_CONNECT_ENV = {
     "RAY_py_gcs_connect_timeout_s": str(RAY_CONNECT_TIMEOUT_S),
     "RAY_gcs_server_port_wait_time_s": "1",
 }
+# Ray's core installs a C handler for SIGTERM and friends that prints a native stack dump (and
+# may crash the process) instead of letting the command end as the CLI ends it.
+_RAY_SIGNAL_ENV = {"RAY_DISABLE_FAILURE_SIGNAL_HANDLER": "1"}
 
 
 @dataclass(frozen=True)
@@ -164,7 +170,7 @@ def _start_ray(workers: int, ray_address: str | None, announce: bool = False) ->
     if ray_address:
         check_reachable(ray_address)  # before Ray's import: nothing listening fails at once
     # Ray reads its C++ settings when it is first imported: the connection limits go first.
-    with _env(_RAY_CONNECT_ENV if ray_address else {}):
+    with _env({**_RAY_SIGNAL_ENV, **(_RAY_CONNECT_ENV if ray_address else {})}):
         # Imported here, not at the top: Ray costs ~1.5 s to import and one-worker runs never
         # need it.
         import ray
@@ -176,6 +182,7 @@ def _start_ray(workers: int, ray_address: str | None, announce: bool = False) ->
                 "starting a local Ray")  # fmt: skip
             print(f"ctxsearch: {what} ...", file=sys.stderr, flush=True)
         kwargs = dict(log_to_driver=False, configure_logging=False, include_dashboard=False)
+        before = _descendants()
         try:
             if ray_address:
                 env = {k: os.environ[k] for k in WORKER_ENV if k in os.environ}
@@ -191,6 +198,12 @@ def _start_ray(workers: int, ray_address: str | None, announce: bool = False) ->
                 # slower per unit at a load of 8 on 2 cores), so a local sweep's workers run at
                 # the driver's priority.
                 ray.init(num_cpus=workers, _system_config={"worker_niceness": 0}, **kwargs)
+        except SystemExit:  # SIGTERM while Ray starts: its own handlers exit; end as a command
+            ray_processes = _descendants() - before
+            ray.shutdown()
+            _end_processes(ray_processes)
+            received.append(int(signal.SIGTERM))
+            raise Stopped(signal.SIGTERM) from None
         except (ConnectionError, RuntimeError, ValueError, OSError) as exc:
             if ray_address == "auto" and "Could not find any running Ray" in str(exc):
                 # Ray's own text names its --address flag, which ctxsearch does not have
@@ -201,6 +214,9 @@ def _start_ray(workers: int, ray_address: str | None, announce: bool = False) ->
                 ) from None
             where = f"--ray-address {ray_address}" if ray_address else "a local Ray"
             raise CtxsearchError(f"cannot start {where}: {' '.join(str(exc).split())}") from None
+    # Ray's core installs C handlers for SIGTERM (a stack dump) over the command's: a stop signal
+    # must still end the command as the CLI ends it (one line, Ray shut down on the way out)
+    reclaim_stop_signals()
     return True
 
 
@@ -273,6 +289,7 @@ def session(options: SweepOptions, progress: bool = False) -> Iterator[None]:
     if options.workers == 1 and not options.ray_address:
         yield
         return
+    before = _descendants()
     started = _start_ray(options.workers, options.ray_address, progress)
     try:
         yield
@@ -280,7 +297,60 @@ def session(options: SweepOptions, progress: bool = False) -> Iterator[None]:
         if started:
             import ray
 
+            ray_processes = _descendants() - before
             ray.shutdown()
+            _end_processes(ray_processes)
+
+
+def _descendants() -> set[int]:
+    """This process's descendants now: children, theirs, ... (Linux /proc; empty elsewhere)."""
+    parent: dict[int, int] = {}
+    try:
+        entries = [e for e in os.listdir("/proc") if e.isdigit()]
+    except OSError:
+        return set()
+    for entry in entries:
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as f:
+                parent[int(entry)] = int(f.read().rsplit(b")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+    out, frontier = set(), {os.getpid()}
+    while frontier:
+        frontier = {pid for pid, pp in parent.items() if pp in frontier} - out
+        out |= frontier
+    return out
+
+
+def _end_processes(pids: set[int], wait_s: float = 5.0) -> None:
+    """End the processes ``pids`` that are still running (Ray's that ``ray.shutdown`` left
+    behind, such as the raylet's agents): SIGTERM, then SIGKILL after ``wait_s``; this
+    process's children among them reaped."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, sig)
+        deadline = time.monotonic() + wait_s
+        while pids and time.monotonic() < deadline:
+            for pid in list(pids):
+                with contextlib.suppress(ChildProcessError):
+                    if os.waitpid(pid, os.WNOHANG)[0] != 0:
+                        pids.discard(pid)
+                        continue
+                if not _running(pid):
+                    pids.discard(pid)
+            time.sleep(0.05)
+        if not pids:
+            return
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return False
 
 
 def _run_on_ray(fn, units, workers, ray_address, desc, progress):
@@ -296,6 +366,7 @@ def _run_on_ray(fn, units, workers, ray_address, desc, progress):
         out: list = [None] * len(units)
         with _progress(len(units), desc, progress) as bar:
             while pending:
+                reclaim_stop_signals()  # Ray's core may install its handlers after its start
                 done, _ = ray.wait(list(pending), num_returns=1)
                 for ref in done:
                     try:

@@ -71,6 +71,20 @@ def desk_cup_store(catalog):
     return make
 
 
+@pytest.fixture(scope="session")
+def small_rrd(tmp_path_factory):
+    """A small rerun recording (two points), written by rerun's SDK."""
+    import rerun as rr
+
+    path = tmp_path_factory.mktemp("rrd") / "small.rrd"
+    rec = rr.RecordingStream("ctxsearch-small-recording")
+    rec.save(str(path))
+    rec.log("world/points", rr.Points3D([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]))
+    rec.flush()
+    del rec
+    return path
+
+
 # The test files that take longest (``pytest --durations=30`` on a 2-core machine), started first
 # so that with ``make test``'s workers (pytest-xdist, a file per worker at a time) no long file
 # is left to run alone at the end. Only the order changes; every test runs.

@@ -19,18 +19,10 @@ from ctxsearch.scripts.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def rrd(tmp_path_factory) -> Path:
-    """A small recording written by the project's recorder."""
-    import rerun as rr
-
-    path = tmp_path_factory.mktemp("view") / "small.rrd"
-    rec = rr.RecordingStream("ctxsearch-view-test")
-    rec.save(str(path))
-    rec.log("world/points", rr.Points3D([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]))
-    rec.flush()
-    del rec
-    return path
+@pytest.fixture
+def rrd(small_rrd) -> Path:
+    """A small recording written by rerun's SDK (conftest's)."""
+    return small_rrd
 
 
 def test_view_serves_the_web_viewer_and_stops_on_ctrl_c(rrd):

@@ -461,7 +461,7 @@ def test_a_keyboard_interrupt_in_a_command_is_one_line_and_the_handler_is_restor
         ({"style": ""}, "style must be a name or a path"),
         ({"detector": ["perfect"]}, "detector must be a name or a path"),
         ({"kb": 3.0}, "kb must be a name or a path"),
-        ({"render_mode": ["rgb_array"]}, "unknown render_mode"),
+        ({"render_mode": ["rgb_array"]}, "render_mode must be a string"),
         ({"style": "x/\x00.toml"}, "NUL byte"),
         ({"detector": "\x00"}, "NUL byte"),
     ],

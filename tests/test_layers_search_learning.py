@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from tests.test_architecture import _imports as imports_of
+
 ROOT = Path(__file__).resolve().parents[1]
 LEARNING = ("exam_views", "frontiers", "acquisition", "learning")
 CLI = ("ctxsearch.scripts.argtypes", "ctxsearch.scripts.cli", "ctxsearch.scripts.room_segments")
@@ -15,14 +17,7 @@ CLI = ("ctxsearch.scripts.argtypes", "ctxsearch.scripts.cli", "ctxsearch.scripts
 def _imports(path: Path) -> set[str]:
     """Every module a file imports, anywhere in it (lazy imports too), and for ``from M import
     n`` also ``M.n`` (``from ctxsearch.agent import frontiers`` imports the module)."""
-    names: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            names.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module)
-            names.update(f"{node.module}.{a.name}" for a in node.names)
-    return names
+    return imports_of(ast.parse(path.read_text(), str(path)))
 
 
 def _within(name: str, module: str) -> bool:
