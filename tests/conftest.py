@@ -8,6 +8,12 @@ import os
 # module pytest happens to import first.
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+# The tests keep what they cache (agent.search.truth_store) in a folder of their own, never in the
+# user's cache; subprocesses of the CLI inherit it.
+if "CTXSEARCH_CACHE_DIR" not in os.environ:
+    import tempfile
+
+    os.environ["CTXSEARCH_CACHE_DIR"] = tempfile.mkdtemp(prefix="ctxsearch-test-cache-")
 
 import pytest  # noqa: E402
 

@@ -164,19 +164,24 @@ def load(directory: Path, key: str) -> EpisodeDraw | None:
 
 
 def save(directory: Path, key: str, draw: EpisodeDraw) -> None:
-    """Store ``draw`` under ``key`` in ``directory`` (created if needed), atomically; a
-    directory that cannot keep it (read-only, full) is a warning on stderr: the draw is made,
-    the cache costs only time."""
+    """Store ``draw`` under ``key`` in ``directory`` (``write_json``)."""
+    write_json(directory, key, to_json(draw), "episode draw")
+
+
+def write_json(directory: Path, key: str, doc: object, what: str) -> None:
+    """Store ``doc`` as ``directory/key.json`` (the directory created if needed), atomically; a
+    directory that cannot keep it (read-only, full) is a warning on stderr naming ``what``: the
+    work is done, the cache costs only time."""
     directory = Path(directory)
     tmp = None
     try:
         directory.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=directory)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(to_json(draw), f)
+            json.dump(doc, f)
         os.replace(tmp, directory / f"{key}.json")
     except OSError as e:
-        print(f"ctxsearch: warning: {directory}: episode draw not kept: {e.strerror or e}",
+        print(f"ctxsearch: warning: {directory}: {what} not kept: {e.strerror or e}",
               file=sys.stderr)  # fmt: skip
     finally:
         if tmp is not None:

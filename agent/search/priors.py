@@ -12,8 +12,9 @@ from pathlib import Path
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.config import KnowledgeConfig
 from ctxsearch.agent.search.registry import PolicySpec
-from ctxsearch.envs.houses import WorldStyle
-from ctxsearch.envs.truth import ground_truth, load_truth, room_truth
+from ctxsearch.agent.search.truth_store import cached_ground_truth
+from ctxsearch.envs.houses import WorldStyle, resolve_style
+from ctxsearch.envs.truth import load_truth, room_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -91,13 +92,14 @@ def truth_probabilities(
 ) -> ss.TableProbabilities:
     """Ground-truth P(rel(B)) for the oracle-prior policies: read from ``ctxsearch truth``'s JSON
     at ``path`` if given, else estimated over ``samples`` generated rooms of ``style`` (a
-    progress bar on stderr with ``progress``). With ``rooms``, also the room context of the
+    progress bar on stderr with ``progress``; kept on disk: agent.search.truth_store). With ``rooms``, also the room context of the
     same ``samples`` worlds (``envs.truth.room_truth``; counted from the plans, also when the
     relations come from ``path``)."""
     if path is not None:
         doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
     else:
-        doc = ground_truth(style, samples, seed, catalog, progress=progress)
+        world = resolve_style(style, catalog) if isinstance(style, str) else style
+        doc = cached_ground_truth(world, samples, seed, catalog, progress)
     table = ss.TableProbabilities.from_truth(doc)
     if rooms:
         rt = room_truth(style, samples, catalog, seed)

@@ -1,0 +1,73 @@
+"""The ground-truth estimate of the oracle-prior policies kept on disk between commands.
+
+``envs.truth.ground_truth`` over a style's sample worlds is deterministic in its inputs and costs
+seconds to tens of seconds (it generates every sample world); every ``bench search`` with an
+oracle-prior policy needs it. ``cached_ground_truth`` keeps each estimate in the user's cache
+directory (``cache_dir``) under a key that is a SHA-256 over the style as loaded (its ``repr``:
+every field of the style, so an edited style file is another key), the number of samples, the
+seed, the catalog's fingerprint and the source of the packages the estimate runs
+(``draw_store.code_digest``): a changed input or a changed line of code is another key, never a
+stale estimate. A file that does not read back as a ground truth of that style, catalog,
+sample count and seed (any bytes: knowledge.files and ``envs.truth.parse_truth`` read it) is a
+miss: the estimate is made again and the file replaced (written to a temporary file first, then
+renamed). Floats are written with ``repr``: they read back to the same bits, so a cached
+estimate gives the same searches as a fresh one.
+
+The cache directory is ``$CTXSEARCH_CACHE_DIR`` if set (empty: no cache), else
+``$XDG_CACHE_HOME/ctxsearch`` (default ``~/.cache/ctxsearch``); its ``truth/`` folder holds
+these files and may be deleted at any time.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+from ctxsearch.agent.search.draw_store import code_digest, write_json
+from ctxsearch.envs.houses import WorldStyle
+from ctxsearch.envs.truth import TruthError, ground_truth, load_truth
+from ctxsearch.knowledge.catalog import Catalog
+
+FORMAT = 1
+
+
+def cache_dir() -> Path | None:
+    """The user's ctxsearch cache directory (module docstring); None: caching is off."""
+    own = os.environ.get("CTXSEARCH_CACHE_DIR")
+    if own is not None:
+        return Path(own) if own.strip() else None
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "ctxsearch"
+
+
+def truth_key(style: WorldStyle, samples: int, seed: int, catalog: Catalog) -> str:
+    """The file name stem of the estimate with these inputs."""
+    h = hashlib.sha256()
+    h.update(f"truth format {FORMAT}\n{code_digest()}\n{catalog.fingerprint}\n".encode())
+    h.update(f"{int(samples)}\n{int(seed)}\n{style!r}".encode())
+    return h.hexdigest()[:32]
+
+
+def cached_ground_truth(
+    style: WorldStyle, samples: int, seed: int, catalog: Catalog, progress: bool = False
+) -> dict:
+    """``envs.truth.ground_truth(style, samples, seed, catalog)``, read from the cache when it
+    holds it, made (with a progress bar on stderr if ``progress``) and kept otherwise."""
+    root = cache_dir()
+    path = (
+        None
+        if root is None
+        else root / "truth" / f"{truth_key(style, samples, seed, catalog)}.json"
+    )
+    if path is not None:
+        try:
+            doc = load_truth(path, catalog, style.name)
+        except TruthError:
+            doc = None
+        if doc is not None and (doc.get("samples"), doc.get("seed")) == (samples, seed):
+            return doc
+    doc = ground_truth(style, samples, seed, catalog, progress=progress)
+    if path is not None:
+        write_json(path.parent, path.stem, doc, "ground-truth estimate")
+    return doc
