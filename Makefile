@@ -42,7 +42,7 @@ test: $(STAMP)
 # takes the apartment's intervals and the rooms, so that it runs beside lane B for longer and
 # fills the one-core moments of B's steps (their truths, tails and tables). The steps write
 # disjoint files and every result is deterministic, so the lanes' order does not change a number.
-# Time on 2 cores: 48 minutes on 2026-12-04, 61 and 63 before the last changes (README, Usage).
+# Time on 2 cores: 48 minutes on 2026-12-04, 61 and 63 before the last changes (docs/usage.md).
 # The sweeps (truth, bench learning, bench search, curve, transfer, intervals, drift) run their
 # units on WORKERS local CPUs (Ray; 1: serially, no Ray); the results are the same for any WORKERS.
 WORKERS ?= $(shell nproc 2>/dev/null || echo 1)

@@ -17,7 +17,7 @@ False, the same episodes at a fraction of the images). ``reset()`` without a see
 from the environment's own generator, so one seeded reset fixes every later episode. A reset to
 a (seed, index) drawn before in the process reuses its draw; ``draw_cache=DIR`` keeps the draws
 on disk for later processes (vectorised copies, the next training run). What a reset costs:
-``scripts/examples/gym_timing.py`` (README).
+``scripts/examples/gym_timing.py`` (docs/speed.md).
 
 Actions (``Discrete(8)``, ``ACTIONS``), each charged by the one time model
 (``envs.robot_spec.TimeModel``) through the World, as every search policy is:

@@ -24,7 +24,7 @@ borrow too much and their intervals miss. Each entry's own spread, estimated fro
 is too noisy to use alone (with two or three members it is often 0 by chance), so an entry
 borrows the class's amount or less, never more. In the held-out trial of ``bench
 hierarchy`` (types held to k = 0-10 examinations) this raised the backoff's coverage in each of
-four room styles at an unchanged error (README, Hierarchy).
+four room styles at an unchanged error (docs/results.md, Type hierarchy).
 
 so a type with much evidence keeps its own interval, one with none gets the class's knowledge as
 kappa pseudo-examinations (a never-seen Workbench does not start from [0, 1]), and the more the

@@ -29,14 +29,14 @@ from ctxsearch.knowledge.pooling import Backoff, PooledCounts
 from ctxsearch.knowledge.room_context import RoomContext
 
 RANK_MODES = ("low", "p0", "high")
-# The lower bound was best or tied on three stores of different sizes (measured; README, Search).
+# The lower bound was best or tied on three stores of different sizes (measured; docs/results.md, Search).
 DEFAULT_RANK = "low"
 # Where P(rel(T)) comes from: the type's own counts (the paper's, "flat"), or, for reference types
 # with fewer than ``min_evidence`` examinations, their class's backoff (knowledge.pooling).
 ESTIMATES = ("flat", "backoff")
 DEFAULT_ESTIMATE = "flat"
 # Below this many examinations a reference type reads the backoff estimate (bench hierarchy: the
-# backoff's error is below the flat estimate's up to k = 10 examinations; README, Hierarchy).
+# backoff's error is below the flat estimate's up to k = 10 examinations; docs/results.md, Type hierarchy).
 DEFAULT_MIN_EVIDENCE = 10
 
 

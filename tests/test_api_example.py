@@ -1,4 +1,4 @@
-"""The README's Python API for other robots: the example runs, learns what its detections say,
+"""The Python API for other robots (docs/python-api.md): the example runs, learns what its detections say,
 ranks search volumes with the learned intervals, and never imports a simulator."""
 
 from __future__ import annotations
@@ -54,12 +54,12 @@ def test_example_runs_twice_on_one_store(tmp_path, capsys):
 
 
 def test_readme_api_snippet_runs_twice(tmp_path, monkeypatch, capsys):
-    text = (ROOT / "README.md").read_text()
-    code = text.split("## Python API for other robots")[1].split("```python\n")[1].split("```")[0]
+    text = (ROOT / "docs" / "python-api.md").read_text()
+    code = text.split("```python\n")[1].split("```")[0]
     monkeypatch.chdir(tmp_path)
     outs = []
     for _ in range(2):
-        exec(compile(code, "README.md", "exec"), {})
+        exec(compile(code, "docs/python-api.md", "exec"), {})
         outs.append(capsys.readouterr().out)
     assert (tmp_path / "robot.sqlite").exists()
     assert outs[0] == outs[1] and "ON-TOP-OF-DESK" in outs[0]

@@ -84,7 +84,7 @@ class RenderingBody(Body, Protocol):
 # again, so a luckier draw (or one at a recall below ``MIN_RECALL``) could beat the oracle; the
 # images after the first at a view make that rare: ``bench search`` counts such episodes
 # (``oracle_violations``: 0 of 1400 in the 200-episode apartment runs of both map scenarios,
-# README) and the tests check there are none. The view it executes is checked
+# docs/results.md) and the tests check there are none. The view it executes is checked
 # again from the pose the physical drive reached (a tenth of a millimetre and a milliradian off
 # can move a far target's recall across its draw). A plan renders at most
 # ``ORACLE_MAX_RENDERS`` images.

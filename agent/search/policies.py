@@ -24,7 +24,7 @@ facts (scenarios, what they need, roles) are ``agent.search.registry``'s; the or
   probabilities (the registry's ``needs``: the runner gives them the truth's table).
 
 Which value of the interval ranks candidates is the probability source's rank (``low`` by
-default, chosen by measurement: README, Search).
+default, chosen by measurement: docs/results.md, Search).
 """
 
 from __future__ import annotations

@@ -19,9 +19,9 @@ from ctxsearch.knowledge.geometry import ObjectInstance
 MIN_REGION_SCORE = 0.01  # regions with less probability left are not worth a look
 # The best few regions by the cost model are re-costed with their planned gazes before one is
 # chosen (the estimate misses detours: furniture in the way, on a built map what is not mapped);
-# measured on the given map (README, Search).
+# measured on the given map (docs/results.md, Search).
 REPLAN_REGIONS = 6
-# On the built map (the online search's region option) 3 (README, Search).
+# On the built map (the online search's region option) 3 (docs/results.md, Search).
 REPLAN_REGIONS_BUILT = 3
 LOOK_DISTANCE_M = 2.5  # the farthest a gaze into a region stands from it
 
