@@ -155,7 +155,7 @@ class SearchConfig:
     # ------------------------------------------------------------------ derived
     @property
     def scenario(self) -> MapMode:
-        """The map scenario (``map.scenario``; resolve it with ``resolved`` first)."""
+        """The map scenario (``map.scenario``, as ``runner.prepare`` resolves it)."""
         if self.map.scenario is None:
             raise ConfigError("map.scenario is not resolved (agent.search.runner.prepare)")
         return self.map.scenario
