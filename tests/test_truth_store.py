@@ -74,3 +74,21 @@ def test_an_empty_cache_dir_setting_turns_the_cache_off(monkeypatch, tmp_path):
     monkeypatch.delenv("CTXSEARCH_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert truth_store.cache_dir() == tmp_path / "ctxsearch"
+
+
+@pytest.mark.parametrize("damage", [b"[]", b'[[[0, "NoSuchType", 1]]]', b"not json"])
+def test_the_room_truth_is_kept_and_read_back_as_made(monkeypatch, tmp_path, catalog, damage):
+    from ctxsearch.envs.houses import resolve_style
+    from ctxsearch.envs.truth import room_truth
+
+    monkeypatch.setenv("CTXSEARCH_CACHE_DIR", str(tmp_path))
+    style = resolve_style("apartment", catalog)
+    fresh = room_truth(style, 3, catalog, 0)
+    first = truth_store.cached_room_truth(style, 3, 0, catalog)
+    (path,) = (tmp_path / "truth").glob("*.json")
+    again = truth_store.cached_room_truth(style, 3, 0, catalog)  # read back
+    for got in (first, again):
+        assert got.same_room == fresh.same_room and got.room_share == fresh.room_share
+    path.write_bytes(damage)  # a miss: made again, the file replaced
+    assert truth_store.cached_room_truth(style, 3, 0, catalog).same_room == fresh.same_room
+    assert json.loads(path.read_text()) != [] and len(json.loads(path.read_text())) == 3

@@ -12,9 +12,9 @@ from pathlib import Path
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.config import KnowledgeConfig
 from ctxsearch.agent.search.registry import PolicySpec
-from ctxsearch.agent.search.truth_store import cached_ground_truth
+from ctxsearch.agent.search.truth_store import cached_ground_truth, cached_room_truth
 from ctxsearch.envs.houses import WorldStyle, resolve_style
-from ctxsearch.envs.truth import load_truth, room_truth
+from ctxsearch.envs.truth import load_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -95,14 +95,14 @@ def truth_probabilities(
     progress bar on stderr with ``progress``; kept on disk: agent.search.truth_store). With ``rooms``, also the room context of the
     same ``samples`` worlds (``envs.truth.room_truth``; counted from the plans, also when the
     relations come from ``path``)."""
+    world = resolve_style(style, catalog) if isinstance(style, str) else style
     if path is not None:
-        doc = load_truth(path, catalog, style if isinstance(style, str) else style.name)
+        doc = load_truth(path, catalog, world.name)
     else:
-        world = resolve_style(style, catalog) if isinstance(style, str) else style
         doc = cached_ground_truth(world, samples, seed, catalog, progress)
     table = ss.TableProbabilities.from_truth(doc)
     if rooms:
-        rt = room_truth(style, samples, catalog, seed)
+        rt = cached_room_truth(world, samples, seed, catalog)
         table = table.with_rooms(rt.same_room, rt.room_share)
     return table
 

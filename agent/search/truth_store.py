@@ -25,9 +25,11 @@ import os
 from pathlib import Path
 
 from ctxsearch.agent.search.draw_store import code_digest, write_json
+from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import WorldStyle
-from ctxsearch.envs.truth import TruthError, ground_truth, load_truth
+from ctxsearch.envs.truth import RoomTruth, TruthError, ground_truth, load_truth, room_contents
 from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.files import InputFileError, read_json
 
 FORMAT = 1
 
@@ -41,10 +43,12 @@ def cache_dir() -> Path | None:
     return Path(base) / "ctxsearch"
 
 
-def truth_key(style: WorldStyle, samples: int, seed: int, catalog: Catalog) -> str:
-    """The file name stem of the estimate with these inputs."""
+def truth_key(
+    style: WorldStyle, samples: int, seed: int, catalog: Catalog, what: str = "truth"
+) -> str:
+    """The file name stem of the estimate ``what`` (``truth``, ``rooms``) with these inputs."""
     h = hashlib.sha256()
-    h.update(f"truth format {FORMAT}\n{code_digest()}\n{catalog.fingerprint}\n".encode())
+    h.update(f"{what} format {FORMAT}\n{code_digest()}\n{catalog.fingerprint}\n".encode())
     h.update(f"{int(samples)}\n{int(seed)}\n{style!r}".encode())
     return h.hexdigest()[:32]
 
@@ -71,3 +75,49 @@ def cached_ground_truth(
     if path is not None:
         write_json(path.parent, path.stem, doc, "ground-truth estimate")
     return doc
+
+
+def cached_room_truth(style: WorldStyle, samples: int, seed: int, catalog: Catalog) -> RoomTruth:
+    """``envs.truth.room_truth(style, samples, catalog, seed)``: the same numbers, from each
+    sample world's true room contents (``envs.truth.room_contents``), kept in the cache; a file
+    that is not those contents for this catalog is a miss."""
+    path = _path(truth_key(style, samples, seed, catalog, "rooms"))
+    worlds = None if path is None else _read_contents(path, samples, catalog)
+    if worlds is None:
+        seeds = range(int(seed), int(seed) + int(samples))
+        worlds = [room_contents(generate_layout(style, s, catalog)) for s in seeds]
+        if path is not None:
+            write_json(path.parent, path.stem, worlds, "ground-truth room contents")
+    return RoomTruth.of_contents(worlds, catalog)
+
+
+def _path(key: str) -> Path | None:
+    root = cache_dir()
+    return None if root is None else root / "truth" / f"{key}.json"
+
+
+def _read_contents(path: Path, samples: int, catalog: Catalog) -> list | None:
+    """The room contents kept at ``path`` (one list of (room, type, instances) per world), or
+    None if the file is missing or is not that."""
+    try:
+        doc = read_json(path)
+    except InputFileError:
+        return None
+    if not isinstance(doc, list) or len(doc) != samples:
+        return None
+    worlds = []
+    for rooms in doc:
+        if not isinstance(rooms, list):
+            return None
+        rows = []
+        for row in rooms:
+            ok = isinstance(row, list) and len(row) == 3
+            room, name, k = row if ok else (None, None, None)
+            if not (
+                ok and type(room) is int and room >= 0 and isinstance(name, str)
+                and name in catalog and type(k) is int and k >= 1
+            ):  # fmt: skip
+                return None
+            rows.append((room, name, k))
+        worlds.append(rows)
+    return worlds
