@@ -28,7 +28,7 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from ctxsearch.agent.learning import LearnConfig, learn
-from ctxsearch.agent.search.config import SearchConfig
+from ctxsearch.agent.search.config import SearchConfig, to_dict
 from ctxsearch.agent.search.draw import remembered_draws
 from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.agent.search.priors import store_seeds
@@ -222,6 +222,8 @@ def curve_doc(config: CurveConfig, points: list[CurvePoint]) -> dict:
             }
         per_k.append(entry)
     return {
+        # the search configuration every snapshot starts from (each run's search.json: its own)
+        "search_config": to_dict(s),
         "style": s.style,
         "seed": s.seed,
         "rooms": list(config.rooms),

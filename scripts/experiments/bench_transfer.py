@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ctxsearch.agent.learning import LearnConfig, learn
-from ctxsearch.agent.search.config import SearchConfig
+from ctxsearch.agent.search.config import SearchConfig, to_dict
 from ctxsearch.agent.search.draw import remembered_draws
 from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.envs.houses import resolve_style
@@ -295,6 +295,8 @@ def transfer_doc(config: TransferConfig, stores: dict, cells: dict, notice: dict
                         cost[sc.name][m][x][y] = paired_ratio(t, t_in, seed=s.seed)
     first = next(iter(cells.values())).baseline
     return {
+        # the search configuration every cell starts from (each cell's search.json: its own)
+        "search_config": to_dict(s),
         "styles": list(config.styles),
         "rooms": config.rooms,
         "probe_rooms": config.probe_rooms,
