@@ -295,11 +295,17 @@ def session(options: SweepOptions, progress: bool = False) -> Iterator[None]:
         yield
     finally:
         if started:
-            import ray
+            _stop_ray(before)
 
-            ray_processes = _descendants() - before
-            ray.shutdown()
-            _end_processes(ray_processes)
+
+def _stop_ray(before: set[int]) -> None:
+    """Shut the Ray this process started down, and end what of it outlives that (the
+    descendants this process did not have before, ``before``: the raylet's agents)."""
+    import ray
+
+    ray_processes = _descendants() - before
+    ray.shutdown()
+    _end_processes(ray_processes)
 
 
 def _descendants() -> set[int]:
@@ -355,6 +361,7 @@ def _running(pid: int) -> bool:
 
 def _run_on_ray(fn, units, workers, ray_address, desc, progress):
     # first: it imports Ray with its settings
+    before = _descendants()
     started = _start_ray(workers, ray_address, progress)
     import ray
     from ray.exceptions import RayTaskError
@@ -380,4 +387,4 @@ def _run_on_ray(fn, units, workers, ray_address, desc, progress):
         return out
     finally:
         if started:
-            ray.shutdown()
+            _stop_ray(before)
