@@ -89,12 +89,10 @@ def end_group(p: subprocess.Popen) -> None:
 
 @dataclass(frozen=True)
 class Served:
-    """A recording being served: the server's process, the viewer's address, and the log file
-    of the server's output."""
+    """A recording being served: the server's process and the viewer's address."""
 
     process: subprocess.Popen
     url: str
-    grpc_url: str
 
 
 def push_recording(path: Path, grpc_url: str) -> None:
@@ -133,9 +131,8 @@ def serve(path: Path, bind: str, port: int, grpc_port: int, log: Path) -> Iterat
         )  # fmt: skip
     try:
         _wait_ready(server, f"http://{host}:{port}/", log)
-        grpc_url = f"rerun+http://{host}:{grpc_port}/proxy"
-        push_recording(path, grpc_url)
-        yield Served(server, viewer_url(host, port, grpc_port), grpc_url)
+        push_recording(path, f"rerun+http://{host}:{grpc_port}/proxy")
+        yield Served(server, viewer_url(host, port, grpc_port))
     finally:
         end_group(server)
 
