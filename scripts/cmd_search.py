@@ -49,12 +49,12 @@ FLAG_KEYS = {
 }
 
 
-def add_budget_argument(p: argparse.ArgumentParser, default: float | None = None) -> None:
+def add_budget_argument(p: argparse.ArgumentParser) -> None:
     """``--budget-seconds``: an episode's simulated-time budget."""
     p.add_argument(
         "--budget-seconds",
         type=argtypes.seconds,
-        default=default,
+        default=None,
         metavar="B",
         help="simulated seconds before an episode counts as failed "
         f"(default: {cfg.DEFAULT_BUDGET_S:.0f})",
@@ -270,7 +270,7 @@ def run_search(args: argparse.Namespace) -> int:
         kb, seeds = _forgetting_knowledge(args, config)
         source = KnowledgeSource(kb, frozenset(seeds))
         config = config.updated({"knowledge.kb": None})
-    one = search_once(config, args.target, source=source, records=[args.record])
+    one = search_once(config, args.target, source=source, records=[args.record], catalog=catalog)
     if args.forget != Forget.NONE:
         print(f"knowledge: {args.kb} read with forgetting {argtypes.forgetting(args).label} "
               f"on day {source.kb.today}")  # fmt: skip

@@ -180,7 +180,7 @@ def test_sigterm_during_ray_is_one_line_and_leaves_no_worker(tmp_path, desk_cup_
                 break
             time.sleep(0.2)
         assert started, "Ray never started"
-        ray_procs = [k for k in _children(p.pid)]
+        ray_procs = _children(p.pid)
         p.send_signal(signal.SIGTERM)
         code, _, err = _ended_alone(p, timeout=60)
     finally:

@@ -131,10 +131,7 @@ def resolve(
     policy with knowledge cannot use it, or no policy uses it at all. (The no-context baselines
     run unchanged beside room context: they are the context policies' twins.)"""
     mode = parse(MapMode, mode, "map")
-    if not names:
-        raise CtxsearchError("no search policy given")
-    if len(set(names)) != len(names):
-        raise CtxsearchError(f"a policy is listed twice in '{','.join(names)}'")
+    _checked(list(names), ",".join(names))
     specs = []
     for name in names:
         base, rank = split_name(name)
@@ -173,11 +170,15 @@ def split_name(name: str) -> tuple[str, Rank | None]:
 
 def parse_policies(text: str) -> list[str]:
     """A comma-separated list of policy names (each optionally ``name@rank``), checked."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
+    return _checked([n.strip() for n in text.split(",") if n.strip()], text)
+
+
+def _checked(names: list[str], shown: str) -> list[str]:
+    """``names``; one-line errors for none, an unknown policy or rank, or a name twice."""
     if not names:
         raise CtxsearchError("no search policy given")
     for n in names:
         split_name(n)
     if len(set(names)) != len(names):
-        raise CtxsearchError(f"a policy is listed twice in '{text}'")
+        raise CtxsearchError(f"a policy is listed twice in '{shown}'")
     return names
