@@ -68,6 +68,7 @@ from ctxsearch.agent.exam_volumes import group_volume_members, relation_boxes
 from ctxsearch.agent.exploration import Explorer
 from ctxsearch.agent.frontiers import FrontierExplorer
 from ctxsearch.agent.grid_costs import GridCosts
+from ctxsearch.agent.home import home_map
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.mapping import BuiltMap
@@ -86,6 +87,7 @@ from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.home_map import HomeMap, RememberedObject
 from ctxsearch.knowledge.options import MapMode, Reexamine
 from ctxsearch.knowledge.store import NewExamination
 
@@ -386,6 +388,22 @@ class RoomLearner:
         b = self.built
         labels = RoomLabels.of_built(b) if b is not None else RoomLabels.of_plan(self.layout)
         return segment_contents(labels, self.recognized.objects(), self.catalog)
+
+    def home_map(self) -> HomeMap | None:
+        """What the robot keeps of the world at the end of a visit on its own map done to the
+        end (agent.home): its built map, its rooms and the furniture it recognised (each with
+        its best confidence and the examinations that reported it); None on a given map or a
+        visit the budget ended early."""
+        if self.built is None or self.left_early:
+            return None
+        rec, lay = self.recognized, self.layout
+        furniture = [
+            RememberedObject(o.type, o.id, o.position, o.yaw, o.size,
+                             min(1.0, rec.best.get(o.id, 1.0)), sum(rec.reports[o.id].values()))
+            for o in rec.objects() if self.catalog.type(o.type).is_furniture
+        ]  # fmt: skip
+        bounds = (-lay.width / 2, -lay.depth / 2, lay.width / 2, lay.depth / 2)
+        return home_map(self.built, (lay.style, lay.seed, self.day), bounds, lay.height, furniture)
 
     def _replays_by_images(self) -> bool:
         """A detector that errs reports poses and objects (false positives, look-alikes) the

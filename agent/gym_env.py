@@ -140,7 +140,7 @@ def draw_episode(
             _DRAWS.popitem(last=False)
     _DRAWS.move_to_end(spec)
     ep = draw.episodes[index]
-    return ep, episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
+    return ep, episode_layout(generate_layout(style, ep.room_seed, catalog, day=ep.day), ep)
 
 
 # The draws this process made, newest last: a reset to a (seed, index) drawn before (an

@@ -42,9 +42,10 @@ from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.envs.camera import NEAR_CLIP, Frame, PinholeCamera
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
-from ctxsearch.knowledge.options import MapMode, PerceptionMode, values
+from ctxsearch.knowledge.options import MapMode, PerceptionMode
 
-MAP_MODES = values(MapMode)
+# the maps learning plans on (a remembered map is a search's: agent.search.tour, agent.search.remembered)
+MAP_MODES = (MapMode.GIVEN.value, MapMode.BUILT.value)
 FLOOR_EPS = 0.005  # m: depth points below this height are floor (a pen lying there is not)
 HEAD_MARGIN = 0.10  # m above the camera: the head's top (points up to here are obstacles)
 VOXEL = 0.10  # m: the seen-space record's voxel edge

@@ -261,9 +261,11 @@ class Recorder:
         color: Sequence[float] | None = None,
         static: bool = False,
         show_labels: bool = True,
+        colors: Sequence[Sequence[float]] | None = None,
     ) -> None:
         """Boxes (relation volumes, search regions) as labelled wireframes at ``entity`` (with
-        ``show_labels=False`` the labels show on hover only)."""
+        ``show_labels=False`` the labels show on hover only); ``colors``: one per box (RGB in
+        [0, 1]), else ``color`` for all."""
         if self._rec is None:
             return
         import rerun as rr
@@ -272,7 +274,9 @@ class Recorder:
         if labels is not None:
             kwargs["labels"] = list(labels)
             kwargs["show_labels"] = show_labels
-        if color is not None:
+        if colors is not None:
+            kwargs["colors"] = [rgb255(c) for c in colors]
+        elif color is not None:
             kwargs["colors"] = [rgb255(color)] * len(boxes)
         if not boxes:
             self._rec.log(self.entity(entity), rr.Clear(recursive=False), static=static)

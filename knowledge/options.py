@@ -17,11 +17,13 @@ from ctxsearch.knowledge.errors import CtxsearchError
 
 
 class MapMode(StrEnum):
-    """The map the robot plans on: the true layout's (``given``, furniture poses known) or its
-    own, built from its depth images (``built``)."""
+    """The map the robot plans on: the true layout's (``given``, furniture poses known), its
+    own, built from its depth images (``built``), or, in a search, the map it built of the same
+    home on an earlier day and remembers (``remembered``: agent.search.tour, agent.search.remembered)."""
 
     GIVEN = "given"
     BUILT = "built"
+    REMEMBERED = "remembered"
 
 
 class PerceptionMode(StrEnum):

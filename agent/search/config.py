@@ -84,7 +84,8 @@ class MapConfig:
 
     scenario: MapMode | None = setting(
         None,
-        "built (the robot maps as it searches) or given (the furniture plan is known); none: "
+        "built (the robot maps as it searches), given (the true furniture plan is known) or "
+        "remembered (the robot's own map of the house from a tour on an earlier day); none: "
         "built in houses, given in single rooms",
     )
     depth_range_m: float = setting(
@@ -96,6 +97,19 @@ class MapConfig:
     )
     segments: Segments = setting(
         Segments.ROBOT, "the built map's rooms: the robot's segmentation (robot) or the plan's"
+    )
+    tour_budget_s: float = setting(
+        1800.0,
+        "remembered map: simulated seconds the tour that made it may take (agent.search.tour)",
+        1.0,
+        1e6,
+    )
+    days_after: int = setting(
+        1,
+        "remembered map: the search happens this many days after the tour (small objects are "
+        "placed anew each day, furniture stays)",
+        0,
+        1000,
     )
 
 

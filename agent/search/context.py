@@ -116,6 +116,8 @@ class SearchContext:
         self.body = _PathMeter(body)
         self.perception = perception
         self.built: BuiltMap | None = maps.new_built_map(episode.start, self.spec)
+        # the remembered furniture as today's images update it (None: not a remembered map)
+        self.memory = maps.furniture_memory(catalog, self.range_of)
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = "?"  # the policy's name, set when it runs (SearchPolicy.run)
@@ -183,7 +185,10 @@ class SearchContext:
         return r
 
     def furniture_map(self) -> list[ObjectInstance]:
-        """The map the location constraint may assume: the furniture poses of ``maps``."""
+        """The map the location constraint may assume: the furniture poses of ``maps`` (on the
+        remembered map, what is left of it after today's images: agent.search.tour, agent.search.remembered)."""
+        if self.memory is not None:
+            return self.memory.objects()
         return list(self.maps.furniture)
 
     def found_of(self, type_name: str) -> int:
@@ -202,7 +207,10 @@ class SearchContext:
         dets = list(self.perception.last_detections)
         if self.built is not None:
             self.built.update(frame)
-        hit = next((d for d in dets if d.type == self.target), None)
+        if self.memory is not None:
+            for gone in self.memory.observe(frame, dets):
+                self.note(f"{gone.type} #{gone.id} of the remembered map is not there: dropped")
+        hit = self._target_hit(dets)
         if hit is not None and not self._confirming:  # what the miss field held there before
             near = self.misses.near(hit.pose.position, CONFIRM_RADIUS_M)
             self._held = (near, self.misses.miss[near].copy())
@@ -234,6 +242,10 @@ class SearchContext:
         if hit is not None and self.found_id is None and self.elapsed <= self.episode.budget_s:
             self._found(hit)
         return dets
+
+    def _target_hit(self, dets: Sequence[Detection]) -> Detection | None:
+        """The image's first detection of the target (None: none)."""
+        return next((d for d in dets if d.type == self.target), None)
 
     def _found(self, hit: Detection) -> None:
         self.found_id, self.found_at = hit.instance_id, self.elapsed

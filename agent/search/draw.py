@@ -80,6 +80,9 @@ class DrawSpec:
     # starts, each episode's ``first_view`` None (the Oracle policy then plans it at its first
     # step), several times fewer images (the Gymnasium task, which has no oracle)
     first_view: bool = True
+    # the day of the worlds (envs.floorplan's days): a remembered map's search happens on a
+    # day after the tour that made the map (agent.search.tour, agent.search.remembered)
+    day: int = 0
 
     @classmethod
     def make(
@@ -98,7 +101,7 @@ class DrawSpec:
         can meet (the room seeds of its ``world_limit`` worlds), sorted: the draw is the same,
         and so is its key, for every store whose learning rooms it never meets (the curve's
         snapshots, the transfer's stores: one draw, not one per store). ``more``: the other
-        fields by name (``targets``, ``first_view``)."""
+        fields by name (``targets``, ``first_view``, ``day``)."""
         worlds = draw_worlds(int(seed), int(episodes))
         exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds.keys()))
         return cls(
@@ -124,7 +127,7 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
     rng = np.random.default_rng([int(spec.seed), i, EPISODE_TAG])
     if room_seed in spec.exclude_seeds:
         return WorldDraw(None)
-    layout = generate_layout(spec.style, room_seed, catalog)
+    layout = generate_layout(spec.style, room_seed, catalog, day=spec.day)
     tgt = episode_target(layout, catalog, spec.target, rng)
     if tgt is None:
         return WorldDraw(None)
@@ -155,7 +158,9 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
         return WorldDraw(None, "infeasible", redraws)
     if not spec.first_view:
         view = None
-    ep = Episode(-1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, first_view=view)
+    ep = Episode(
+        -1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, spec.day, first_view=view
+    )
     return WorldDraw(ep, None, redraws)
 
 
@@ -233,7 +238,7 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
             return False
         if spec.target is not None and ep.target != spec.target:
             return False
-        if (ep.instance is not None) != (spec.targets is Targets.INSTANCE):
+        if (ep.instance is not None) != (spec.targets is Targets.INSTANCE) or ep.day != spec.day:
             return False
         last = world
         if not _episode_fits(ep, spec, catalog):
@@ -244,7 +249,7 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
 def _episode_fits(ep: Episode, spec: DrawSpec, catalog: Catalog) -> bool:
     """The episode's world holds its target, the start is on a free cell, and its first oracle
     view (if any) sees a true instance within the budget."""
-    whole = generate_layout(spec.style, ep.room_seed, catalog)
+    whole = generate_layout(spec.style, ep.room_seed, catalog, day=ep.day)
     if ep.target not in small_types_present(whole, catalog):
         return False
     if ep.instance is not None and ep.instance not in {o.id for o in whole.of_type(ep.target)}:

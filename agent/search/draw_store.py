@@ -142,6 +142,7 @@ def from_json(doc: dict) -> EpisodeDraw:
             RobotPose(*(_finite(x) for x in e["start"])),
             _finite(e["budget_s"]),
             instance=None if e.get("instance") is None else int(e["instance"]),
+            day=int(e.get("day", 0)),
             first_view=_view(e["first_view"]),
         )
         for e in doc["episodes"]

@@ -62,6 +62,9 @@ class Episode:
     # ``--targets instance``: the one instance of the target the world keeps (the others are
     # taken out of it: ``episode_layout``); None: every instance of the type counts.
     instance: int | None = None
+    # the day of the world (envs.floorplan: furniture stays, small objects are placed anew on
+    # each later day): the remembered map's searches happen on a day after its tour
+    day: int = 0
     # The oracle's first plan (``oracle_view`` from ``start`` at second 0), as the episode draw
     # computed it to check the episode is feasible: the Oracle policy starts from it instead of
     # planning the same view again. Not part of the episode's identity.
@@ -78,6 +81,7 @@ class Episode:
             "start": [s.x, s.y, s.yaw],
             "budget_s": self.budget_s,
             **({} if self.instance is None else {"instance": self.instance}),
+            **({"day": self.day} if self.day else {}),
         }
 
 

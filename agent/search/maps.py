@@ -5,8 +5,12 @@
   from its depth images (the same map and rules as learning's ``--map built``: it plans only
   through cells seen to be floor with nothing within the clearance), objects are known only once
   detected, and the seen map's lattice covers the footprint without knowing the furniture.
-- ``given`` (``WorldMaps.given``): the furniture poses and the true layout's grid are known (a
-  home robot's map from an earlier visit).
+- ``given`` (``WorldMaps.given``): the furniture poses and the true layout's grid are known (the
+  true plan: an upper reference for a robot's own map).
+- ``remembered`` (``WorldMaps.remembered``): the map the robot made of the house on an earlier day
+  (agent.search.remembered: its occupancy, surfaces, rooms and the furniture it recognised, with its
+  misses and look-alikes); each policy's context starts a built map from it and updates the
+  remembered furniture with what it sees.
 
 These constructors and the episode runner's sensor are where the true layout becomes what the
 robot is given; the behaviours read only ``WorldMaps``.
@@ -24,11 +28,13 @@ from ctxsearch.agent.room_segmentation import RoomLabels
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.config import MapConfig, Segments
+from ctxsearch.agent.search.remembered import FurnitureMemory, home_rooms, home_seen, restored_map
 from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.home_map import HomeMap
 from ctxsearch.knowledge.options import MapMode
 
 _DEFAULT_MAP = MapConfig()
@@ -85,12 +91,23 @@ class WorldMaps:
     # the lattice do not change: agent.search.viewpoints.ViewpointScorer's ``views``)
     views: dict = field(default_factory=dict, compare=False, repr=False)
     depth_range: float = _DEFAULT_MAP.depth_range_m  # m: how far a built map reads depth
+    home: HomeMap | None = None  # the remembered map (``remembered``)
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
-        """An empty map of the robot's own over the footprint (``built``), None on a given map."""
+        """The robot's own map for one policy's run: empty over the footprint (``built``), the
+        remembered one's copy (``remembered``), None on a given map."""
+        if self.home is not None:
+            return restored_map(self.home, spec, self.depth_range)
         if self.map is not MapMode.BUILT:
             return None
         return BuiltMap(self.bounds, spec, start, max_range=self.depth_range, top=self.top)
+
+    def furniture_memory(self, catalog: Catalog, ranges) -> FurnitureMemory | None:
+        """The remembered furniture as one policy's run updates it (None: not ``remembered``);
+        ``ranges``: a type's detection range."""
+        if self.home is None:
+            return None
+        return FurnitureMemory(self.furniture, ranges)
 
     @classmethod
     def built(
@@ -145,6 +162,26 @@ class WorldMaps:
             grid, seen, furniture, detector, MapMode.GIVEN, size, _bounds(layout), layout.height,
             Occluders.from_layout(layout, spec), RoomLabels.of_plan(layout),
             depth_range=config.depth_range_m,
+        )  # fmt: skip
+
+    @classmethod
+    def remembered(
+        cls,
+        home: HomeMap,
+        layout: RoomLayout,
+        spec: RobotSpec,
+        detector: DetectorModel | None = None,
+        config: MapConfig = _DEFAULT_MAP,
+    ) -> WorldMaps:
+        """The ``remembered`` map scenario: ``home``, the map of an earlier day's tour
+        (agent.search.tour, agent.search.remembered); the layout gives only the footprint (the lattice's extent, as on
+        the built map) and the room count the efficiency model assumes."""
+        built = restored_map(home, spec, config.depth_range_m)
+        size = sx.WorldSize(layout.width * layout.depth, max(1, home.room_count()))
+        return cls(
+            built.refresh(), home_seen(home, layout), tuple(home.objects()), detector,
+            MapMode.REMEMBERED, size, home.bounds, home.top, plan_rooms=home_rooms(home),
+            depth_range=config.depth_range_m, home=home,
         )  # fmt: skip
 
     @classmethod

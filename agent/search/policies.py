@@ -252,6 +252,12 @@ class IndirectPlanned(SearchPolicy):
         return tm.leg_estimate(0.5 * mean_drive) + tm.looks_estimate(images, costs.head_s)
 
 
+# indirect search by scenario: online where the map is the robot's own (built, remembered)
+_INDIRECT = {
+    MapMode.BUILT: IndirectOnline,
+    MapMode.GIVEN: IndirectPlanned,
+    MapMode.REMEMBERED: IndirectOnline,
+}
 # The algorithm behind each policy name, by scenario (the oracle: agent.search.oracle.Oracle,
 # built by the episode runner with what it reads of the truth).
 _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
@@ -261,8 +267,8 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
     "uniform": Online,
     "location": Location,
     "oracle-prior": Location,
-    "indirect": {MapMode.BUILT: IndirectOnline, MapMode.GIVEN: IndirectPlanned},
-    "oracle-prior-indirect": {MapMode.BUILT: IndirectOnline, MapMode.GIVEN: IndirectPlanned},
+    "indirect": _INDIRECT,
+    "oracle-prior-indirect": _INDIRECT,
 }
 
 

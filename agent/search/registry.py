@@ -47,28 +47,30 @@ class PolicyInfo:
         return dict(self.roles).get(mode)
 
 
-_B, _G = MapMode.BUILT, MapMode.GIVEN
+_B, _G, _R = MapMode.BUILT, MapMode.GIVEN, MapMode.REMEMBERED
 # In this order: each scenario's default policies are the entries with a role there, in order.
 REGISTRY: tuple[PolicyInfo, ...] = (
     PolicyInfo("frontier", (_B,), ((_B, Role.BASELINE),),
                summary="no context: the belief with every point alike, on the robot's own map"),
-    PolicyInfo("uniform", (_G,), ((_G, Role.BASELINE),),
+    PolicyInfo("uniform", (_G, _R), ((_G, Role.BASELINE), (_R, Role.BASELINE)),
                summary="no context: the belief with every point alike (location's twin)"),
-    PolicyInfo("map-only", (_G,), ((_G, Role.REFERENCE),),
+    PolicyInfo("map-only", (_G, _R), ((_G, Role.REFERENCE),),
                summary="no context: every relation volume of the known furniture, a short tour"),
-    PolicyInfo("location", (_G,), ((_G, Role.CONTEXT),), Needs.KB,
+    PolicyInfo("location", (_G, _R), ((_G, Role.CONTEXT), (_R, Role.CONTEXT)), Needs.KB,
                summary="location constraint: the belief over relation volumes by P(rel(T))",
-               room_context=(_G,)),
-    PolicyInfo("indirect", (_B, _G), ((_B, Role.CONTEXT),), Needs.KB,
+               room_context=(_G, _R)),
+    PolicyInfo("indirect", (_B, _G, _R), ((_B, Role.CONTEXT),), Needs.KB,
                summary="detectability-driven: intermediate types, volumes and frontier",
-               room_context=(_B,)),
-    PolicyInfo("oracle-prior", (_G,), ((_G, Role.ASYMPTOTE),), Needs.TRUTH,
-               summary="location with the true probabilities", room_context=(_G,)),
-    PolicyInfo("oracle-prior-indirect", (_B, _G), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
-               summary="indirect with the true probabilities", room_context=(_B,)),
-    PolicyInfo("oracle", (_B, _G), ((_B, Role.BOUND), (_G, Role.BOUND)), reads_truth=True,
+               room_context=(_B, _R)),
+    PolicyInfo("oracle-prior", (_G, _R), ((_G, Role.ASYMPTOTE), (_R, Role.ASYMPTOTE)),
+               Needs.TRUTH, summary="location with the true probabilities",
+               room_context=(_G, _R)),
+    PolicyInfo("oracle-prior-indirect", (_B, _G, _R), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
+               summary="indirect with the true probabilities", room_context=(_B, _R)),
+    PolicyInfo("oracle", (_B, _G, _R), ((_B, Role.BOUND), (_G, Role.BOUND), (_R, Role.BOUND)),
+               reads_truth=True,
                summary="knows the target and the detector's draws: the lower bound"),
-    PolicyInfo("exhaustive", (_G,), ((_G, Role.REFERENCE),),
+    PolicyInfo("exhaustive", (_G, _R), ((_G, Role.REFERENCE),),
                summary="no context: coverage of the whole map"),
 )  # fmt: skip
 POLICIES: dict[str, PolicyInfo] = {p.name: p for p in REGISTRY}

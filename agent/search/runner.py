@@ -28,7 +28,7 @@ from ctxsearch.agent.recording import Recorder, open_stream
 from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.config import SearchConfig
+from ctxsearch.agent.search.config import MapConfig, SearchConfig
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
 from ctxsearch.agent.search.draw_store import code_digest
@@ -44,6 +44,8 @@ from ctxsearch.agent.search.oracle import Oracle, OracleEye
 from ctxsearch.agent.search.policies import SearchPolicy, make_policy
 from ctxsearch.agent.search.priors import NO_KNOWLEDGE, KnowledgeSource, Priors, make_priors
 from ctxsearch.agent.search.registry import PolicySpec, default_policies, resolve
+from ctxsearch.agent.search.remembered import log_remembered
+from ctxsearch.agent.search.tour import cached_tour
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import (
     Detection,
@@ -57,7 +59,9 @@ from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.world import World
 from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.home_map import HomeMap
 from ctxsearch.knowledge.options import MapMode
 
 
@@ -97,9 +101,10 @@ class SearchRun:
         """The episode draw this run searches: ``episodes`` episodes (``target``: of that type
         only), never in the worlds the knowledge was learned in."""
         c = self.config
+        day = c.map.days_after if c.scenario is MapMode.REMEMBERED else 0
         return DrawSpec.make(
             self.style, episodes, c.seed, self.catalog, c.budget_s, self.priors.learned, target,
-            self.detector, targets=c.targets,
+            self.detector, targets=c.targets, day=day,
         )  # fmt: skip
 
     def runs(self, records: Sequence[Path | None] | None = None) -> tuple[PolicyRun, ...]:
@@ -270,6 +275,8 @@ def run_policy(ep: Episode, run: PolicyRun, world: EpisodeWorld, stream=None) ->
         rec.log_room(layout, catalog)
         rec.log_text(f"episode: room {ep.style}/{ep.room_seed}, target {ep.target}, policy {name}")
         policy, ctx = world.prepare(ep, run, rec)
+        if ctx.maps.home is not None:
+            log_remembered(rec, ctx.maps.home)
         return world.judged(policy.run(ctx))
 
 
@@ -295,7 +302,7 @@ def search_world(
     progress: Callable[[str], None] | None = None,
 ) -> list[SearchResult]:
     """Build ``ep``'s world once and run each of ``what.runs`` in it; results in that order."""
-    layout = episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
+    layout = episode_layout(generate_layout(style, ep.room_seed, catalog, day=ep.day), ep)
     stream = None
     if what.shared is not None:
         names = [r.spec.name for r in what.runs]
@@ -305,17 +312,9 @@ def search_world(
             name=f"search: {ep.style} room {ep.room_seed}, {ep.target}: {' vs '.join(names)}",
             blueprint=search_blueprint(layout, [(recording_root(n), n) for n in names]),
         )
-    m = what.config.map
     try:
         with World(layout, catalog) as world:
-            given = WorldMaps.given(layout, catalog, world.spec, what.detector, m)
-            if what.config.scenario is MapMode.BUILT:
-                built = WorldMaps.built(layout, catalog, world.spec, what.detector, m)
-                here = EpisodeWorld(
-                    layout, catalog, world, built, what.config, given, what.observer
-                )
-            else:
-                here = EpisodeWorld(layout, catalog, world, given, what.config, None, what.observer)
+            here = _episode_world(ep, style, layout, world, what)
             out = []
             for run in what.runs:
                 res = run_policy(ep, run, here, stream)
@@ -329,6 +328,40 @@ def search_world(
             stream.flush()
             stream.disconnect()
     return out
+
+
+def _episode_world(
+    ep: Episode, style: WorldStyle, layout: RoomLayout, world: World, what: WorldRuns
+) -> EpisodeWorld:
+    """The episode's world with the scenario's maps (the true layout's for the oracle)."""
+    catalog, m, scenario = world.catalog, what.config.map, what.config.scenario
+    given = WorldMaps.given(layout, catalog, world.spec, what.detector, m)
+    if scenario is MapMode.GIVEN:
+        return EpisodeWorld(layout, catalog, world, given, what.config, None, what.observer)
+    if scenario is MapMode.BUILT:
+        maps = WorldMaps.built(layout, catalog, world.spec, what.detector, m)
+    else:
+        home = remembered_home(ep, style, catalog, what.detector, m)
+        maps = WorldMaps.remembered(home, layout, world.spec, what.detector, m)
+    return EpisodeWorld(layout, catalog, world, maps, what.config, given, what.observer)
+
+
+def remembered_home(
+    ep: Episode, style: WorldStyle, catalog: Catalog, detector: DetectorModel | None, m: MapConfig
+) -> HomeMap:
+    """The map the robot made of episode ``ep``'s house on the day of its tour
+    (``ep.day - map.days_after``; agent.search.tour), from the cache or toured now in a world of
+    that day of its own."""
+    day = ep.day - m.days_after
+    if day < 0:
+        raise CtxsearchError(f"episode {ep.index} is on day {ep.day}: no day to tour before it")
+    layout = generate_layout(style, ep.room_seed, catalog, day=day)
+    with World(layout, catalog) as world:
+        model = detector or load_detector("perfect")
+        sensor = EpisodeSensor(
+            world, SimDetector(model, layout, catalog, layout.seed), catalog, world.sim_time
+        )
+        return cached_tour(layout, catalog, detector, m, day, body=world, sensor=sensor)
 
 
 def run_episode(

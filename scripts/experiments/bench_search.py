@@ -196,7 +196,7 @@ def episode_facts(style: WorldStyle, eps: Sequence[Episode], catalog: Catalog) -
     from the true layout: a report, not the robot's knowledge."""
     out = []
     for ep in eps:
-        layout = episode_layout(generate_layout(style, ep.room_seed, catalog), ep)
+        layout = episode_layout(generate_layout(style, ep.room_seed, catalog, day=ep.day), ep)
         inst = layout.of_type(ep.target)
         start = _room_at(layout, ep.start.x, ep.start.y)
         same = not layout.rooms or any(layout.room_of.get(o.id) == start for o in inst)
