@@ -330,6 +330,7 @@ class _Rooms:
                     break
             self.log.end_room(L, L.n_room)
             contents = [] if stopped else L.room_contents()
+            home = None if stopped else L.home_map()
         finally:
             L.close()
             release_memory()
@@ -339,7 +340,7 @@ class _Rooms:
             return False
         store.mark_room(
             run.settings.key, run.settings.style, seed, ROOM_DONE, end_time=L.clock, day=day,
-            contents=contents,
+            contents=contents, home_map=home,
         )  # fmt: skip
         run.counters.clock_offset = L.clock
         summary.rooms += int(day == 0)

@@ -5,7 +5,7 @@ strategy) and one row per observed (relation, related type, related object id); 
 knowledge base, hence its intervals, are rebuilt from this log, so runs resume, stores from several
 robots merge (``merge_stores``), and the same evidence can be re-read with another alpha.
 
-Tables (schema version 5)::
+Tables (schema version 7)::
 
     meta          (key TEXT PRIMARY KEY, value TEXT)   app='ctxsearch', schema_version,
                                                        catalog_fingerprint, catalog_path, alpha,
@@ -26,6 +26,16 @@ Tables (schema version 5)::
                                                        recall, false-report rate: uint16 blobs in
                                                        catalog order; knowledge.corrected); none
                                                        for the oracle perception
+    room_contents (run, style, room_seed, day, segment, type, instances)
+                                                       version 6: per house visit done, per
+                                                       segment of the robot's map, how many
+                                                       instances of each type it recognized
+                                                       there (knowledge.room_context)
+    home_maps     (run, style, seed, day, map)         version 7: per house visit done, the
+                                                       robot's remembered map of the world
+                                                       (knowledge.home_map.HomeMap.to_bytes: a
+                                                       pickle-free .npz blob);
+                                                       PRIMARY KEY (run, style, seed, day)
 
 The uniqueness key ``EXAM_KEY`` (run, style, room_seed, day, object_id) is what identifies an
 examination of a run: a second process learning the same run on the same store cannot add an
@@ -37,20 +47,25 @@ per day.
 
 Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time),
 version 2 (no uniqueness key) and version 3 (no day stamps: every examination and visit is of day
-0). Reading (``open(..., read_only=True)``: ``kb show``, ``kb stats``, search) never migrates. The
-first write to one (``record``, ``mark_room``, a merge into it) upgrades it in place to version 5
-in the same transaction as the write: a version-4 store gains the empty views table; older ones
-have their tables rebuilt in this version's exact schema (older rows get day 0) and duplicate examinations (same ``EXAM_KEY``, written by two processes
-before version 3) are dropped, keeping the first; a failure anywhere rolls the whole transaction
-back, leaving the file as it was. Older ctxsearch then refuses the store with its one-line
-"newer schema" error. ``examinations()`` reads the log back, examination by examination.
+0), version 4 (no views), version 5 (no room contents) and version 6 (no remembered maps:
+``home_map`` is None, ``home_maps`` empty). Reading (``open(..., read_only=True)``: ``kb show``,
+``kb stats``, search) never migrates. The first write to one (``record``, ``mark_room``, a merge
+into it) upgrades it in place to version 7 in the same transaction as the write: a version-6 store
+gains the empty home_maps table, a version-5 store that and the empty room_contents table, a
+version-4 store those and the empty views table; older ones have their tables rebuilt in this
+version's exact schema (older rows get day 0) and duplicate examinations (same ``EXAM_KEY``,
+written by two processes before version 3) are dropped, keeping the first; a failure anywhere
+rolls the whole transaction back, leaving the file as it was. Older ctxsearch then refuses the
+store with its one-line "newer schema" error. ``examinations()`` reads the log back, examination
+by examination; ``home_map(style, seed)`` the latest remembered map of a world.
 
 A store's schema (tables, columns, indexes, triggers, views) must be exactly what this version (or
 the older version it claims) writes: anything else, e.g. a trigger that would add evidence on
 every append, is refused. Every value read back is checked (types, finite numbers, names in the
 catalog) and a bad one is a one-line StoreError naming the store.
 
-Every examination is written in one transaction (its row and its observation rows). The store
+Every examination is written in one transaction (its row and its observation rows); a visit's
+'done' in one with its room contents and its remembered map (``mark_room``). The store
 uses SQLite's write-ahead log (journal_mode=WAL, synchronous=NORMAL): a process killed at any
 point loses at most the examination in flight (a power cut, at most the last few), commits cost
 no fsync, and readers (``ctxsearch kb show``) do not block a running robot. A file that is not a ctxsearch store, has a newer schema, is corrupt, or was built on a
@@ -77,6 +92,8 @@ import numpy as np
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.home_map import MAX_BYTES as MAX_MAP_BYTES
+from ctxsearch.knowledge.home_map import HomeMap, check_types
 from ctxsearch.knowledge.store_reads import EvidenceReads, Examination
 from ctxsearch.knowledge.store_schema import (
     _EXAM_COLS,
@@ -353,13 +370,16 @@ class EvidenceStore(EvidenceReads):
         end_time: float | None = None,
         day: int = 0,
         contents: Iterable[tuple[int, str, int]] = (),
+        home_map: HomeMap | None = None,
     ) -> None:
         """Set the status of a room's visit on ``day``: 'started' when the robot enters it (a
         visit already done stays done), 'done' when it is finished; ``end_time`` (the run's
         simulated clock when it was done) replaces the stored one. ``contents`` (with 'done'
         only): what the visit's rooms held, (segment, type, instances) rows
-        (knowledge.room_context), written in the same transaction; a visit keeps the contents
-        it was first given (a second 'done' adds none: nothing counts twice)."""
+        (knowledge.room_context); ``home_map`` (with 'done' only): the robot's remembered map of
+        the world (of this style, seed and day, its furniture of catalog types); both written
+        in the same transaction; a visit keeps the contents and the map it was first given (a
+        second 'done' adds none: nothing counts twice)."""
         if status not in ROOM_STATUSES:
             raise CtxsearchError(f"room status must be one of {ROOM_STATUSES}, got {status!r}")
         key = (_text(run, "run"), _text(style, "style"), _int(seed, "seed"), _day(day), status)
@@ -367,6 +387,9 @@ class EvidenceStore(EvidenceReads):
         rows = self._content_rows(key[:4], contents)
         if rows and status != "done":
             raise CtxsearchError("room contents are recorded only with a visit marked 'done'")
+        if home_map is not None and status != "done":
+            raise CtxsearchError("a home map is recorded only with a visit marked 'done'")
+        blob = None if home_map is None else _map_blob(key[:4], home_map, self.catalog)
         with self._transaction() as cur:
             if (
                 rows
@@ -396,6 +419,16 @@ class EvidenceStore(EvidenceReads):
                     "WHERE rooms.status != 'done'",
                     key,
                 )
+            if blob is not None:
+                self._insert_home_map(cur, (*key[:4], blob))
+
+    def _insert_home_map(self, cur: sqlite3.Cursor, row: tuple) -> None:
+        """Store a visit's map unless it has one (the first kept)."""
+        cur.execute(
+            "INSERT INTO home_maps (run, style, seed, day, map) VALUES (?, ?, ?, ?, ?) "
+            "ON CONFLICT (run, style, seed, day) DO NOTHING",
+            row,
+        )
 
     def _content_rows(self, visit: tuple, contents: Iterable[tuple[int, str, int]]) -> list[tuple]:
         """``mark_room``'s contents as rows, checked against the catalog (CtxsearchError)."""
@@ -493,15 +526,35 @@ class EvidenceStore(EvidenceReads):
             self.duplicates_dropped += dropped
 
 
+def _map_blob(visit: tuple, home_map: object, catalog: Catalog) -> bytes:
+    """``mark_room``'s map as bytes, checked: a HomeMap of the visit's (run, style, seed, day)
+    world and day, its furniture of the catalog's types (CtxsearchError otherwise)."""
+    _run, style, seed, day = visit
+    if not isinstance(home_map, HomeMap):
+        raise CtxsearchError(f"home_map must be a HomeMap, got {type(home_map).__name__}")
+    where = f"home map of {style}/{seed} day {day}"
+    if (home_map.style, home_map.seed, home_map.day) != (style, seed, day):
+        raise CtxsearchError(
+            f"{where}: the map is of {home_map.style}/{home_map.seed} day {home_map.day}"
+        )
+    blob = check_types(home_map, catalog.type_names, where).to_bytes()
+    if len(blob) > MAX_MAP_BYTES:
+        raise CtxsearchError(f"{where}: {len(blob)} bytes, larger than {MAX_MAP_BYTES}")
+    return blob
+
+
 def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: Catalog) -> int:
     """Append the logs of ``in_paths`` to the store at ``out_path`` (created if missing).
 
     Every input must be a store built on ``catalog`` (StoreError naming the file otherwise); all
     inputs are checked before anything is written, and the whole merge is one transaction.
     Examination ids are renumbered; a room marked 'done' in any input is 'done' in the output,
-    with the first end time any of them recorded. An output older than version 4 is upgraded. An
-    examination that is already in the output (same EXAM_KEY) is a StoreError: nothing is merged.
-    A new output gets the first input's alpha. Returns the number of examinations appended.
+    with the first end time any of them recorded, the first room contents and the first
+    remembered map (each checked: one that cannot be decoded, or holds a type outside the
+    catalog, is a one-line error naming the input and nothing is merged). An output older than
+    version 7 is upgraded. An examination that is already in the output (same EXAM_KEY) is a
+    StoreError: nothing is merged. A new output gets the first input's alpha. Returns the number
+    of examinations appended.
     """
     out_path = Path(out_path)
     ins = [Path(p) for p in in_paths]
@@ -523,11 +576,16 @@ def merge_stores(out_path: str | Path, in_paths: Sequence[str | Path], catalog: 
     appended = 0
     try:
         with store, store._transaction() as cur:
-            for p, meta in zip(ins, metas, strict=True):
+            for p in ins:
                 src = _connect_ro(p)
                 try:
                     src.execute("BEGIN")  # one snapshot of the input, even if a robot is writing it
-                    appended += _append_log(cur, src, int(meta["schema_version"]))
+                    # Its version as this snapshot sees it: a robot writing it may have upgraded
+                    # it in its WAL since the check of its main file (inspect_store).
+                    version = int(_check_store(src, p, quick_check=False)["schema_version"])
+                    appended += _append_log(cur, src, version)
+                    if version >= 7:
+                        _append_maps(cur, src, p, catalog)
                 except sqlite3.IntegrityError:
                     raise StoreError(
                         f"{p}: holds examinations already in {out_path} (same run, room and "
@@ -599,6 +657,29 @@ def _append_contents(cur: sqlite3.Cursor, src: sqlite3.Connection) -> None:
             cur.executemany(
                 f"INSERT INTO room_contents ({cols}) VALUES (?, ?, ?, ?, ?, ?, ?)", rows
             )
+
+
+def _append_maps(
+    cur: sqlite3.Cursor, src: sqlite3.Connection, path: Path, catalog: Catalog
+) -> None:
+    """Copy ``src``'s remembered maps, each decoded and checked first (a one-line HomeMapError
+    or StoreError naming ``path``); a visit that already has a map in the output keeps it."""
+    cols = "run, style, seed, day, map"
+    for run, style, seed, day, blob in src.execute(
+        f"SELECT {cols} FROM home_maps ORDER BY 1, 2, 3, 4"
+    ):
+        where = f"{path}: home map {style}/{seed} day {day}"
+        m = check_types(HomeMap.from_bytes(blob, where), catalog.type_names, where)
+        if (
+            not isinstance(run, str) or not isinstance(style, str)
+            or (m.style, m.seed, m.day) != (style, seed, day)
+        ):  # fmt: skip
+            raise StoreError(f"{where}: damaged knowledge store: the row is not the map's visit")
+        cur.execute(
+            f"INSERT INTO home_maps ({cols}) VALUES (?, ?, ?, ?, ?) "
+            "ON CONFLICT (run, style, seed, day) DO NOTHING",
+            (run, style, seed, day, blob),
+        )
 
 
 def _copy_shifted(

@@ -1,6 +1,8 @@
 """Reading the evidence log back (``EvidenceReads``, the read side of ``knowledge.store.EvidenceStore``):
-examinations, rooms and visits, counts per room, and the knowledge base; every value read is
-checked and a bad one is a one-line StoreError naming the store."""
+examinations, rooms and visits, counts per room, the knowledge base, and the robot's remembered
+maps of the houses it visited (``HomeMapReads``, schema 7); every value read is checked and a bad
+one is a one-line StoreError naming the store (a remembered map that cannot be decoded, a one-line
+``knowledge.home_map.HomeMapError`` naming the store and the map)."""
 
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts, room_counts_from_rows
 from ctxsearch.knowledge.corrected import CorrectedIntervals, ExamViews
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
+from ctxsearch.knowledge.home_map import MAX_BYTES as MAX_MAP_BYTES
+from ctxsearch.knowledge.home_map import HomeMap, check_types
 from ctxsearch.knowledge.options import IntervalMethod
 from ctxsearch.knowledge.room_context import RoomContext
 from ctxsearch.knowledge.store_schema import (
@@ -46,14 +50,112 @@ class Examination:
     day: int = 0  # the day of the world's visit (0 in stores older than version 4)
 
 
-class EvidenceReads:
-    """The read queries of an open evidence store (mixed into ``EvidenceStore``, which holds
-    the connection ``conn``, the catalog, the store's ``alpha`` and its ``path``)."""
+class _ReadChecks:
+    """What every read of an open evidence store checks its values with (one-line StoreErrors
+    naming the store); the store holds the connection ``conn``, the catalog, its ``alpha``,
+    its ``path`` and its schema ``version``."""
 
     conn: sqlite3.Connection
     catalog: Catalog
     alpha: float
     path: Path
+    version: int
+
+    def _bad(self, what: str) -> StoreError:
+        return StoreError(f"{self.path}: damaged knowledge store: {what}")
+
+    def _integer(self, v: object, what: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self._bad(f"{what} {v!r} is not an integer")
+        return v
+
+    def _day_stamp(self, v: object, what: str) -> int:
+        d = self._integer(v, what)
+        if not 0 <= d <= MAX_DAY:
+            raise self._bad(f"{what} {d} is not a day in [0, {MAX_DAY}]")
+        return d
+
+    def _number(self, v: object, what: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self._bad(f"{what} {v!r} is not a finite number")
+        return float(v)
+
+    def _name(self, v: object, what: str) -> str:
+        if not isinstance(v, str) or not v or not v.isprintable():
+            raise self._bad(f"{what} {v!r} is not a name")
+        return v
+
+    @contextlib.contextmanager
+    def _reading(self):
+        try:
+            yield
+        except sqlite3.Error as exc:
+            raise StoreError(
+                f"{self.path}: cannot read knowledge store ({_one_line(exc)})"
+            ) from None
+
+
+class HomeMapReads(_ReadChecks):
+    """The robot's remembered maps (schema 7's ``home_maps``: one per house visit done, the
+    first kept); a store older than version 7 holds none."""
+
+    def home_maps(self, run: str | None = None) -> list[tuple[str, str, int, int]]:
+        """(run, style, seed, day) of every stored map (of one run, or all), sorted."""
+        if self.version < 7:
+            return []
+        where, args = (" WHERE run = ?", (run,)) if run is not None else ("", ())
+        out = []
+        with self._reading():
+            for r, st, seed, day in self.conn.execute(
+                f"SELECT run, style, seed, day FROM home_maps{where}", args
+            ):
+                out.append((self._name(r, "home map run"), self._name(st, "home map style"),
+                            self._integer(seed, "home map seed"),
+                            self._day_stamp(day, "home map day")))  # fmt: skip
+        return sorted(out)
+
+    def home_map(
+        self, style: str, seed: int, run: str | None = None, upto_day: int | None = None
+    ) -> HomeMap | None:
+        """The remembered map of world (``style``, ``seed``) of the latest day (at most
+        ``upto_day`` if given) that has one, of ``run`` (or of any run: the latest day, then
+        the first run by name); None if there is none. A row that is not a map of that visit
+        and of this catalog is a one-line error naming the store."""
+        if self.version < 7:
+            return None
+        conds, args = ["style = ?", "seed = ?"], [style, _whole(seed, "seed")]
+        if run is not None:
+            conds.append("run = ?")
+            args.append(run)
+        if upto_day is not None:
+            conds.append("day <= ?")
+            args.append(_whole(upto_day, "upto_day"))
+        sql = (
+            "SELECT run, day, typeof(map), length(map), CASE WHEN typeof(map) = 'blob' AND "
+            f"length(map) <= {MAX_MAP_BYTES} THEN map END FROM home_maps "
+            f"WHERE {' AND '.join(conds)} ORDER BY day DESC, run LIMIT 1"
+        )
+        with self._reading():
+            row = self.conn.execute(sql, args).fetchone()
+        if row is None:
+            return None
+        day = self._day_stamp(row[1], f"home map {style}/{seed}: day")
+        where = f"{self.path}: home map {style}/{seed} day {day}"
+        if row[2] != "blob":
+            raise self._bad(f"home map {style}/{seed} day {day} is {row[2]}, not a blob")
+        if row[4] is None:
+            raise self._bad(f"home map {style}/{seed} day {day}: {row[3]} bytes, larger than "
+                            f"{MAX_MAP_BYTES}")  # fmt: skip
+        m = check_types(HomeMap.from_bytes(row[4], where), self.catalog.type_names, where)
+        if (m.style, m.seed, m.day) != (style, args[1], day):
+            raise self._bad(f"home map {style}/{seed} day {day} holds the map of "
+                            f"{m.style}/{m.seed} day {m.day}")  # fmt: skip
+        return m
+
+
+class EvidenceReads(HomeMapReads):
+    """The read queries of an open evidence store (mixed into ``EvidenceStore``, which holds
+    the connection ``conn``, the catalog, the store's ``alpha`` and its ``path``)."""
 
     def examinations(self, run: str | None = None) -> Iterator[Examination]:
         """Every examination of the log (of one run, or all) in log order, each with its
@@ -382,40 +484,6 @@ class EvidenceReads:
             alpha,
         )
 
-    # ---- internals ----------------------------------------------------------------------------
-    def _bad(self, what: str) -> StoreError:
-        return StoreError(f"{self.path}: damaged knowledge store: {what}")
-
-    def _integer(self, v: object, what: str) -> int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self._bad(f"{what} {v!r} is not an integer")
-        return v
-
-    def _day_stamp(self, v: object, what: str) -> int:
-        d = self._integer(v, what)
-        if not 0 <= d <= MAX_DAY:
-            raise self._bad(f"{what} {d} is not a day in [0, {MAX_DAY}]")
-        return d
-
-    def _number(self, v: object, what: str) -> float:
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise self._bad(f"{what} {v!r} is not a finite number")
-        return float(v)
-
-    def _name(self, v: object, what: str) -> str:
-        if not isinstance(v, str) or not v or not v.isprintable():
-            raise self._bad(f"{what} {v!r} is not a name")
-        return v
-
-    @contextlib.contextmanager
-    def _reading(self):
-        try:
-            yield
-        except sqlite3.Error as exc:
-            raise StoreError(
-                f"{self.path}: cannot read knowledge store ({_one_line(exc)})"
-            ) from None
-
 
 def _exam_filter(run: str | None, upto: int | None, prefix: str = "") -> tuple[str, tuple]:
     """The WHERE clause (with its leading space, or empty) and arguments selecting the
@@ -429,3 +497,10 @@ def _exam_filter(run: str | None, upto: int | None, prefix: str = "") -> tuple[s
         conds.append(f"{prefix}id <= ?")
         args.append(int(upto))
     return (" WHERE " + " AND ".join(conds) if conds else "", tuple(args))
+
+
+def _whole(v: object, what: str) -> int:
+    """``v`` as an integer (numpy integers too), or a CtxsearchError."""
+    if isinstance(v, bool) or not isinstance(v, int | np.integer):
+        raise CtxsearchError(f"{what} must be an integer, got {v!r}")
+    return int(v)

@@ -1,8 +1,9 @@
-"""The evidence store's schema: its tables (version 6) and the older versions it reads, the
-checks a file passes before it is opened (``inspect_store``: a ctxsearch store of this catalog, the
-exact schema its version writes, sane day stamps), the upgrade of an older store inside the first
-write's transaction (``_migrate``), and the connections (read-only ones never write). The store
-itself is ``knowledge.store``."""
+"""The evidence store's schema: its tables (version 7: version 6 and the robot's remembered map
+of each house visit, ``home_maps``) and the older versions it reads, the checks a file passes
+before it is opened (``inspect_store``: a ctxsearch store of this catalog, the exact schema its
+version writes, sane day stamps), the upgrade of an older store inside the first write's
+transaction (``_migrate``), and the connections (read-only ones never write). The store itself is
+``knowledge.store``."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 APP = "ctxsearch"
 ROOM_STATUSES = ("started", "done")
 # What identifies an examination of a run: at most one row per key (a UNIQUE index from v3 on;
@@ -31,9 +32,9 @@ EXAM_KEY = ("run", "style", "room_seed", "day", "object_id")
 MAX_DAY = 1_000_000
 _V3_EXAM_KEY = ("run", "style", "room_seed", "object_id")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
-_TABLES = ("meta", "rooms", "examinations", "observations", "views", "room_contents")
+_TABLES = ("meta", "rooms", "examinations", "observations", "views", "room_contents", "home_maps")
 # The first version holding each table that not every version has.
-_TABLE_SINCE = {"views": 5, "room_contents": 6}
+_TABLE_SINCE = {"views": 5, "room_contents": 6, "home_maps": 7}
 
 _META_SQL = "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)"
 _ROOMS_SQL = """CREATE TABLE rooms (
@@ -91,6 +92,15 @@ _ROOM_CONTENTS_SQL = """CREATE TABLE room_contents (
     instances INTEGER NOT NULL CHECK (instances >= 1),
     PRIMARY KEY (run, style, room_seed, day, segment, type)
 ) WITHOUT ROWID"""
+# Version 7: the robot's remembered map of a world at the end of a house visit done to the end
+# (knowledge.home_map.HomeMap.to_bytes: a pickle-free .npz archive), one per visit, the first
+# kept; written with the visit's 'done' and its room contents. A rowid table: its rows are large.
+_HOME_MAPS_SQL = """CREATE TABLE home_maps (
+    run TEXT NOT NULL, style TEXT NOT NULL, seed INTEGER NOT NULL,
+    day INTEGER NOT NULL CHECK (day >= 0),
+    map BLOB NOT NULL,
+    PRIMARY KEY (run, style, seed, day)
+)"""
 _EXAM_KEY_INDEX = f"CREATE UNIQUE INDEX examinations_key ON examinations ({', '.join(EXAM_KEY)})"
 # The schema this version writes, statement by statement (meta first).
 _SCHEMA_STATEMENTS = (
@@ -102,8 +112,9 @@ _SCHEMA_STATEMENTS = (
     _OBSERVATIONS_INDEX,
     _VIEWS_SQL,
     _ROOM_CONTENTS_SQL,
+    _HOME_MAPS_SQL,
 )
-# The schemas of older versions, still read (and upgraded to version 6 on the first write).
+# The schemas of older versions, still read (and upgraded to version 7 on the first write).
 _OLD_ROOM_INDEX = "CREATE INDEX examinations_room ON examinations (run, style, room_seed)"
 _OLD_SCHEMAS = {
     1: (
@@ -130,8 +141,9 @@ _OLD_SCHEMAS = {
         _OBSERVATIONS_SQL,
         _OBSERVATIONS_INDEX,
     ),
-    4: _SCHEMA_STATEMENTS[:-2],  # without the views table
-    5: _SCHEMA_STATEMENTS[:-1],  # without the room_contents table
+    4: _SCHEMA_STATEMENTS[:-3],  # without the views table
+    5: _SCHEMA_STATEMENTS[:-2],  # without the room_contents table
+    6: _SCHEMA_STATEMENTS[:-1],  # without the home_maps table
 }
 
 _EXAM_COLS = "run, style, room_seed, day, object_id, type, sim_time, strategy, created"
@@ -298,14 +310,16 @@ def _bad_day(conn: sqlite3.Connection) -> str | None:
     if row is not None:
         return f"room {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in [0, {MAX_DAY}]"
     tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-    if "room_contents" in tables:
-        q = f"SELECT style, room_seed, day FROM room_contents WHERE {bad} LIMIT 1"
-        row = conn.execute(q).fetchone()
-        if row is not None:
-            return (
-                f"room contents of {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in "
-                f"[0, {MAX_DAY}]"
-            )
+    for table, seed, what in (("room_contents", "room_seed", "room contents"),
+                              ("home_maps", "seed", "home map")):  # fmt: skip
+        if table in tables:
+            q = f"SELECT style, {seed}, day FROM {table} WHERE {bad} LIMIT 1"
+            row = conn.execute(q).fetchone()
+            if row is not None:
+                return (
+                    f"{what} of {row[0]!r}/{row[1]!r}: day {row[2]!r} is not a day in "
+                    f"[0, {MAX_DAY}]"
+                )
     return None
 
 
@@ -380,15 +394,16 @@ class _Corrupt(Exception):
 
 def _migrate(cur: sqlite3.Cursor, version: int) -> int:
     """Bring a store of an older ``version`` to SCHEMA_VERSION inside the caller's transaction:
-    version 5 gains the (empty) room_contents table, version 4 that and the (empty) views table;
-    older ones have their tables rebuilt in this version's exact schema, dropping duplicate
-    examinations (same EXAM_KEY: keep the first and its observations). Returns how many were
-    dropped. Examinations of older stores have no views (knowledge.corrected counts them with
-    recall 1), and their visits no room contents (no room context learned from them)."""
-    if version in (4, 5):
-        if version == 4:
-            cur.execute(_VIEWS_SQL)
-        cur.execute(_ROOM_CONTENTS_SQL)
+    version 6 gains the (empty) home_maps table, version 5 that and the (empty) room_contents
+    table, version 4 those and the (empty) views table; older ones have their tables rebuilt in
+    this version's exact schema, dropping duplicate examinations (same EXAM_KEY: keep the first
+    and its observations). Returns how many were dropped. Examinations of older stores have no
+    views (knowledge.corrected counts them with recall 1), and their visits no room contents (no
+    room context learned from them) and no remembered maps."""
+    if version in (4, 5, 6):
+        for stmt, since in ((_VIEWS_SQL, 5), (_ROOM_CONTENTS_SQL, 6), (_HOME_MAPS_SQL, 7)):
+            if version < since:
+                cur.execute(stmt)
         cur.execute(
             "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
         )

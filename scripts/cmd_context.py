@@ -52,8 +52,8 @@ def _add_common(p: argparse.ArgumentParser, rooms_help: str) -> None:
     p.add_argument(
         "--scenarios",
         default="built,given",
-        help="map scenarios: built (the robot builds its map), given (furniture known) "
-        "(default: built,given)",
+        help="map scenarios: built (the robot builds its map), given (the true furniture plan), "
+        "remembered (its own map from a tour on an earlier day) (default: built,given)",
     )
     for name, pols in SCENARIO_POLICIES.items():
         p.add_argument(

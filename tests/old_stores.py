@@ -24,25 +24,20 @@ EXAM_COLS = "id, run, style, room_seed, object_id, type, sim_time, strategy, cre
 
 
 def as_version(path: Path, version: int) -> None:
-    """Rewrite the (day-0, version-6) store at ``path`` as schema ``version`` (1 to 5) wrote
-    it: the room_contents table goes (version 5), the views table too (version 4); the day
-    columns go too; version 2 has no uniqueness key, version 1 no rooms.end_time."""
+    """Rewrite the (day-0, version-7) store at ``path`` as schema ``version`` (1 to 6) wrote
+    it: the home_maps table goes (version 6), the room_contents table too (version 5), the
+    views table too (version 4); the day columns go too; version 2 has no uniqueness key,
+    version 1 no rooms.end_time."""
     conn = sqlite3.connect(path)
     conn.execute("PRAGMA foreign_keys = OFF")
-    conn.execute("DROP TABLE room_contents")
-    if version == 5:
-        conn.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
-        conn.commit()
-        conn.execute("VACUUM")
-        conn.close()
-        return
-    conn.execute("DROP TABLE views")
-    if version == 4:
-        conn.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
-        conn.commit()
-        conn.execute("VACUUM")
-        conn.close()
-        return
+    for table, below in (("home_maps", 7), ("room_contents", 6), ("views", 5)):
+        conn.execute(f"DROP TABLE {table}")
+        if version == below - 1:
+            conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(version),))
+            conn.commit()
+            conn.execute("VACUUM")
+            conn.close()
+            return
     conn.execute("DROP INDEX examinations_key")
     conn.execute("DROP INDEX observations_pair")
     for t in ("observations", "examinations", "rooms"):

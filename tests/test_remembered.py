@@ -87,7 +87,7 @@ def test_a_remembered_piece_shown_up_close_without_a_report_is_dropped():
     depth = np.full((cam.height, cam.width), 10.0)  # nothing in front of the desk
     frame = Frame(None, depth, ids, cam, pose)
     mem = rm.FurnitureMemory([DESK], lambda t: 8.0)
-    for k in range(rm.DROP_AFTER - 1):
+    for _ in range(rm.DROP_AFTER - 1):
         assert mem.observe(frame, []) == [] and mem.objects() == [DESK]
     assert mem.observe(frame, []) == [DESK] and mem.objects() == []
     # reported once: never dropped

@@ -142,6 +142,9 @@ CRAFTED = {
     "table": "CREATE TABLE notes (x)",
     "dropped key": "DROP INDEX examinations_key",
     "other column": "ALTER TABLE observations ADD COLUMN weight REAL DEFAULT 2",
+    "map trigger": "CREATE TRIGGER forget AFTER INSERT ON home_maps BEGIN "
+    "DELETE FROM home_maps WHERE rowid != new.rowid; END",
+    "map index": "CREATE INDEX maps_by_day ON home_maps (day)",
 }
 
 

@@ -1,7 +1,8 @@
 """Search scenarios and the paired ratio, shared by ``bench curve`` and ``bench transfer``.
 
 A scenario names what the robot knows at the start of an episode (``built``: nothing, it builds
-its map; ``given``: the furniture poses) and three policies: the no-context baseline, the
+its map; ``given``: the true furniture poses; ``remembered``: its own map from a tour on an
+earlier day) and three policies: the no-context baseline, the
 context policy (the learned intervals) and the asymptote (the same policy with the true
 probabilities). ``scenario_config`` turns a scenario into a ``bench search`` configuration.
 
@@ -29,14 +30,14 @@ from ctxsearch.knowledge.options import MapMode
 from ctxsearch.scripts.experiments.bench_search import BenchResult, bench_search
 from ctxsearch.scripts.sweep import SweepOptions
 
-SCENARIO_NAMES = tuple(m.value for m in (MapMode.BUILT, MapMode.GIVEN))
+SCENARIO_NAMES = tuple(m.value for m in (MapMode.BUILT, MapMode.GIVEN, MapMode.REMEMBERED))
 
 
 @dataclass(frozen=True)
 class Scenario:
     """A map scenario and its three policies (module docstring)."""
 
-    name: str  # "built" or "given": the map the robot searches on
+    name: str  # "built", "given" or "remembered": the map the robot searches on
     baseline: str  # no context
     context: str  # ranks by the learned intervals
     asymptote: str  # the context policy with the true probabilities
