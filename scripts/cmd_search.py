@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ctxsearch.agent.search import config as cfg
-from ctxsearch.agent.search.config import ConfigError, SearchConfig
+from ctxsearch.agent.search.config import ConfigError, HomeSource, SearchConfig
 from ctxsearch.agent.search.registry import POLICIES, Role, default_policies, with_role
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import (
@@ -275,18 +275,26 @@ def run_search(args: argparse.Namespace) -> int:
         print(f"knowledge: {args.kb} read with forgetting {argtypes.forgetting(args).label} "
               f"on day {source.kb.today}")  # fmt: skip
     ep, res = one.episode, one.results[0]
-    s = ep.start
+    s, c = ep.start, one.config
     print(
-        f"room: {ep.style} seed {ep.room_seed} (held out); start ({s.x:.2f}, {s.y:.2f}) heading "
-        f"{s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
+        f"room: {ep.style} seed {ep.room_seed} ({_provenance(c, ep.day)}); start ({s.x:.2f}, "
+        f"{s.y:.2f}) heading {s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
     )
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
-    c = one.config
     detector = c.detector_model(catalog).name
     print(f"detector: {detector}; intervals: {c.knowledge.interval}; map: {c.scenario}")
     if args.record is not None:
         print(f"recording: {args.record} (open with: rerun {args.record})")
     return 0
+
+
+def _provenance(config, day: int) -> str:
+    """Where the searched world comes from, in words."""
+    if config.scenario is not MapMode.REMEMBERED:
+        return "held out"
+    tour = config.map.home is HomeSource.TOUR
+    where = "held out, toured" if tour else "a house it learned in, its map"
+    return f"{where} {config.map.days_after} day(s) before; day {day}"
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:

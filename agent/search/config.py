@@ -47,6 +47,16 @@ class Segments(StrEnum):
     PLAN = "plan"
 
 
+class HomeSource(StrEnum):
+    """Where the remembered map's houses come from: held-out houses the robot toured the day
+    before (``tour``: the knowledge was learned in other houses), or the houses the knowledge
+    store's learning visited on the built map (``store``: the knowledge includes their earlier
+    days)."""
+
+    TOUR = "tour"
+    STORE = "store"
+
+
 @dataclass(frozen=True)
 class KnowledgeConfig:
     """Where a policy's probabilities come from and how they are read (agent.search.priors)."""
@@ -103,6 +113,12 @@ class MapConfig:
         "remembered map: simulated seconds the tour that made it may take (agent.search.tour)",
         1.0,
         1e6,
+    )
+    home: HomeSource | None = setting(
+        None,
+        "remembered map: tour (held-out houses toured the day before) or store (the store's "
+        "learned houses and their maps); none: store if the knowledge store holds maps of the "
+        "style, else tour",
     )
     days_after: int = setting(
         1,

@@ -83,6 +83,9 @@ class DrawSpec:
     # the day of the worlds (envs.floorplan's days): a remembered map's search happens on a
     # day after the tour that made the map (agent.search.tour, agent.search.remembered)
     day: int = 0
+    # the houses the episodes are drawn in, in turn (the store's remembered homes: room seeds
+    # the knowledge was learned in, never excluded); empty: held-out worlds
+    homes: tuple[int, ...] = ()
 
     @classmethod
     def make(
@@ -123,9 +126,9 @@ class WorldDraw:
 def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
     """World ``i``'s episode (module docstring): a start from which the target is not visible
     and from which the oracle's planner detects it within the budget."""
-    room_seed = held_out_seed(spec.seed, i)
+    room_seed = spec.homes[i % len(spec.homes)] if spec.homes else held_out_seed(spec.seed, i)
     rng = np.random.default_rng([int(spec.seed), i, EPISODE_TAG])
-    if room_seed in spec.exclude_seeds:
+    if room_seed in spec.exclude_seeds and not spec.homes:
         return WorldDraw(None)
     layout = generate_layout(spec.style, room_seed, catalog, day=spec.day)
     tgt = episode_target(layout, catalog, spec.target, rng)
@@ -232,9 +235,12 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     seeds = draw_worlds(spec.seed, spec.episodes)
     last = -1
     for k, ep in enumerate(draw.episodes):
-        world = seeds.get(ep.room_seed, -1)
         asked = (ep.index, ep.style, ep.budget_s) == (k, spec.style.name, spec.budget_s)
-        if not asked or world <= last or ep.room_seed in spec.exclude_seeds:
+        if spec.homes:  # the homes in turn, several episodes each
+            world, last = (k if ep.room_seed in spec.homes else -1), -1
+        else:
+            world = seeds.get(ep.room_seed, -1)
+        if not asked or world <= last or (ep.room_seed in spec.exclude_seeds and not spec.homes):
             return False
         if spec.target is not None and ep.target != spec.target:
             return False

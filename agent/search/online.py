@@ -40,6 +40,7 @@ from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.room_prior import RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.options import MapMode
 
 
 @dataclass(frozen=True)
@@ -124,14 +125,15 @@ class OnlineSearch:
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
 
     def run(self) -> None:
-        """Look around (on the built map: its first images map the floor), then take the best
+        """Look around (on the built map only: its first images map the floor; a remembered map
+        knows its floor, as a given one does), then take the best
         option until none is left or the belief's detectable mass left is below the configured
         ``belief.stop_mass``; the share left is the context's ``mass_left``. On a given map a
         sweep where the robot stands is one of the options, taken when it is worth its seconds."""
         ctx = self.ctx
         first = self.belief()
         self.record(first)
-        if ctx.built is not None:  # the robot's own map starts from the floor it can see
+        if ctx.maps.map is MapMode.BUILT:  # a map from nothing starts from the floor it sees
             self.explorer.look_around(first.weights)
         while True:
             ctx.check()

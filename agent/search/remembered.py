@@ -57,8 +57,12 @@ def home_rooms(home: HomeMap) -> RoomLabels:
 
 
 def home_seen(home: HomeMap, layout: RoomLayout) -> ss.SeenMap:
-    """The search lattice of the house with nothing seen today and the remembered surfaces."""
+    """The search lattice of the house with nothing seen today and the remembered surfaces (a
+    map kept without them, a learning visit's, learns them anew from today's images as the
+    built map does)."""
     seen = ss.SeenMap.for_footprint(layout)
+    if not len(home.support):
+        return seen
     if len(home.support) != len(seen):
         raise HomeMapError(f"{home.style}/{home.seed}", "its surfaces are not the house's lattice")
     return ss.SeenMap(seen.points, seen.best, home.support.copy(), False)

@@ -28,7 +28,7 @@ from ctxsearch.agent.recording import Recorder, open_stream
 from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.config import MapConfig, SearchConfig
+from ctxsearch.agent.search.config import HomeSource, MapConfig, SearchConfig
 from ctxsearch.agent.search.context import SearchContext
 from ctxsearch.agent.search.draw import DrawSpec, make_episodes
 from ctxsearch.agent.search.draw_store import code_digest
@@ -63,6 +63,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
 from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.store import EvidenceStore
 
 
 def code_version() -> dict:
@@ -96,15 +97,20 @@ class SearchRun:
     # called at each online decision of every policy (SearchContext.observer): a read-only hook
     # for diagnostics, in this process only (None: nothing)
     observer: Callable | None = None
+    # the remembered map from the store (``map.home`` store): room seed -> its latest map's day
+    homes: dict[int, int] = field(default_factory=dict)
 
     def draw_spec(self, episodes: int, target: str | None = None) -> DrawSpec:
         """The episode draw this run searches: ``episodes`` episodes (``target``: of that type
         only), never in the worlds the knowledge was learned in."""
         c = self.config
-        day = c.map.days_after if c.scenario is MapMode.REMEMBERED else 0
+        homes, day = (), 0
+        if c.scenario is MapMode.REMEMBERED:
+            homes = tuple(sorted(self.homes))
+            day = max(self.homes.values(), default=0) + c.map.days_after
         return DrawSpec.make(
             self.style, episodes, c.seed, self.catalog, c.budget_s, self.priors.learned, target,
-            self.detector, targets=c.targets, day=day,
+            self.detector, targets=c.targets, day=day, homes=homes,
         )  # fmt: skip
 
     def runs(self, records: Sequence[Path | None] | None = None) -> tuple[PolicyRun, ...]:
@@ -140,8 +146,35 @@ def prepare(
         config = replace(config, policies=default_policies(mode))
     specs = resolve(config.policies, mode, config.knowledge.room_context)
     detector = config.detector_model(catalog)
+    config, homes = _homes(config, style, catalog)
     priors = make_priors(specs, style, catalog, config.knowledge, source, progress)
-    return SearchRun(config, style, catalog, specs, priors, detector)
+    return SearchRun(config, style, catalog, specs, priors, detector, homes=homes)
+
+
+def _homes(
+    config: SearchConfig, style: WorldStyle, catalog: Catalog
+) -> tuple[SearchConfig, dict[int, int]]:
+    """On the remembered map: the configuration with ``map.home`` resolved (none: ``store`` if
+    the knowledge store holds maps of the style, else ``tour``) and, from the store, each
+    house's room seed and the day of its latest map; one-line errors for ``store`` without
+    such maps."""
+    if config.scenario is not MapMode.REMEMBERED:
+        return config, {}
+    kb, asked = config.knowledge.kb, config.map.home
+    homes: dict[int, int] = {}
+    if kb is not None and asked is not HomeSource.TOUR and Path(kb).exists():
+        with EvidenceStore.open(Path(kb), catalog, read_only=True) as store:
+            for _run, st, seed, day in store.home_maps():
+                if st == style.name:
+                    homes[seed] = max(day, homes.get(seed, day))
+    if asked is HomeSource.STORE and not homes:
+        raise CtxsearchError(
+            f"{kb or 'no knowledge store'}: no remembered map of style '{style.name}' (learn on "
+            f"the built map first: ctxsearch learn --style {style.name} --kb FILE; or "
+            "--set map.home=tour)"
+        )
+    source = HomeSource.STORE if homes else HomeSource.TOUR
+    return config.updated({"map.home": source}), homes
 
 
 class EpisodeSensor:
@@ -340,6 +373,9 @@ def _episode_world(
         return EpisodeWorld(layout, catalog, world, given, what.config, None, what.observer)
     if scenario is MapMode.BUILT:
         maps = WorldMaps.built(layout, catalog, world.spec, what.detector, m)
+    elif m.home is HomeSource.STORE:
+        home = stored_home(ep, style, catalog, what.config)
+        maps = WorldMaps.remembered(home, layout, world.spec, what.detector, m)
     else:
         home = remembered_home(ep, style, catalog, what.detector, m)
         maps = WorldMaps.remembered(home, layout, world.spec, what.detector, m)
@@ -362,6 +398,20 @@ def remembered_home(
             world, SimDetector(model, layout, catalog, layout.seed), catalog, world.sim_time
         )
         return cached_tour(layout, catalog, detector, m, day, body=world, sensor=sensor)
+
+
+def stored_home(ep: Episode, style: WorldStyle, catalog: Catalog, config: SearchConfig) -> HomeMap:
+    """The remembered map of episode ``ep``'s house in the knowledge store, of the latest day at
+    least ``map.days_after`` before the episode's."""
+    kb = config.knowledge.kb
+    day = ep.day - config.map.days_after
+    home = None
+    if kb is not None:
+        with EvidenceStore.open(Path(kb), catalog, read_only=True) as store:
+            home = store.home_map(style.name, ep.room_seed, upto_day=day)
+    if home is None:
+        raise CtxsearchError(f"{kb}: no remembered map of {style.name}/{ep.room_seed} by day {day}")
+    return home
 
 
 def run_episode(
