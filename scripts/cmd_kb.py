@@ -95,6 +95,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _register_show(kb_sub)
     _register_stats(kb_sub)
     _register_merge(kb_sub)
+    _register_maps(kb_sub)
 
 
 def _register_show(kb_sub: argparse._SubParsersAction) -> None:
@@ -197,6 +198,26 @@ def _register_merge(kb_sub: argparse._SubParsersAction) -> None:
     merge.add_argument("inputs", type=Path, nargs="+", metavar="IN", help="input stores")
     _add_catalog_arg(merge)
     merge.set_defaults(func=run_merge)
+
+
+def _register_maps(kb_sub: argparse._SubParsersAction) -> None:
+    """Add ``kb maps``."""
+    maps = kb_sub.add_parser(
+        "maps",
+        help="list the robot's remembered maps of the houses it visited on its own map",
+        description=_wrap(
+            "List the remembered map of every house visit a store holds (learning on the built "
+            "map keeps one per visit done): run, style, seed, day, the furniture it recognised "
+            "(and how many of them it saw in more than one examination), its rooms and how much "
+            "of its grid it mapped as floor. `ctxsearch search --map remembered` searches on them."
+        ),
+        epilog="example:\n  ctxsearch kb maps demo/kb.sqlite",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    maps.add_argument("path", type=Path, metavar="PATH", help="knowledge store (SQLite)")
+    maps.add_argument("--json", action="store_true", help="print JSON instead")
+    _add_catalog_arg(maps)
+    maps.set_defaults(func=run_maps)
 
 
 def register_bench(sub: argparse._SubParsersAction) -> None:
@@ -440,6 +461,46 @@ def run_show(args: argparse.Namespace) -> int:
     if rooms:
         out.append(f"room context: {rc.rooms} rooms of the robot's maps held furniture")
         out.append(format_rows(rooms))
+    _emit("\n".join(out))
+    return 0
+
+
+def run_maps(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch kb maps``."""
+    catalog = load_catalog(args.catalog)
+    rows = []
+    try:
+        with EvidenceStore.open(args.path, catalog, read_only=True) as store:
+            for run, style, seed, day in store.home_maps():
+                m = store.home_map(style, seed, run=run, upto_day=day)
+                if m is None or m.day != day:
+                    continue
+                rows.append({
+                    "run": run, "style": style, "seed": seed, "day": day,
+                    "furniture": len(m.furniture),
+                    "furniture_seen_twice": sum(1 for o in m.furniture if o.sightings >= 2),
+                    "rooms": m.room_count(), "floor_share": round(float(m.floor.mean()), 4),
+                    "images": m.images,
+                })  # fmt: skip
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(
+            f"{args.path}: corrupt knowledge store ({' '.join(str(exc).split())})"
+        ) from None
+    if args.json:
+        _emit(json.dumps(rows, indent=1))
+        return 0
+    if not rows:
+        _emit(
+            f"{args.path}: no remembered maps (learn on the built map: ctxsearch learn --kb PATH)"
+        )
+        return 0
+    out = [f"{args.path}: {len(rows)} remembered map(s)"]
+    for r in rows:
+        out.append(
+            f"  {r['style']} seed {r['seed']} day {r['day']} ({r['run']}): {r['furniture']} "
+            f"furniture ({r['furniture_seen_twice']} seen twice or more), {r['rooms']} rooms, "
+            f"{100 * r['floor_share']:.0f}% of the grid floor, {r['images']} images"
+        )
     _emit("\n".join(out))
     return 0
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ctxsearch.agent.search import remembered as rm
-from ctxsearch.agent.search.config import MapConfig, SearchConfig
+from ctxsearch.agent.search.config import HomeSource, MapConfig, SearchConfig
 from ctxsearch.agent.search.maps import WorldMaps
 from ctxsearch.agent.search.registry import Role, default_policies, resolve, with_role
 from ctxsearch.agent.search.runner import EpisodeSensor, search_once
@@ -24,6 +24,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
 from ctxsearch.knowledge.options import MapMode
+from tests.rrd_files import read_rrd
 
 DESK = ObjectInstance("Desk", 7, (2.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))
 
@@ -119,13 +120,15 @@ def test_the_remembered_scenario_starts_from_the_map_not_the_truth(office_tour, 
     assert maps.plan_rooms is not None and maps.seen.support is not None
 
 
-def test_a_search_on_the_remembered_map_finds_on_a_later_day_and_repeats(catalog):
+def test_a_search_on_the_remembered_map_finds_on_a_later_day_and_repeats(catalog, tmp_path):
     cfg = SearchConfig(style="office", policies=("uniform",), detector="perfect", seed=3)
     cfg = cfg.with_scenario(MapMode.REMEMBERED)
-    one = search_once(cfg, "Cup", catalog=catalog)
+    one = search_once(cfg, "Cup", catalog=catalog, records=[tmp_path / "s.rrd"])
     two = search_once(cfg, "Cup", catalog=catalog)
     assert one.episode.day == 1 and one.results[0].success
     assert one.results[0].sim_time == two.results[0].sim_time
+    assert one.config.map.home is HomeSource.TOUR  # no store: a held-out house toured on day 0
+    assert "/world/search/remembered" in read_rrd(tmp_path / "s.rrd").entities
 
 
 def test_a_tour_is_kept_and_a_damaged_file_is_a_miss(catalog, tmp_path, monkeypatch):
@@ -147,3 +150,35 @@ def test_a_tour_is_kept_and_a_damaged_file_is_a_miss(catalog, tmp_path, monkeypa
     path.write_bytes(b"\x00garbage")
     assert run().furniture == first.furniture  # made again
     assert HomeMap.from_bytes(path.read_bytes()).furniture == first.furniture
+
+
+def test_learn_then_search_in_a_house_the_robot_knows_and_a_damaged_map_is_refused(
+    tmp_path, capsys, catalog
+):
+    import sqlite3
+
+    from ctxsearch.scripts.cli import main
+
+    kb = tmp_path / "k.sqlite"
+    assert main(["learn", "--style", "office", "--rooms", "1", "--kb", str(kb),
+                 "--no-progress"]) == 0  # fmt: skip
+    with sqlite3.connect(kb) as c:
+        ((seed, day),) = c.execute("SELECT seed, day FROM home_maps").fetchall()
+    capsys.readouterr()
+    assert main(["kb", "maps", str(kb)]) == 0
+    listed = capsys.readouterr().out
+    assert "1 remembered map(s)" in listed and f"office seed {seed} day {day}" in listed
+    later = generate_layout(resolve_style("office", catalog), seed, catalog, day=day + 1)
+    small = sorted({o.type for o in later.objects if not catalog.type(o.type).is_furniture})
+    args = ["search", "--kb", str(kb), "--style", "office", "--map", "remembered",
+            "--target", small[0], "--policy", "uniform"]  # fmt: skip
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert f"seed {seed} (a house it learned in, its map 1 day(s) before; day {day + 1})" in out
+    with sqlite3.connect(kb) as c:
+        c.execute("UPDATE home_maps SET map = ?", (b"PK\x03\x04 not a map",))
+    before = kb.read_bytes()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "remembered map" in err and str(kb) in err
+    assert kb.read_bytes() == before

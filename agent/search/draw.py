@@ -287,9 +287,13 @@ def _draw_worlds(
     while len(draw.episodes) < n:
         if i >= limit:
             what = f"a {spec.target}" if spec.target else "a small object"
+            where = (
+                f"none of the {len(spec.homes)} remembered house(s)" if spec.homes
+                else "no held-out room"
+            )  # fmt: skip
             raise CtxsearchError(
-                f"no held-out room of style '{spec.style.name}' holds {what} that can be searched "
-                f"for (tried {limit} rooms)"
+                f"{where} of style '{spec.style.name}' holds {what} on day {spec.day} that can be "
+                f"searched for (tried {limit} draws)"
             )
         # A round: as many worlds as episodes still needed (at least two per worker).
         m = min(limit - i, max(n - len(draw.episodes), 2 * workers))
