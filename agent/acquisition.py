@@ -72,7 +72,7 @@ from ctxsearch.agent.home import home_map
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.mapping import BuiltMap
-from ctxsearch.agent.navigation import OccupancyGrid, drive_along, nearest_free
+from ctxsearch.agent.navigation import OccupancyGrid, drive_along, start_pose
 from ctxsearch.agent.resume import ReplayBody, replayed_related, resume_error
 from ctxsearch.agent.room_segmentation import Recognized, RoomLabels, segment_contents
 from ctxsearch.agent.run_state import ExamResult, Run, StoredExam, room_rng
@@ -82,7 +82,6 @@ from ctxsearch.envs.camera import Frame, focal_length
 from ctxsearch.envs.detector import load_detector
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose
-from ctxsearch.envs.rooms import door_entry
 from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -505,13 +504,3 @@ def exam_options(run: Run, model: ViewModel | None, body: Body) -> GazePlanOptio
     return GazePlanOptions(
         max_distance=model.exam_range(recall, focal_length(spec.fovy_deg, h), w, h)
     )
-
-
-def start_pose(layout: RoomLayout, grid: OccupancyGrid) -> RobotPose:
-    """Where the robot enters: the free cell nearest a point 0.6 m inside the door, facing into
-    the room (in the largest free region if the door's side is cut off)."""
-    x, y, yaw = door_entry(layout)
-    p = nearest_free(grid, np.array([x, y]), grid.largest_region())
-    if p is None:
-        raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
-    return RobotPose(float(p[0]), float(p[1]), yaw)

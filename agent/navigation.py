@@ -53,7 +53,9 @@ from scipy.sparse.csgraph import dijkstra
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.envs.floorplan import wall_obstacles
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.robot_spec import RobotSpec
+from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
+from ctxsearch.envs.rooms import door_entry
+from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import Box
 
 _SQRT2 = math.sqrt(2.0)
@@ -397,3 +399,13 @@ def drive_along(body: Body, grid: OccupancyGrid, goal_xy: np.ndarray) -> bool:
     seg = path[-1] - path[-2]
     body.drive(path, math.atan2(seg[1], seg[0]))
     return True
+
+
+def start_pose(layout: RoomLayout, grid: OccupancyGrid) -> RobotPose:
+    """Where the robot enters: the free cell nearest a point 0.6 m inside the door, facing into
+    the room (in the largest free region if the door's side is cut off)."""
+    x, y, yaw = door_entry(layout)
+    p = nearest_free(grid, np.array([x, y]), grid.largest_region())
+    if p is None:
+        raise CtxsearchError(f"room {layout.style}/{layout.seed} has no free space for the robot")
+    return RobotPose(float(p[0]), float(p[1]), yaw)

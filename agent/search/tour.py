@@ -1,7 +1,7 @@
 """The home the robot lives in: the map it made of a house on an earlier day, and the search on it.
 
 A robot that lives in a home has toured it before. ``tour`` is that visit, on a day of its own:
-the robot starts where it docks (agent.acquisition.start_pose) knowing nothing, and explores the
+the robot starts where it docks (agent.navigation.start_pose) knowing nothing, and explores the
 house on its own built map (agent.mapping.BuiltMap from its depth images) with the detector of
 the run, sweeping at the furniture ring's tilt from the viewpoint that shows the most of what no
 image has shown within the furniture's detection range per expected second (the search's own
@@ -38,9 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ctxsearch.agent.acquisition import start_pose
 from ctxsearch.agent.home import home_map
-from ctxsearch.agent.navigation import OccupancyGrid
+from ctxsearch.agent.navigation import OccupancyGrid, start_pose
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.config import MapConfig
 from ctxsearch.agent.search.context import SearchContext, SearchStopped
