@@ -294,7 +294,9 @@ def _provenance(config, day: int) -> str:
         return "held out"
     tour = config.map.home is HomeSource.TOUR
     where = "held out, toured" if tour else "a house it learned in, its map"
-    return f"{where} {config.map.days_after} day(s) before; day {day}"
+    from ctxsearch.agent.search.runner import days_after  # lazy: the runner loads MuJoCo
+
+    return f"{where} {days_after(config)} day(s) before; day {day}"
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:

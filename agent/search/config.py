@@ -106,7 +106,9 @@ class MapConfig:
         30.0,
     )
     segments: Segments = setting(
-        Segments.ROBOT, "the built map's rooms: the robot's segmentation (robot) or the plan's"
+        Segments.ROBOT,
+        "the built and remembered maps' rooms: the robot's segmentation (robot) or the plan's "
+        "(a bound)",
     )
     tour_budget_s: float = setting(
         1800.0,
@@ -120,10 +122,11 @@ class MapConfig:
         "learned houses and their maps); none: store if the knowledge store holds maps of the "
         "style, else tour",
     )
-    days_after: int = setting(
-        1,
-        "remembered map: the search happens this many days after the tour (small objects are "
-        "placed anew each day, furniture stays)",
+    days_after: int | None = setting(
+        None,
+        "the search happens this many days after day 0 (on the remembered map: after the day "
+        "its map was made); small objects are placed anew each day, furniture stays; none: 1 on "
+        "the remembered map, 0 otherwise",
         0,
         1000,
     )

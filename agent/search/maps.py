@@ -178,9 +178,11 @@ class WorldMaps:
         the built map) and the room count the efficiency model assumes."""
         built = restored_map(home, spec, config.depth_range_m)
         size = sx.WorldSize(layout.width * layout.depth, max(1, home.room_count()))
+        plan = config.segments is Segments.PLAN
+        rooms = RoomLabels.of_plan(layout) if plan else home_rooms(home)
         return cls(
             built.refresh(), home_seen(home, layout), tuple(home.objects()), detector,
-            MapMode.REMEMBERED, size, home.bounds, home.top, plan_rooms=home_rooms(home),
+            MapMode.REMEMBERED, size, home.bounds, home.top, plan_rooms=rooms,
             depth_range=config.depth_range_m, home=home,
         )  # fmt: skip
 

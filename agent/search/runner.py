@@ -104,10 +104,8 @@ class SearchRun:
         """The episode draw this run searches: ``episodes`` episodes (``target``: of that type
         only), never in the worlds the knowledge was learned in."""
         c = self.config
-        homes, day = (), 0
-        if c.scenario is MapMode.REMEMBERED:
-            homes = tuple(sorted(self.homes))
-            day = max(self.homes.values(), default=0) + c.map.days_after
+        homes = tuple(sorted(self.homes))
+        day = max(self.homes.values(), default=0) + days_after(c)
         return DrawSpec.make(
             self.style, episodes, c.seed, self.catalog, c.budget_s, self.priors.learned, target,
             self.detector, targets=c.targets, day=day, homes=homes,
@@ -149,6 +147,14 @@ def prepare(
     config, homes = _homes(config, style, catalog)
     priors = make_priors(specs, style, catalog, config.knowledge, source, progress)
     return SearchRun(config, style, catalog, specs, priors, detector, homes=homes)
+
+
+def days_after(config: SearchConfig | MapConfig) -> int:
+    """``map.days_after`` as a run reads it: 1 on the remembered map, 0 otherwise, unless set."""
+    m = config.map if isinstance(config, SearchConfig) else config
+    if m.days_after is not None:
+        return m.days_after
+    return 1 if m.scenario is MapMode.REMEMBERED else 0
 
 
 def _homes(
@@ -388,7 +394,7 @@ def remembered_home(
     """The map the robot made of episode ``ep``'s house on the day of its tour
     (``ep.day - map.days_after``; agent.search.tour), from the cache or toured now in a world of
     that day of its own."""
-    day = ep.day - m.days_after
+    day = ep.day - days_after(m)
     if day < 0:
         raise CtxsearchError(f"episode {ep.index} is on day {ep.day}: no day to tour before it")
     layout = generate_layout(style, ep.room_seed, catalog, day=day)
@@ -404,7 +410,7 @@ def stored_home(ep: Episode, style: WorldStyle, catalog: Catalog, config: Search
     """The remembered map of episode ``ep``'s house in the knowledge store, of the latest day at
     least ``map.days_after`` before the episode's."""
     kb = config.knowledge.kb
-    day = ep.day - config.map.days_after
+    day = ep.day - days_after(config)
     home = None
     if kb is not None:
         with EvidenceStore.open(Path(kb), catalog, read_only=True) as store:
