@@ -51,6 +51,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="a house: skip the exploration and the robot's rooms (rooms.png, rooms.json)",
     )
+    p.add_argument(
+        "--remembered",
+        action="store_true",
+        help="also tour it on day 0 as a remembered map's search does and draw what the robot "
+        "keeps beside the plan (remembered.png: misses, look-alikes and phantoms marked; "
+        "remembered.json: the counts)",
+    )
     argtypes.add_detector_argument(p)
     p.set_defaults(func=run)
 
@@ -113,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         catalog=args.catalog,
         detector=args.detector,
         segment=not args.no_segment,
+        remembered=args.remembered,
     )
     for p in show_room(config):
         print(f"wrote {p}")

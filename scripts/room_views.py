@@ -26,6 +26,7 @@ from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import relation_volume
 from ctxsearch.scripts.overview_rooms import draw_room_labels
+from ctxsearch.scripts.remembered_view import write_remembered
 from ctxsearch.scripts.room_segments import write_segments
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -183,6 +184,7 @@ class RoomViewConfig:
     catalog: Path | None = None  # object-type catalog (None: assets/types.toml)
     detector: str | None = None  # detector preset, name or file (None: realistic)
     segment: bool = True  # a house: explore it and draw the robot's rooms (scripts.room_segments)
+    remembered: bool = False  # tour it and draw the remembered map (scripts.remembered_view)
 
     def check(self) -> None:
         """A one-line error for a negative view count or an image size MuJoCo cannot render."""
@@ -226,6 +228,9 @@ def show_room(config: RoomViewConfig) -> list[Path]:
     written = [p, lp, *viewer.written]
     if layout.is_house and config.segment:
         written += write_segments(layout, catalog, config.out)
+    if config.remembered:
+        detector = default_or_named(config.detector, catalog, "realistic")
+        written += write_remembered(layout, catalog, detector, config.out)
     if config.record is not None:
         written.append(Path(config.record))
     return written

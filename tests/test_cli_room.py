@@ -144,3 +144,19 @@ def test_a_detection_is_labelled_for_a_reader():
     true = Detection(11, "Cup", pose, 40, 2.0, (0, 0, 5, 5))
     assert room_views.detection_label(false) == "a false detection (Remote)"
     assert room_views.detection_label(true) == "Cup#11"
+
+
+def test_room_remembered_draws_the_tour_beside_the_plan(tmp_path, capsys):
+    import json
+
+    from ctxsearch.scripts.cli import main
+
+    out = tmp_path / "r"
+    args = ["room", "--style", "office", "--seed", "3", "--out", str(out), "--views", "0",
+            "--remembered", "--detector", "perfect"]  # fmt: skip
+    assert main(args) == 0
+    doc = json.loads((out / "remembered.json").read_text())
+    assert doc["furniture"] == doc["recognised"] + doc["misses"] and doc["furniture"] > 0
+    assert doc["phantoms"] == 0 and doc["lookalikes"] == 0  # the perfect detector
+    assert (out / "remembered.png").stat().st_size > 1000
+    assert "the robot's remembered map:" in capsys.readouterr().out
