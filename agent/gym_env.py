@@ -41,6 +41,12 @@ the episode; ``info["success"]`` says whether it was a true instance of the targ
 look-alike or false positive ends the episode as a failure); ``truncated``: the budget (``budget_s``) is spent, or ``MAX_EPISODE_STEPS``
 steps were taken (Gymnasium's TimeLimit: a blocked forward or a head at its limit costs 0 s).
 
+``map="remembered"``: the episode's house is one the robot toured the day before (the
+benchmark's ``--map remembered``: episodes on day 1, the tour of day 0 made by agent.search.tour
+and kept in the same cache); the furniture it remembers is known from the start (the
+``context`` rows rank its relation volumes before the first image; ``info["remembered_furniture"]``
+counts it). The default, ``"given"``, knows only what it detects.
+
 Observations (a Dict): ``rgb`` (H, W, 3) uint8 and ``depth`` (H, W, 1) float32 metres (clipped
 to ``DEPTH_MAX``) of the last ``look`` (zeros before the first: images cost time), ``pose`` (x,
 y, yaw), ``head`` (pan, tilt), ``elapsed`` simulated seconds (saturating at twice the budget), ``target`` (the target's index in
@@ -72,11 +78,12 @@ from gymnasium import spaces
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.perception_modes import DEFAULT_DETECTOR
 from ctxsearch.agent.search import measures
-from ctxsearch.agent.search.config import DEFAULT_BUDGET_S
+from ctxsearch.agent.search.config import DEFAULT_BUDGET_S, MapConfig
 from ctxsearch.agent.search.context import confirming_detection
 from ctxsearch.agent.search.draw import DrawSpec, draw_episodes
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, episode_layout
 from ctxsearch.agent.search.priors import open_knowledge
+from ctxsearch.agent.search.runner import toured
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import Detection, DetectorModel, SimDetector, default_or_named
 from ctxsearch.envs.floorplan import generate_layout
@@ -89,6 +96,8 @@ from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import ArgumentTypeError, ArgumentValueError, CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.home_map import HomeMap
+from ctxsearch.knowledge.options import MapMode
 from ctxsearch.knowledge.ranking import KBProbabilities, candidate_volumes
 
 ENV_ID = "ctxsearch/ObjectSearch-v0"
@@ -112,6 +121,10 @@ ELAPSED_LIMIT = 2.0  # the ``elapsed`` observation saturates at this many budget
 MAX_EPISODE_STEPS = 2000
 DEFAULT_TOP_K = 8
 CONTEXT_FEATURES = ("cx", "cy", "cz", "yaw", "hx", "hy", "hz", "p_low", "p_high", "valid")
+# given: the robot knows nothing but what it detects (the true grid bounds its motion);
+# remembered: the house is one it toured the day before, its remembered furniture known from
+# the start (the context's volumes, ``info["remembered_furniture"]``)
+MAPS = (MapMode.GIVEN.value, MapMode.REMEMBERED.value)
 
 
 def draw_episode(
@@ -124,13 +137,16 @@ def draw_episode(
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
     detector: DetectorModel | None = None,
     cache: Path | None = None,
+    day: int = 0,
 ) -> tuple[Episode, RoomLayout]:
     """Episode ``index`` of the benchmark's episodes for ``seed`` (the draw of ``DrawSpec.make(
     style, index + 1, seed, ..., detector=detector)``: agent.search.draw's worlds in order, the
     target not visible from the start and detectable within the budget) and its room's layout.
     ``cache``: a directory where the draw is kept for later processes (agent.search.draw_store:
-    the benchmark's draw cache; None: this process only)."""
-    spec = DrawSpec.make(style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector)
+    the benchmark's draw cache; None: this process only); ``day``: the worlds' day."""
+    spec = DrawSpec.make(
+        style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector, day=day
+    )
     spec = replace(spec, first_view=False)  # the task has no oracle: whether, not when
     draw = _DRAWS.get(spec)
     if draw is None:
@@ -223,8 +239,12 @@ class ObjectSearchEnv(gymnasium.Env):
         top_k: int = DEFAULT_TOP_K,
         render_mode: str | None = None,
         draw_cache: str | Path | None = None,
+        map: str = "given",  # noqa: A002 - the CLI's name (--map)
     ) -> None:
         _check_arguments(style, detector, kb, budget_s, top_k, render_mode, draw_cache)
+        if map not in MAPS:
+            raise ArgumentValueError(f"map must be one of {', '.join(MAPS)}, got {map!r}"[:300])
+        self.map = MapMode(map)
         self.draw_cache = None if draw_cache is None else Path(draw_cache)
         self.catalog = load_catalog()
         with _api_errors():
@@ -240,6 +260,7 @@ class ObjectSearchEnv(gymnasium.Env):
         self.action_space = spaces.Discrete(len(ACTIONS))
         self.observation_space = self._observation_space()
         self.world: World | None = None
+        self.home: HomeMap | None = None  # the remembered map of the episode's house
         self.episode: Episode | None = None
         self.layout: RoomLayout | None = None
 
@@ -288,7 +309,9 @@ class ObjectSearchEnv(gymnasium.Env):
             exclude_seeds=self.learned,
             detector=self.detector_model,
             cache=self.draw_cache,
+            day=1 if self.map is MapMode.REMEMBERED else 0,
         )
+        self.home = self._remembered()
         self.close()
         self.world = World(
             self.layout, self.catalog, width=self.width, height=self.height, spec=self.robot_spec,
@@ -302,10 +325,23 @@ class ObjectSearchEnv(gymnasium.Env):
         self._rgb = np.zeros((self.height, self.width, 3), np.uint8)
         self._depth = np.zeros((self.height, self.width, 1), np.float32)
         self._detected = np.zeros(len(self._types), np.int8)
+        # what the robot knows of the world: on the remembered map its furniture from the start
         self._known: dict[int, ObjectInstance] = {}
+        if self.home is not None:
+            self._known.update((o.id, o.instance()) for o in self.home.furniture)
         self.found_id: int | None = None
         self.success = False
         return self._observation(), self._info([])
+
+    def _remembered(self) -> HomeMap | None:
+        """On the remembered map: the map of the robot's tour of the episode's house the day
+        before (agent.search.tour, cached as the benchmark's tours are); else None."""
+        if self.map is not MapMode.REMEMBERED:
+            return None
+        ep = self.episode
+        day0 = generate_layout(self.style, ep.room_seed, self.catalog, day=ep.day - 1)
+        with _api_errors():
+            return toured(day0, self.catalog, self.detector_model, MapConfig(), ep.day - 1)[0]
 
     def step(self, action) -> tuple[dict, float, bool, bool, dict]:
         """Do ``ACTIONS[action]``; observation, reward (minus its seconds), terminated,
@@ -446,6 +482,8 @@ class ObjectSearchEnv(gymnasium.Env):
             "found_id": self.found_id,
             "success": bool(self.success),
             "detections": [(d.type, d.instance_id) for d in dets],
+            "day": ep.day,
+            "remembered_furniture": 0 if self.home is None else len(self.home.furniture),
         }
 
 

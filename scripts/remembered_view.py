@@ -22,11 +22,9 @@ import numpy as np
 from ctxsearch.agent.room_segmentation import wall_mask
 from ctxsearch.agent.search.config import MapConfig
 from ctxsearch.agent.search.remembered import confidence_color
-from ctxsearch.agent.search.runner import EpisodeSensor
-from ctxsearch.agent.search.tour import tour
-from ctxsearch.envs.detector import DetectorModel, SimDetector
+from ctxsearch.agent.search.runner import toured
+from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.envs.layout import RoomLayout
-from ctxsearch.envs.world import World
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
@@ -110,11 +108,7 @@ def write_remembered(
 ) -> list[Path]:
     """Tour the world on day 0, write remembered.png and remembered.json into ``out``; print
     one line."""
-    with World(layout, catalog) as world:
-        sensor = EpisodeSensor(world, SimDetector(detector, layout, catalog, layout.seed),
-                               catalog, world.sim_time)  # fmt: skip
-        home = tour(layout, catalog, detector, MapConfig(), 0, body=world, sensor=sensor)
-        seconds = float(world.sim_time)
+    home, seconds = toured(layout, catalog, detector, MapConfig(), 0, cached=False)
     img, counts = draw(home, layout, catalog)
     png, js = out / "remembered.png", out / "remembered.json"
     cv2.imwrite(str(png), img)

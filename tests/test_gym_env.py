@@ -182,9 +182,33 @@ def test_context_feature_ranks_the_learned_relation_volumes(catalog):
     env.close()
 
 
+def test_on_the_remembered_map_the_toured_furniture_is_context_from_the_start(catalog):
+    kb = KnowledgeBase(catalog)
+    for _ in range(20):
+        kb.record_examination("Desk", [("ON-TOP-OF-DESK", "Cup")])
+    env = make(kb=kb, top_k=4, map="remembered")
+    seed = next(s for s in range(40) if env.reset(seed=s)[1]["target"] == "Cup")
+    obs, info = env.reset(seed=seed)
+    base = env.unwrapped
+    assert info["day"] == 1 and info["remembered_furniture"] > 0
+    assert base.episode.day == 1 and base.home.day == 0
+    assert {o.id for o in base.home.furniture} <= {
+        o.id for o in base.layout.objects if catalog.type(o.type).is_furniture
+    }
+    assert any(o.type == "Desk" for o in base.home.furniture)
+    assert obs["context"][0, -1] == 1.0  # a desk's volume ranked before any image
+    given = make(kb=kb, top_k=4)
+    obs_g, info_g = given.reset(seed=seed)
+    assert info_g["remembered_furniture"] == 0 and info_g["day"] == 0
+    np.testing.assert_array_equal(obs_g["context"], 0.0)
+    env.close()
+    given.close()
+
+
 @pytest.mark.parametrize(
     ("kwargs", "needle"),
     [
+        ({"map": "built"}, "map must be one of"),
         ({"style": "no_such_style"}, "no_such_style"),
         ({"detector": "no_such_detector"}, "no_such_detector"),
         ({"width": 0}, "image size"),

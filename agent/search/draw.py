@@ -236,11 +236,12 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     last = -1
     for k, ep in enumerate(draw.episodes):
         asked = (ep.index, ep.style, ep.budget_s) == (k, spec.style.name, spec.budget_s)
-        if spec.homes:  # the homes in turn, several episodes each
-            world, last = (k if ep.room_seed in spec.homes else -1), -1
-        else:
+        if spec.homes:  # the homes in turn, several episodes each, none excluded
+            world, fits = k, ep.room_seed in spec.homes
+        else:  # held-out worlds in index order, none a learned one
             world = seeds.get(ep.room_seed, -1)
-        if not asked or world <= last or (ep.room_seed in spec.exclude_seeds and not spec.homes):
+            fits = world > last and ep.room_seed not in spec.exclude_seeds
+        if not (asked and fits):
             return False
         if spec.target is not None and ep.target != spec.target:
             return False

@@ -45,7 +45,7 @@ from ctxsearch.agent.search.policies import SearchPolicy, make_policy
 from ctxsearch.agent.search.priors import NO_KNOWLEDGE, KnowledgeSource, Priors, make_priors
 from ctxsearch.agent.search.registry import PolicySpec, default_policies, resolve
 from ctxsearch.agent.search.remembered import log_remembered
-from ctxsearch.agent.search.tour import cached_tour
+from ctxsearch.agent.search.tour import cached_tour, tour
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import (
     Detection,
@@ -392,18 +392,35 @@ def remembered_home(
     ep: Episode, style: WorldStyle, catalog: Catalog, detector: DetectorModel | None, m: MapConfig
 ) -> HomeMap:
     """The map the robot made of episode ``ep``'s house on the day of its tour
-    (``ep.day - map.days_after``; agent.search.tour), from the cache or toured now in a world of
-    that day of its own."""
+    (``ep.day - map.days_after``; agent.search.tour), from the cache or toured now."""
     day = ep.day - days_after(m)
     if day < 0:
         raise CtxsearchError(f"episode {ep.index} is on day {ep.day}: no day to tour before it")
     layout = generate_layout(style, ep.room_seed, catalog, day=day)
+    return toured(layout, catalog, detector, m, day)[0]
+
+
+def toured(
+    layout: RoomLayout,
+    catalog: Catalog,
+    detector: DetectorModel | None,
+    m: MapConfig,
+    day: int,
+    cached: bool = True,
+) -> tuple[HomeMap, float]:
+    """The robot's tour of ``layout`` (the world on ``day``) in a world of its own, sensing
+    with ``detector`` (None: perfect): the map it leaves and the simulated seconds it took
+    (agent.search.tour; ``cached``: read from and kept in the cache, the seconds then 0 for a
+    map read back)."""
     with World(layout, catalog) as world:
         model = detector or load_detector("perfect")
         sensor = EpisodeSensor(
             world, SimDetector(model, layout, catalog, layout.seed), catalog, world.sim_time
         )
-        return cached_tour(layout, catalog, detector, m, day, body=world, sensor=sensor)
+        t0 = world.sim_time
+        run = cached_tour if cached else tour
+        home = run(layout, catalog, detector, m, day, body=world, sensor=sensor)
+        return home, float(world.sim_time - t0)
 
 
 def stored_home(ep: Episode, style: WorldStyle, catalog: Catalog, config: SearchConfig) -> HomeMap:

@@ -19,12 +19,10 @@ import sys
 import numpy as np
 
 from ctxsearch.agent.search.config import MapConfig
-from ctxsearch.agent.search.runner import EpisodeSensor
-from ctxsearch.agent.search.tour import tour
-from ctxsearch.envs.detector import SimDetector, load_detector
+from ctxsearch.agent.search.runner import toured
+from ctxsearch.envs.detector import load_detector
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
-from ctxsearch.envs.world import World
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 
@@ -35,10 +33,7 @@ def house_quality(style: str, seed: int, detector: str) -> dict:
     st = resolve_style(style, catalog)
     det = load_detector(detector, catalog)
     layout = generate_layout(st, seed, catalog)
-    with World(layout, catalog) as world:
-        sensor = EpisodeSensor(world, SimDetector(det, layout, catalog, seed), catalog, 0.0)
-        home = tour(layout, catalog, det, MapConfig(), 0, body=world, sensor=sensor)
-        seconds = float(world.sim_time)
+    home, seconds = toured(layout, catalog, det, MapConfig(), 0, cached=False)
     true = {o.id: o for o in layout.objects if catalog.type(o.type).is_furniture}
     got = {o.id: o for o in home.furniture}
     err = [float(np.hypot(*(np.array(o.position[:2]) - true[i].position[:2])))
