@@ -90,15 +90,14 @@ bench-b: $(STAMP)
 # build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice; the old
 # store's WAL files go too (SQLite would replay a stale log into the copy). Both scenarios search
 # the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache). The
-# remembered map searches 100 held-out houses on the day after the robot toured each; then "find
-# my phone" (one instance kept) with room context, remembered and given on the same day-1 episodes.
+# remembered map: "find my phone" (one instance kept) with room context in 60 held-out houses on
+# the day after the robot toured each, and the given map on the same day-1 episodes.
 	rm -f build/kb_apartment.sqlite build/kb_apartment.sqlite-wal build/kb_apartment.sqlite-shm
 	mkdir -p build && cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --episodes 100 --quiet --out results/search_apartment_remembered --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --episodes 100 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --set map.days_after=1 --policies uniform,location,oracle-prior,oracle --episodes 100 --targets instance --room-context --quiet --out results/search_apartment_given_instance --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --set map.days_after=1 --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_given_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
 	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
 	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
