@@ -135,18 +135,16 @@ def draw_episode(
     index: int = 0,
     budget_s: float = DEFAULT_BUDGET_S,
     exclude_seeds: set[int] | frozenset[int] = frozenset(),
-    detector: DetectorModel | None = None,
     cache: Path | None = None,
-    day: int = 0,
+    **spec_fields,
 ) -> tuple[Episode, RoomLayout]:
     """Episode ``index`` of the benchmark's episodes for ``seed`` (the draw of ``DrawSpec.make(
     style, index + 1, seed, ..., detector=detector)``: agent.search.draw's worlds in order, the
     target not visible from the start and detectable within the budget) and its room's layout.
     ``cache``: a directory where the draw is kept for later processes (agent.search.draw_store:
-    the benchmark's draw cache; None: this process only); ``day``: the worlds' day."""
-    spec = DrawSpec.make(
-        style, index + 1, seed, catalog, budget_s, exclude_seeds, None, detector, day=day
-    )
+    the benchmark's draw cache; None: this process only); ``spec_fields``: the draw's other
+    fields by name (``detector``, ``day``: agent.search.draw.DrawSpec)."""
+    spec = DrawSpec.make(style, index + 1, seed, catalog, budget_s, exclude_seeds, **spec_fields)
     spec = replace(spec, first_view=False)  # the task has no oracle: whether, not when
     draw = _DRAWS.get(spec)
     if draw is None:
