@@ -170,17 +170,22 @@ def save(directory: Path, key: str, draw: EpisodeDraw) -> None:
 
 
 def write_json(directory: Path, key: str, doc: object, what: str) -> None:
-    """Store ``doc`` as ``directory/key.json`` (the directory created if needed), atomically; a
+    """Store ``doc`` as ``directory/key.json`` (``write_bytes``)."""
+    write_bytes(directory, f"{key}.json", json.dumps(doc).encode("utf-8"), what)
+
+
+def write_bytes(directory: Path, name: str, data: bytes, what: str) -> None:
+    """Store ``data`` as ``directory/name`` (the directory created if needed), atomically; a
     directory that cannot keep it (read-only, full) is a warning on stderr naming ``what``: the
     work is done, the cache costs only time."""
     directory = Path(directory)
     tmp = None
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=directory)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(doc, f)
-        os.replace(tmp, directory / f"{key}.json")
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, directory / name)
     except OSError as e:
         print(f"ctxsearch: warning: {directory}: {what} not kept: {e.strerror or e}",
               file=sys.stderr)  # fmt: skip

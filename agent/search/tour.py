@@ -30,8 +30,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +42,7 @@ from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.config import MapConfig
 from ctxsearch.agent.search.context import SearchContext, SearchStopped
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS, sweep
-from ctxsearch.agent.search.draw_store import code_digest
+from ctxsearch.agent.search.draw_store import code_digest, write_bytes
 from ctxsearch.agent.search.episode import Episode
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.maps import WorldMaps
@@ -191,7 +189,7 @@ def cached_tour(layout, catalog, detector, config, day, *, body, sensor) -> Home
             return got
     home = tour(layout, catalog, detector, config, day, body=body, sensor=sensor)
     if path is not None:
-        _write(path, home.to_bytes())
+        write_bytes(path.parent, path.name, home.to_bytes(), "remembered-map tour")
     return home
 
 
@@ -207,15 +205,3 @@ def _read_tour(path: Path, layout: RoomLayout, day: int, catalog: Catalog) -> Ho
     if (home.style, home.seed, home.day) != (layout.style, layout.seed, int(day)):
         return None
     return home
-
-
-def _write(path: Path, data: bytes) -> None:
-    """``data`` at ``path`` (a temporary file renamed over it: a reader never sees half)."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tour-", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except OSError:
-        pass  # a cache that cannot be written is no cache
