@@ -258,3 +258,16 @@ def test_two_workers_give_the_serial_json(tmp_path, transfer_dir):
     assert _strip_timing(a) == _strip_timing(b)
     csv_a = (transfer_dir / "transfer.csv").read_text()
     assert csv_a == (tmp_path / "t" / "transfer.csv").read_text()
+
+
+def test_the_remembered_scenario_searches_toured_held_out_houses_at_every_k():
+    from ctxsearch.agent.search.config import HomeSource, SearchConfig
+    from ctxsearch.scripts.experiments.scenarios import DEFAULT_SCENARIOS, scenario_config
+
+    base = SearchConfig(style="apartment")
+    got = scenario_config(base, DEFAULT_SCENARIOS["remembered"])
+    assert got.map.home is HomeSource.TOUR
+    assert got.policies == ("uniform", "location", "oracle-prior")
+    assert scenario_config(base, DEFAULT_SCENARIOS["given"]).map.home is None
+    mine = base.updated({"map.home": "store"})
+    assert scenario_config(mine, DEFAULT_SCENARIOS["remembered"]).map.home is HomeSource.STORE

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ctxsearch.agent.search import measures
-from ctxsearch.agent.search.config import SearchConfig
+from ctxsearch.agent.search.config import HomeSource, SearchConfig
 from ctxsearch.agent.search.episode import Episode
 from ctxsearch.agent.search.registry import Role, parse_policies, with_role
 from ctxsearch.knowledge.base import KnowledgeBase
@@ -70,10 +70,16 @@ DEFAULT_SCENARIOS = {name: registry_scenario(MapMode(name)) for name in SCENARIO
 def scenario_config(
     base: SearchConfig, scenario: Scenario, policies: Sequence[str] | None = None
 ) -> SearchConfig:
-    """``base`` set up for ``scenario``: its policies (or ``policies``, a subset) and its map."""
-    return base.updated(
-        {"policies": tuple(policies or scenario.policies), "map.scenario": scenario.name}
-    )
+    """``base`` set up for ``scenario``: its policies (or ``policies``, a subset) and its map;
+    on the remembered map the houses are held-out ones toured the day before (``map.home``
+    tour, unless set): the stores compared learned maps of their own houses or none, and every
+    store must search the same episodes."""
+    changes: dict[str, object] = {
+        "policies": tuple(policies or scenario.policies), "map.scenario": scenario.name
+    }
+    if scenario.name == MapMode.REMEMBERED.value and base.map.home is None:
+        changes["map.home"] = HomeSource.TOUR
+    return base.updated(changes)
 
 
 def parse_scenarios(names: str, overrides: dict[str, str | None]) -> tuple[Scenario, ...]:
