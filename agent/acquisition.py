@@ -401,8 +401,7 @@ class RoomLearner:
                              min(1.0, rec.best.get(o.id, 1.0)), sum(rec.reports[o.id].values()))
             for o in rec.objects() if self.catalog.type(o.type).is_furniture
         ]  # fmt: skip
-        bounds = (-lay.width / 2, -lay.depth / 2, lay.width / 2, lay.depth / 2)
-        return home_map(self.built, (lay.style, lay.seed, self.day), bounds, lay.height, furniture)
+        return home_map(self.built, lay, self.day, furniture)
 
     def _replays_by_images(self) -> bool:
         """A detector that errs reports poses and objects (false positives, look-alikes) the

@@ -13,24 +13,26 @@ import numpy as np
 
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.room_segmentation import RoomLabels
+from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.knowledge.home_map import HomeMap, RememberedObject
 
 
 def home_map(
     built: BuiltMap,
-    where: tuple[str, int, int],
-    bounds: tuple[float, float, float, float],
-    top: float,
+    layout: RoomLayout,
+    day: int,
     furniture: list[RememberedObject],
     support: np.ndarray | None = None,
 ) -> HomeMap:
-    """The remembered map of world ``where`` = (style, seed, day) from the visit's ``built``
-    map over the footprint ``bounds`` up to ``top``, with the ``furniture`` it recognised and
-    the lattice's ``support`` (None: the visit kept none)."""
-    style, seed, day = where
+    """The remembered map of ``layout``'s world on ``day`` from the visit's ``built`` map
+    (over the layout's footprint, up to its height), with the ``furniture`` it recognised and
+    the lattice's ``support`` (None: the visit kept none). The layout gives only the world's
+    name and extent, what the robot knew before it looked."""
     sup = np.zeros(0, bool) if support is None else np.asarray(support, bool)
+    hw, hd = layout.width / 2, layout.depth / 2
     return HomeMap(
-        style, int(seed), int(day), tuple(float(v) for v in bounds), float(top), built.x0,
+        layout.style, int(layout.seed), int(day), (-hw, -hd, hw, hd), float(layout.height),
+        built.x0,
         built.y0, built.resolution, built.floor.copy(), built.occupied.copy(),
         built.top_z.copy(), RoomLabels.of_built(built).labels.astype(np.int16),
         tuple(sorted(furniture, key=lambda o: o.id)), sup, built.images,

@@ -117,7 +117,7 @@ class SearchContext:
         self.perception = perception
         self.built: BuiltMap | None = maps.new_built_map(episode.start, self.spec)
         # the remembered furniture as today's images update it (None: not a remembered map)
-        self.memory = maps.furniture_memory(catalog, self.range_of)
+        self.memory = maps.furniture_memory(self.range_of)
         self.probs = probs
         self.recorder = recorder or Recorder(None)
         self.policy = "?"  # the policy's name, set when it runs (SearchPolicy.run)
@@ -186,7 +186,7 @@ class SearchContext:
 
     def furniture_map(self) -> list[ObjectInstance]:
         """The map the location constraint may assume: the furniture poses of ``maps`` (on the
-        remembered map, what is left of it after today's images: agent.search.tour, agent.search.remembered)."""
+        remembered map, what is left of it after today's images: agent.search.remembered)."""
         if self.memory is not None:
             return self.memory.objects()
         return list(self.maps.furniture)

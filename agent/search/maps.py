@@ -102,7 +102,7 @@ class WorldMaps:
             return None
         return BuiltMap(self.bounds, spec, start, max_range=self.depth_range, top=self.top)
 
-    def furniture_memory(self, catalog: Catalog, ranges) -> FurnitureMemory | None:
+    def furniture_memory(self, ranges) -> FurnitureMemory | None:
         """The remembered furniture as one policy's run updates it (None: not ``remembered``);
         ``ranges``: a type's detection range."""
         if self.home is None:

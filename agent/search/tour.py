@@ -159,10 +159,7 @@ def tour(
     assert built is not None
     min_score = detector.fp_max_score if detector is not None and not detector.perfect else 0.0
     support = ctx.seen.support | ~np.isfinite(ctx.seen.best)  # a place never seen may hold one
-    return home_map(
-        built, (layout.style, layout.seed, day), maps.bounds, maps.top,
-        ctx.sightings.furniture(catalog, min_score), support,
-    )  # fmt: skip
+    return home_map(built, layout, day, ctx.sightings.furniture(catalog, min_score), support)
 
 
 # ============================================================================= tours kept on disk
