@@ -326,8 +326,11 @@ def generate_house(
     day: int = 0,
 ) -> RoomLayout:
     """A furnished house of ``house`` style, the same for the same (house, seed, day); on a later
-    ``day`` its plan and furniture stay and every room's small objects are placed anew
-    (``generate_room``'s day)."""
+    ``day`` its plan and furniture (house ids included) stay and every room's small objects are
+    those of ``generate_room``'s day: made from the day before, each small object staying with
+    its room style's probability (``Style.stay``) where the day's rules still want one of its
+    type. Small objects are numbered anew every day (``_house_ids``): across days, an object that
+    stayed is identified by its type and exact pose (``envs.persistence.stayed``), not its id."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
@@ -387,9 +390,11 @@ def generate_house(
 
 
 def _house_ids(room: RoomLayout, base: int, catalog: Catalog, day: int, furnished) -> dict:
-    """Room-local id -> house id. Day 0: local + the room's base (the rooms' ids in turn). A
-    later day: furniture keeps its day-0 house id; small objects take the ids no furniture of
-    the house holds, in order (rooms in turn), so ids stay 1..N."""
+    """Room-local id -> house id. Day 0: local + the room's base (the rooms' ids in turn), 1..N.
+    A later day: furniture keeps its day-0 house id; small objects take the smallest ids no
+    furniture of the house holds, in order (rooms in turn, a room's objects in its order), so
+    ids stay unique and fill 1..N but for the day-0 ids of furniture above N (a day with fewer
+    small objects than day 0)."""
     if not day:
         return {o.id: o.id + base for o in room.objects}
     taken = {o.id + b for _i, r, b, _c in furnished for o in r.objects

@@ -39,6 +39,7 @@ from scipy import ndimage
 
 from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.parts import WorldSurface, world_parts_array, world_surfaces
+from ctxsearch.envs.persistence import Credits, DayMemo, DayState, choose_stayers
 from ctxsearch.envs.robot_spec import RobotSpec, wrap_angle
 from ctxsearch.envs.styles import Rule, Style
 from ctxsearch.knowledge.catalog import Catalog, ObjectType, load_catalog
@@ -63,6 +64,8 @@ MIN_POCKET_CELLS = 10  # free components smaller than this (0.1 m^2) are ignored
 GRID_SLACK = 0.07
 MAX_ROOM_ATTEMPTS = 12
 DAY_TAG = 0xDA75  # the day stream's hash tag (``day_rng``)
+STAY_TAG = 0x57A7  # the stay stream's hash tag (``stay_rng``)
+DAYS_KEPT = 256  # rooms whose latest day is kept in memory (``envs.persistence.DayMemo``)
 FURNITURE_TRIES = 60
 OBJECT_TRIES = 30
 # Probability that a piece of furniture of this shape stands with its back to a wall.
@@ -284,6 +287,21 @@ class _Builder:
         if obstacle is not None:
             self.obstacles.append(obstacle)
             self.dmin = np.minimum(self.dmin, obstacle.dist)
+
+    def drop(self, ids: set[int]) -> None:
+        """Take the objects of ``ids`` out of the finished room, with whatever rests on them
+        (the stayers no placement of the day took); a placement that names one of them as its
+        reference forgets it. Only the room's contents are updated, not the collision state."""
+        gone = set(ids)
+        while more := {o for o, s in self.support.items() if s in gone and o not in gone}:
+            gone |= more
+        self.objects = [o for o in self.objects if o.id not in gone]
+        self._ids -= gone
+        for k in gone:
+            self.support.pop(k, None)
+            self.resting.pop(k, None)
+            self.placed_by.pop(k, None)
+        self.placed_by = {k: v for k, v in self.placed_by.items() if v[0] not in gone}
 
     # -- free space -----------------------------------------------------------------------------
     def make_obstacle(self, obj: ObjectInstance, furniture: bool) -> _Obstacle:
@@ -573,12 +591,19 @@ def _build(
 
 
 def _place_small(
-    b: _Builder, style: Style, catalog: Catalog, rng: np.random.Generator, furniture_rules: bool
+    b: _Builder,
+    style: Style,
+    catalog: Catalog,
+    rng: np.random.Generator,
+    furniture_rules: bool,
+    credits: Credits | None = None,
 ) -> None:
     """The rules in file order (those placing furniture only with ``furniture_rules``), then the
-    clutter."""
+    clutter. With ``credits`` (a later day's stayers), an instance of a type with stayers left
+    takes one of them instead of being placed; stayers not taken yet are no rule's reference."""
     for rule in style.rules:
-        refs = [o for o in b.objects if o.type == rule.ref]
+        pending = credits.pending() if credits else ()
+        refs = [o for o in b.objects if o.type == rule.ref and o.id not in pending]
         is_furniture = catalog.type(rule.type).is_furniture
         if is_furniture and not furniture_rules:
             continue
@@ -588,11 +613,12 @@ def _place_small(
             for _ in range(int(rng.integers(rule.count[0], rule.count[1] + 1))):
                 if is_furniture:
                     b.place_furniture_by_rule(rule, ref)
-                else:
+                elif not (credits and credits.take(rule.type, (ref.id, rule.relation))):
                     b.place_small_by_rule(rule, ref)
     for tname, (lo, hi) in style.clutter:
         for _ in range(int(rng.integers(lo, hi + 1))):
-            b.place_clutter(tname)
+            if not (credits and credits.take(tname)):
+                b.place_clutter(tname)
 
 
 def day_rng(style: Style, seed: int, day: int) -> np.random.Generator:
@@ -603,20 +629,58 @@ def day_rng(style: Style, seed: int, day: int) -> np.random.Generator:
     )
 
 
+def stay_rng(style: Style, seed: int, day: int) -> np.random.Generator:
+    """The random stream that decides which small objects of ``day`` - 1 stay on ``day`` (its
+    own hash tag: the day's placements draw from ``day_rng`` as they would without it)."""
+    return np.random.default_rng(
+        [int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name), int(day), STAY_TAG]
+    )
+
+
 def _next_day(
-    b0: _Builder, style: Style, catalog: Catalog, robot: RobotSpec, seed: int, day: int
+    prev: DayState, style: Style, catalog: Catalog, robot: RobotSpec, seed: int, day: int
 ) -> _Builder:
-    """The room of ``b0`` on ``day``: the same shell and furniture (same ids and poses), its small
-    objects placed anew by ``style.on_day(day)``'s rules from the day's stream."""
-    shell = RoomShell(b0.width, b0.depth, b0.height, b0.doors)
+    """The room of ``prev`` (its day ``day`` - 1) on ``day``: the same shell and furniture (same
+    ids and poses); each small object stays with its type's ``style.stay`` (``stay_rng``), then
+    ``style.on_day(day)``'s rules place the day's small objects from the day's stream, an
+    instance of a type with stayers left taking one of them (``envs.persistence``); the stayers
+    none took have left. With every stay probability 0 this is the day placed from scratch."""
+    shell = RoomShell(prev.width, prev.depth, prev.height, prev.doors)
     rng = day_rng(style, seed, day)
-    b = _Builder(style.on_day(day), catalog, rng, robot, shell)
-    for obj in b0.objects:
+    today = style.on_day(day)
+    b = _Builder(today, catalog, rng, robot, shell)
+    for obj in prev.objects:
         if catalog.type(obj.type).is_furniture:
             obstacle = b.make_obstacle(obj, furniture=True)
-            b.add(obj, world_parts_array(obj, catalog), None, obstacle, b0.placed_by.get(obj.id))
-    _place_small(b, style.on_day(day), catalog, rng, furniture_rules=False)
+            b.add(obj, world_parts_array(obj, catalog), None, obstacle, prev.placed_by.get(obj.id))
+    stayers = choose_stayers(prev.objects, prev.support, lambda t: style.stay(t, catalog),
+                             catalog, stay_rng(style, seed, day))  # fmt: skip
+    credits = Credits(_keep(b, prev, stayers), b.placed_by) if stayers else None
+    _place_small(b, today, catalog, rng, furniture_rules=False, credits=credits)
+    if credits is not None:
+        b.drop(credits.pending())
     return b
+
+
+def _keep(b: _Builder, prev: DayState, stayers: list[ObjectInstance]) -> list[ObjectInstance]:
+    """Add the stayers to the day's room at their exact pose, on what they rested on, with the
+    rule that placed them where its reference is still there; one on the floor that would now
+    close off free space leaves (as does whatever rested on it). Returns those kept."""
+    kept = []
+    for obj in stayers:
+        surf = prev.resting.get(obj.id)
+        if surf is not None and surf.owner not in b._ids:
+            continue  # it rested on a small object that did not stay
+        obstacle = None
+        if surf is None:
+            obstacle = b.make_obstacle(obj, furniture=False)
+            if not b.free_space_ok(obstacle):
+                continue
+        by = prev.placed_by.get(obj.id)
+        by = by if by is not None and by[0] in b._ids else None
+        b.add(obj, world_parts_array(obj, b.catalog), surf, obstacle, by)
+        kept.append(obj)
+    return kept
 
 
 def door_entry(layout: RoomLayout, inset: float = 0.6) -> tuple[float, float, float]:
@@ -641,10 +705,66 @@ def generate_room(
 ) -> RoomLayout:
     """A furnished room of ``style``, the same for the same (style, seed, shell, day). With
     ``shell`` (a room of a house) its size and doors are given instead of drawn. On ``day`` >= 1
-    the room persists: the same size, doors and furniture as on day 0, its small objects placed
-    anew (``day_rng``) by the style's rules as they stand that day (``Style.on_day``)."""
+    the room persists: the same size, doors and furniture (ids and poses) as on day 0, and day d
+    is made from day d - 1 (``_next_day``): each small object stays exactly where it was with its
+    type's probability (``Style.stay``), and the style's rules as they stand that day
+    (``Style.on_day``) place the day's small objects (``day_rng``), taking stayers of a type
+    before placing new ones, so each type's count follows the day's rules; the stayers not taken
+    leave. A stayer keeps its id; the ids of those that left are gaps, new objects take the
+    smallest free ones. Day d is d day steps from day 0 (each about half the room's own build);
+    the latest day of each of the last ``DAYS_KEPT`` rooms is kept in memory, so a room's days
+    asked for in turn cost one step each. With every stay probability 0
+    (``Style.moves_everything``) each day is placed from day 0 directly, as before small
+    objects stayed."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
+    if not day:
+        state = _state(_day_zero(style, seed, catalog, robot, shell))
+    elif style.moves_everything(catalog):
+        state = _state(_day_zero(style, seed, catalog, robot, shell))
+        state = _state(_next_day(state, style, catalog, robot, seed, day))
+    else:
+        state = _chain(style, seed, catalog, robot, shell, int(day))
+    return RoomLayout(
+        style=style.name,
+        seed=int(seed),
+        width=state.width,
+        depth=state.depth,
+        height=state.height,
+        door=state.doors[0],
+        objects=state.objects,
+        support=dict(state.support),
+        placed_by=dict(state.placed_by),
+    )
+
+
+_DAYS = DayMemo(DAYS_KEPT)
+
+
+def _chain(
+    style: Style, seed: int, catalog: Catalog, robot: RobotSpec, shell: RoomShell | None, day: int
+) -> DayState:
+    """Day ``day`` of the room, made day by day from the latest day of it kept in memory that is
+    not later (else from day 0)."""
+    key = (style, int(seed), catalog, robot, shell)
+    start, state = _DAYS.start(key, day) or (0, None)
+    if state is None:
+        state = _state(_day_zero(style, seed, catalog, robot, shell))
+    for d in range(start + 1, day + 1):
+        state = _state(_next_day(state, style, catalog, robot, seed, d))
+    _DAYS.keep(key, day, state)
+    return state
+
+
+def _state(b: _Builder) -> DayState:
+    return DayState(b.width, b.depth, b.height, b.doors, tuple(b.objects), dict(b.support),
+                    dict(b.placed_by), dict(b.resting))  # fmt: skip
+
+
+def _day_zero(
+    style: Style, seed: int, catalog: Catalog, robot: RobotSpec, shell: RoomShell | None
+) -> _Builder:
+    """The room as first generated (its own stream; redrawn while a furniture minimum fails)."""
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, style_hash(style.name)])
     b = None
     for attempt in range(MAX_ROOM_ATTEMPTS):
@@ -652,16 +772,4 @@ def generate_room(
         if b is not None:
             break
     assert b is not None
-    if day:
-        b = _next_day(b, style, catalog, robot, seed, day)
-    return RoomLayout(
-        style=style.name,
-        seed=int(seed),
-        width=b.width,
-        depth=b.depth,
-        height=b.height,
-        door=b.door,
-        objects=tuple(b.objects),
-        support=dict(b.support),
-        placed_by=dict(b.placed_by),
-    )
+    return b

@@ -10,7 +10,7 @@ ground-truth tool and the oracle baselines do.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ctxsearch.envs.robot_spec import RobotSpec
@@ -19,11 +19,12 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, read_toml
 
 STYLES_DIR = ASSETS_DIR / "styles"
-TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter", "drift"}
+TOP_FIELDS = {"name", "description", "room", "furniture", "rule", "clutter", "drift", "stay"}
 ROOM_FIELDS = {"width", "depth", "height", "door_width"}
 RULE_FIELDS = {"ref", "relation", "type", "p", "count", "on"}
 DRIFT_FIELDS = {"rule", "p", "from_day"}
 MAX_DAY = 100_000
+EVERY_TYPE = "*"  # a [stay] key: every small type the table does not name
 ON_CHOICES = ("auto", "floor", "surface")
 MAX_COUNT = 50
 MAX_ROOM_SIDE = 50.0  # metres: width, depth (and door width) of a room
@@ -93,6 +94,25 @@ class Style:
     rules: tuple[Rule, ...]
     clutter: tuple[tuple[str, tuple[int, int]], ...]
     drift: tuple[Drift, ...] = ()  # the schedule of changes over days (empty: none)
+    # [stay]: (small type or EVERY_TYPE, probability) in file order (empty: the catalog's)
+    stays: tuple[tuple[str, float], ...] = ()
+
+    def stay(self, type_name: str, catalog: Catalog) -> float:
+        """The probability that an instance of ``type_name`` is still exactly where it was on
+        the next day: the style's [stay] value for the type, else its ``"*"`` value, else the
+        catalog's ``stay``. Furniture always stays (1)."""
+        if catalog.type(type_name).is_furniture:
+            return 1.0
+        table = dict(self.stays)
+        if type_name in table:
+            return table[type_name]
+        return table.get(EVERY_TYPE, catalog.type(type_name).stay)
+
+    def moves_everything(self, catalog: Catalog) -> bool:
+        """True when no small object this style places ever stays to the next day (every stay
+        probability 0): each day is then placed from scratch, as before persistence."""
+        small = [t for t in self.types if not catalog.type(t).is_furniture]
+        return all(self.stay(t, catalog) == 0.0 for t in small)
 
     def on_day(self, day: int) -> Style:
         """The style as it places small objects on ``day``: every drift entry with ``from_day
@@ -105,9 +125,7 @@ class Style:
             Rule(r.ref, r.relation, r.type, p.get(rule_name(r), r.p), r.count, r.on)
             for r in self.rules
         )
-        return Style(self.name, self.path, self.description, self.width, self.depth,
-                     self.height, self.door_width, self.furniture, rules, self.clutter,
-                     self.drift)  # fmt: skip
+        return replace(self, rules=rules)
 
     def with_drift(self, drift: tuple[Drift, ...], catalog: Catalog | None = None) -> Style:
         """The style with another drift schedule (checked like a file's: ``check_drift_rule``;
@@ -123,9 +141,7 @@ class Style:
                     "first): give each rule at most one p per day",
                     field=f"drift[{i}]",
                 )
-        return Style(self.name, self.path, self.description, self.width, self.depth,
-                     self.height, self.door_width, self.furniture, self.rules, self.clutter,
-                     tuple(drift))  # fmt: skip
+        return replace(self, drift=tuple(drift))
 
     @property
     def types(self) -> tuple[str, ...]:
@@ -316,6 +332,37 @@ def _drift(path, i: int, raw, style: Style, catalog: Catalog) -> Drift:
     return d
 
 
+def _stays(path, raw, catalog: Catalog) -> tuple[tuple[str, float], ...]:
+    """The [stay] table: small type (or ``"*"``) = the probability that an instance is still
+    exactly where it was on the next day."""
+    if not isinstance(raw, dict):
+        raise StyleError(path, 'must be a table of Type = probability (or "*" = p)', field="stay")
+    out = []
+    for tname, p in raw.items():
+        field = f"stay.{tname}"
+        if tname != EVERY_TYPE and tname not in catalog:
+            raise StyleError(
+                path,
+                f"unknown type '{tname}' (known: {', '.join(catalog.type_names)}, or \"*\" for "
+                "every small type not named)",
+                field=field,
+            )
+        if tname != EVERY_TYPE and catalog.type(tname).is_furniture:
+            raise StyleError(
+                path, f"'{tname}' is furniture, which stays across days: only small objects move",
+                field=field,
+            )  # fmt: skip
+        if (
+            isinstance(p, bool)
+            or not isinstance(p, int | float)
+            or not (0.0 <= p <= 1.0)
+            or math.isnan(p)
+        ):
+            raise StyleError(path, f"probability must be in [0, 1], got {p!r}", field=field)
+        out.append((tname, float(p)))
+    return tuple(out)
+
+
 def _check_fill(path, style: Style, catalog: Catalog, clearance: float) -> None:
     """Raise if the expected furniture (largest sizes) cannot fit in the smallest room with room
     for the robot to drive, or a single piece cannot fit at all."""
@@ -433,6 +480,7 @@ def parse_style(doc: dict, path: str | Path, catalog: Catalog, name: str | None 
         furniture=furniture,
         rules=tuple(rules),
         clutter=clutter,
+        stays=_stays(path, doc.get("stay", {}), catalog),
     )
     _check_fill(path, style, catalog, RobotSpec().clearance)
     raw_drift = doc.get("drift", [])

@@ -20,6 +20,13 @@ samples are houses (``generate_house(style, seed + i)``) and every furnished roo
 one unit: relations stay object-centred and are checked among the objects of one room (a volume
 reaching through a wall finds nothing behind it), so a house's statistics are the mix of its
 rooms', and ``se_room`` treats the rooms as the independent units.
+
+Persistence (``persistence``, ``ctxsearch truth``'s ``persistence``): per small type, the share
+of its instances on day d of the sampled worlds that are still at the same type and exact pose
+on day d + 1 (``envs.persistence.stayed``), beside the configured stay probability. In
+expectation the measured share is at most the configured one, and lower where a type's count
+changes from day to day: a day keeps only as many stayers of a type as its rules place
+(``envs.rooms``' days).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from tqdm import tqdm
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import HouseStyle, resolve_style
 from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.persistence import stayed
 from ctxsearch.envs.styles import Style
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -132,8 +140,9 @@ def ground_truth(
 ) -> dict:
     """P(rel(B)) for every (A, rel, B) over ``samples`` rooms of ``style`` (seeds seed .. seed+N-1);
     for a house style over the rooms of ``samples`` houses (then ``"rooms"`` says how many). On
-    ``day`` >= 1 the worlds are those of that day (their small objects placed anew by the
-    style's rules as its drift schedule has them that day); the document then says ``"day"``.
+    ``day`` >= 1 the worlds are those of that day (made day by day from day 0: some small
+    objects stayed where they were, the style's rules as its drift schedule has them that day
+    placed the rest); the document then says ``"day"``.
 
     Returns ``{"style", "samples", "seed", "catalog", "entries": [{"ref", "relation", "type",
     "p", "se", "n", "y", "se_room"}]}`` (``catalog`` is the catalog's fingerprint).
@@ -193,15 +202,71 @@ def room_contents(layout: RoomLayout) -> list[tuple[int, str, int]]:
 
 def sample_counts_and_rooms(
     style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog
-) -> tuple[list, list[list[tuple[int, str, int]]]]:
-    """``sample_counts`` of ``seeds`` and each world's ``room_contents``, every world generated
-    once (``ctxsearch truth`` on a house style, a sweep unit)."""
-    counts, rooms = [], []
+) -> tuple[list, list[list[tuple[int, str, int]]], dict[tuple[str, str], list[int]]]:
+    """``sample_counts`` of ``seeds``, each world's ``room_contents`` and the worlds' persistence
+    counts from day 0 to day 1 (``persistence_counts``), every day-0 world generated once
+    (``ctxsearch truth``'s sweep unit)."""
+    counts, rooms, kept = [], [], {}
     for s in seeds:
         layout = generate_layout(style, s, catalog)
         counts.extend(world_counts(layout, catalog))
         rooms.append(room_contents(layout))
-    return counts, rooms
+        later = generate_layout(style, s, catalog, 1)
+        for key, (n, y) in persistence_counts(layout, later, catalog).items():
+            kept.setdefault(key, [0, 0])
+            kept[key][0] += n
+            kept[key][1] += y
+    return counts, rooms, kept
+
+
+def persistence_counts(
+    before: RoomLayout, after: RoomLayout, catalog: Catalog
+) -> dict[tuple[str, str], tuple[int, int]]:
+    """Per (room style, small type): (n, y), n the instances in ``before`` and y those of them
+    at the same type and exact pose in ``after`` (a world on two days; a single room's style is
+    the layout's)."""
+    kept = stayed(after, before)  # the ids in before of the objects still there after
+    out: dict[tuple[str, str], tuple[int, int]] = {}
+    for o in before.objects:
+        if catalog.type(o.type).is_furniture:
+            continue
+        room = before.rooms[before.room_of[o.id]].style if before.is_house else before.style
+        n, y = out.get((room, o.type), (0, 0))
+        out[(room, o.type)] = (n + 1, y + int(o.id in kept))
+    return out
+
+
+def persistence(
+    style: Style | HouseStyle,
+    counts: dict[tuple[str, str], list[int] | tuple[int, int]],
+    catalog: Catalog,
+    day: int = 0,
+) -> dict:
+    """``ctxsearch truth``'s ``persistence`` from summed ``persistence_counts`` of its worlds on
+    ``day`` and ``day`` + 1: per small type of the style, the configured stay probability
+    (``stay``; a house style's: the mean of its room styles' weighted by the day's instances in
+    their rooms, each in ``stay_by_style``), the day's instances ``n``, those still at the same
+    type and pose the next day ``y``, their share ``p`` (None without instances) and its binomial
+    ``se`` (instances of one world are not independent: optimistic)."""
+    rooms = [s for s, _ in style.rooms] if isinstance(style, HouseStyle) else [style]
+    by_name = {s.name: s for s in rooms}
+    types = [t for t in style.types if not catalog.type(t).is_furniture]
+    out = []
+    for t in types:
+        per = {r: counts.get((r, t), (0, 0)) for r in by_name}
+        n = sum(v[0] for v in per.values())
+        y = sum(v[1] for v in per.values())
+        cfg = {r: by_name[r].stay(t, catalog) for r in by_name if t in by_name[r].types}
+        if n and isinstance(style, HouseStyle):
+            stay = sum(per[r][0] * cfg.get(r, 0.0) for r in per) / n
+        else:
+            stay = sum(cfg.values()) / len(cfg)
+        e = {"type": t, "stay": stay, "n": n, "y": y, "p": y / n if n else None,
+             "se": math.sqrt(y / n * (1 - y / n) / n) if n else None}  # fmt: skip
+        if isinstance(style, HouseStyle):
+            e["stay_by_style"] = cfg
+        out.append(e)
+    return {"from_day": int(day), "to_day": int(day) + 1, "types": out}
 
 
 @dataclass(frozen=True)

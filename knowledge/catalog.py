@@ -17,6 +17,13 @@ so ON-TOP-OF-DESK = lo [-0.5,-0.5,0.5], hi [0.5,0.5,0.5], margin_hi [0,0,0.4] is
 resting on the desk top, whatever the desk's size. Relation names follow the paper's convention:
 ``<REL>-<TYPE>`` with the type's name upper-cased as suffix, which makes every name unique.
 Coordinate systems may be partial: a Cup may have ABOVE/NEAR and no FRONT.
+
+``stay`` (optional, default 0) is the probability that an instance of a small-object type is
+still exactly where it was on the next day of a world (``envs.rooms``' days; a room style may
+override it, ``envs.styles.Style.stay``). Furniture always stays: its ``stay`` is checked like
+any other's and has no effect. Like the classes, it is not part of the fingerprint: it says how
+the simulated worlds change over days, not what the relation volumes are, so stores stay valid
+when it changes.
 """
 
 from __future__ import annotations
@@ -68,7 +75,8 @@ SHAPES = (
     "microscope",
     "bottle",
 )
-TYPE_FIELDS = {"name", "kind", "shape", "size", "color", "min_pixels", "max_range", "relation"}
+TYPE_FIELDS = {"name", "kind", "shape", "size", "color", "min_pixels", "max_range", "relation",
+               "stay"}  # fmt: skip
 RELATION_FIELDS = {"name", "lo", "hi", "margin_lo", "margin_hi"}
 # Sane ranges of the numbers a catalog holds (finite, and far beyond any real room or camera).
 MAX_SIZE = 10.0  # metres per axis
@@ -102,7 +110,9 @@ class RelationSpec:
 
 @dataclass(frozen=True, slots=True)
 class ObjectType:
-    """An object type: name, kind, builder shape, size range, colour, detectability, relations."""
+    """An object type: name, kind, builder shape, size range, colour, detectability, relations,
+    and ``stay``: the probability that a small object of this type is still exactly where it was
+    on the next day (without effect for furniture, which always stays)."""
 
     name: str
     kind: str
@@ -113,6 +123,7 @@ class ObjectType:
     min_pixels: int
     max_range: float
     relations: tuple[RelationSpec, ...] = ()
+    stay: float = 0.0
 
     @property
     def is_furniture(self) -> bool:
@@ -190,6 +201,7 @@ class Catalog:
         """A hash of the catalog's content (types, sizes, detectability, relation volumes).
 
         Stores record it: evidence gathered with other relation volumes is not comparable.
+        ``stay`` (how the simulated worlds change over days) and the classes are not part of it.
         """
         doc = [
             {
@@ -378,6 +390,20 @@ def _detectability(path: Path, name: str, raw: dict) -> tuple[int, float]:
     return mp, float(mr)
 
 
+def _stay(path: Path, name: str, raw: dict) -> float:
+    """The type's ``stay``: a probability (default 0: placed anew every day)."""
+    v = raw.get("stay", 0.0)
+    if not _is_number(v, 1.0) or v < 0:
+        raise CatalogError(
+            path,
+            f"must be a probability in [0, 1] (the chance an instance is still where it was "
+            f"the next day), got {v!r}",
+            type_name=name,
+            field="stay",
+        )
+    return float(v)
+
+
 def _relations(path: Path, name: str, raw: dict, size_lo, size_hi) -> tuple[RelationSpec, ...]:
     """The type's [[type.relation]] tables, each validated, no name twice."""
     raw_rels = raw.get("relation", [])
@@ -415,6 +441,7 @@ def _parse_type(path: Path, name: str, raw: dict) -> ObjectType:
         min_pixels=mp,
         max_range=mr,
         relations=_relations(path, name, raw, size_lo, size_hi),
+        stay=_stay(path, name, raw),
     )
 
 

@@ -176,9 +176,10 @@ def _add_day_args(p: argparse.ArgumentParser) -> None:
         type=argtypes.positive_int,
         default=1,
         metavar="D",
-        help="visit the same rooms on D days (furniture stays, small objects are placed anew "
-        "each day by the style's rules and its [[drift]] schedule); a later call with more days "
-        "adds the days not yet done (default: 1, the paper's single visit)",
+        help="visit the same rooms on D days (furniture stays; each small object stays where it "
+        "was with its type's stay probability, assets/types.toml or the style's [stay], and the "
+        "style's rules and its [[drift]] schedule place the day's others); a later call with "
+        "more days adds the days not yet done (default: 1, the paper's single visit)",
     )
     p.add_argument(
         "--reexamine",
@@ -335,10 +336,11 @@ def register_drift(bench_sub: argparse._SubParsersAction) -> None:
         "drift",
         help="a world set that changes over days: how fast none / half-life / detect notice it, "
         "their false alarms and errors, and the search on the last day with each",
-        description="Learn in --rooms rooms of a style on --days days (the furniture stays, small "
-        "objects are placed anew each day) while the style drifts (its [[drift]] schedule, or "
-        "--drift RULE:P:FROM_DAY, applied in memory), once re-examining every known object daily "
-        "(one store read by each forgetting method) and once per method with --reexamine impact. "
+        description="Learn in --rooms rooms of a style on --days days (the furniture stays; an "
+        "office's small objects are placed anew each day: its [stay] table) while the style "
+        "drifts (its [[drift]] schedule, or --drift RULE:P:FROM_DAY, applied in memory), once "
+        "re-examining every known object daily (one store read by each forgetting method) and "
+        "once per method with --reexamine impact. "
         "Writes DIR/drift.json, DIR/drift.md, DIR/drift.csv (per day x entry x method) and "
         "DIR/drift.png (p_true(day) against each method's interval for the changed entries).",
     )

@@ -1,4 +1,5 @@
-"""``ctxsearch truth``: ground-truth P(rel(B)) of a room style, estimated over generated rooms."""
+"""``ctxsearch truth``: ground-truth P(rel(B)) of a room style, estimated over generated rooms,
+and how many of each small type's instances stay from day 0 to day 1."""
 
 from __future__ import annotations
 
@@ -30,7 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "type, p, se, n}]} to --out; for a house style also the room context: same_room "
         "(P(SAME-ROOM-AS-F(T)) for each furniture type F, the share of the rooms holding an F "
         "that hold a T), room_share (the share of furnished rooms holding each type) and "
-        "furnished_rooms.",
+        "furnished_rooms. persistence: per small type, its configured stay probability (the "
+        "chance an instance is still exactly where it was the next day: assets/types.toml, a "
+        "style's [stay]) and the measured share of its day-0 instances still at the same pose on "
+        "day 1 (y of n), which is lower where the type's count changes from day to day.",
     )
     p.add_argument(
         "--style",
@@ -60,7 +64,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Estimate the ground truth, write the JSON, print a short table."""
     # Imported here: the ground truth pulls in scipy, which `ctxsearch --help` must not wait for.
-    from ctxsearch.envs.truth import RoomTruth, sample_counts_and_rooms, truth_document
+    from ctxsearch.envs.truth import (
+        RoomTruth,
+        persistence,
+        sample_counts_and_rooms,
+        truth_document,
+    )
 
     catalog = load_catalog(args.catalog)
     style = resolve_style(args.style, catalog)
@@ -76,10 +85,15 @@ def run(args: argparse.Namespace) -> int:
         desc=f"truth {style.name} ({SEEDS_PER_UNIT} worlds per unit)",
         progress=not args.no_progress and sys.stderr.isatty(),
     )
-    rooms = [c for counts, _ in parts for c in counts]
+    rooms = [c for counts, _, _ in parts for c in counts]
     truth = truth_document(style, args.samples, args.seed, catalog, rooms)
+    kept: dict[tuple[str, str], list[int]] = {}
+    for _, _, k in parts:
+        for key, (n, y) in k.items():
+            kept[key] = [kept.get(key, [0, 0])[0] + n, kept.get(key, [0, 0])[1] + y]
+    truth["persistence"] = persistence(style, kept, catalog)
     if isinstance(style, HouseStyle):  # room context over the same houses
-        rt = RoomTruth.of_contents([w for _, worlds in parts for w in worlds], catalog)
+        rt = RoomTruth.of_contents([w for _, worlds, _ in parts for w in worlds], catalog)
         truth["furnished_rooms"] = rt.counts.rooms
         truth["room_share"] = {t: s for t, s in sorted(rt.room_share.items()) if s > 0}
         truth["same_room"] = rt.entries()
@@ -116,4 +130,15 @@ def run(args: argparse.Namespace) -> int:
                 f"{e['relation']:<24} {e['type']:<12} {e['p']:6.3f} {e['se']:6.3f} {e['n']:6d}"
                 f"  / {share[e['type']]:.3f}"
             )
+    _print_persistence(truth["persistence"])
     return 0
+
+
+def _print_persistence(doc: dict) -> None:
+    """The persistence table: per small type, configured stay and measured share (y of n)."""
+    print(f"persistence, day {doc['from_day']} -> {doc['to_day']} (same type and pose):")
+    print(f"{'type':<12} {'stay':>6} {'measured':>8} {'se':>6} {'y':>6} {'n':>6}")
+    for e in doc["types"]:
+        p = "-" if e["p"] is None else f"{e['p']:.3f}"
+        se = "-" if e["se"] is None else f"{e['se']:.3f}"
+        print(f"{e['type']:<12} {e['stay']:6.3f} {p:>8} {se:>6} {e['y']:6d} {e['n']:6d}")
