@@ -644,7 +644,9 @@ def _next_day(
     ids and poses); each small object stays with its type's ``style.stay`` (``stay_rng``), then
     ``style.on_day(day)``'s rules place the day's small objects from the day's stream, an
     instance of a type with stayers left taking one of them (``envs.persistence``); the stayers
-    none took have left. With every stay probability 0 this is the day placed from scratch."""
+    none took stay as well (a household's things do not vanish because the day's draw of a type
+    was smaller: that day holds more of it than its rules drew). With every stay probability 0
+    this is the day placed from scratch."""
     shell = RoomShell(prev.width, prev.depth, prev.height, prev.doors)
     rng = day_rng(style, seed, day)
     today = style.on_day(day)
@@ -657,8 +659,6 @@ def _next_day(
                              catalog, stay_rng(style, seed, day))  # fmt: skip
     credits = Credits(_keep(b, prev, stayers), b.placed_by) if stayers else None
     _place_small(b, today, catalog, rng, furniture_rules=False, credits=credits)
-    if credits is not None:
-        b.drop(credits.pending())
     return b
 
 
@@ -709,8 +709,8 @@ def generate_room(
     is made from day d - 1 (``_next_day``): each small object stays exactly where it was with its
     type's probability (``Style.stay``), and the style's rules as they stand that day
     (``Style.on_day``) place the day's small objects (``day_rng``), taking stayers of a type
-    before placing new ones, so each type's count follows the day's rules; the stayers not taken
-    leave. A stayer keeps its id; the ids of those that left are gaps, new objects take the
+    before placing new ones; the stayers not taken stay too (a type then has more that day than
+    its rules drew, so an object stays with its type's probability, not less). A stayer keeps its id; the ids of those that left are gaps, new objects take the
     smallest free ones. Day d is d day steps from day 0 (each about half the room's own build);
     the latest day of each of the last ``DAYS_KEPT`` rooms is kept in memory, so a room's days
     asked for in turn cost one step each. With every stay probability 0

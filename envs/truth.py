@@ -48,6 +48,7 @@ from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, read_json
 from ctxsearch.knowledge.geometry import ObjectInstance, related
+from ctxsearch.knowledge.persistence import near_place
 from ctxsearch.knowledge.room_context import RoomContext, relation_name
 
 
@@ -212,27 +213,30 @@ def sample_counts_and_rooms(
         counts.extend(world_counts(layout, catalog))
         rooms.append(room_contents(layout))
         later = generate_layout(style, s, catalog, 1)
-        for key, (n, y) in persistence_counts(layout, later, catalog).items():
-            kept.setdefault(key, [0, 0])
-            kept[key][0] += n
-            kept[key][1] += y
+        for key, row in persistence_counts(layout, later, catalog).items():
+            acc = kept.setdefault(key, [0] * len(row))
+            for i, v in enumerate(row):
+                acc[i] += v
     return counts, rooms, kept
 
 
 def persistence_counts(
     before: RoomLayout, after: RoomLayout, catalog: Catalog
-) -> dict[tuple[str, str], tuple[int, int]]:
-    """Per (room style, small type): (n, y), n the instances in ``before`` and y those of them
-    at the same type and exact pose in ``after`` (a world on two days; a single room's style is
-    the layout's)."""
+) -> dict[tuple[str, str], tuple[int, int, int]]:
+    """Per (room style, small type): (n, y, near), n the instances in ``before``, y those of
+    them at the same type and exact pose in ``after`` and ``near`` those with an instance of
+    their type within ``knowledge.persistence.RADIUS_M`` of them in ``after`` (the robot's
+    relation STILL-WHERE-SEEN: another instance put there counts) (a world on two days; a
+    single room's style is the layout's)."""
     kept = stayed(after, before)  # the ids in before of the objects still there after
-    out: dict[tuple[str, str], tuple[int, int]] = {}
+    out: dict[tuple[str, str], tuple[int, int, int]] = {}
     for o in before.objects:
         if catalog.type(o.type).is_furniture:
             continue
         room = before.rooms[before.room_of[o.id]].style if before.is_house else before.style
-        n, y = out.get((room, o.type), (0, 0))
-        out[(room, o.type)] = (n + 1, y + int(o.id in kept))
+        n, y, m = out.get((room, o.type), (0, 0, 0))
+        near = near_place(o.position, after.objects, o.type)
+        out[(room, o.type)] = (n + 1, y + int(o.id in kept), m + int(near))
     return out
 
 
@@ -247,22 +251,26 @@ def persistence(
     (``stay``; a house style's: the mean of its room styles' weighted by the day's instances in
     their rooms, each in ``stay_by_style``), the day's instances ``n``, those still at the same
     type and pose the next day ``y``, their share ``p`` (None without instances) and its binomial
-    ``se`` (instances of one world are not independent: optimistic)."""
+    ``se`` (instances of one world are not independent: optimistic), and ``near``, ``p_near``:
+    those with an instance of the type within the persistence radius the next day (the true
+    value of the robot's P(STILL-WHERE-SEEN(T) after 1 day), knowledge.persistence)."""
     rooms = [s for s, _ in style.rooms] if isinstance(style, HouseStyle) else [style]
     by_name = {s.name: s for s in rooms}
     types = [t for t in style.types if not catalog.type(t).is_furniture]
     out = []
     for t in types:
-        per = {r: counts.get((r, t), (0, 0)) for r in by_name}
+        per = {r: tuple(counts.get((r, t), (0, 0, 0))) + (0,) for r in by_name}
         n = sum(v[0] for v in per.values())
         y = sum(v[1] for v in per.values())
+        near = sum(v[2] for v in per.values())
         cfg = {r: by_name[r].stay(t, catalog) for r in by_name if t in by_name[r].types}
         if n and isinstance(style, HouseStyle):
             stay = sum(per[r][0] * cfg.get(r, 0.0) for r in per) / n
         else:
             stay = sum(cfg.values()) / len(cfg)
         e = {"type": t, "stay": stay, "n": n, "y": y, "p": y / n if n else None,
-             "se": math.sqrt(y / n * (1 - y / n) / n) if n else None}  # fmt: skip
+             "se": math.sqrt(y / n * (1 - y / n) / n) if n else None,
+             "near": near, "p_near": near / n if n else None}  # fmt: skip
         if isinstance(style, HouseStyle):
             e["stay_by_style"] = cfg
         out.append(e)

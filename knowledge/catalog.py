@@ -197,6 +197,13 @@ class Catalog:
         return name in self._rel_by_name
 
     @property
+    def world_fingerprint(self) -> str:
+        """``fingerprint`` and every type's ``stay``: what makes the simulated worlds of every
+        day (the episode draws' key: a changed ``stay`` changes the worlds after day 0)."""
+        stays = ",".join(f"{t.name}={t.stay!r}" for t in self.types)
+        return hashlib.sha256(f"{self.fingerprint}\n{stays}".encode()).hexdigest()[:16]
+
+    @property
     def fingerprint(self) -> str:
         """A hash of the catalog's content (types, sizes, detectability, relation volumes).
 

@@ -337,7 +337,7 @@ def register_drift(bench_sub: argparse._SubParsersAction) -> None:
         help="a world set that changes over days: how fast none / half-life / detect notice it, "
         "their false alarms and errors, and the search on the last day with each",
         description="Learn in --rooms rooms of a style on --days days (the furniture stays; an "
-        "office's small objects are placed anew each day: its [stay] table) while the style "
+        "small objects are placed anew each day, so that what changes is the rules alone) while the style "
         "drifts (its [[drift]] schedule, or --drift RULE:P:FROM_DAY, applied in memory), once "
         "re-examining every known object daily (one store read by each forgetting method) and "
         "once per method with --reexamine impact. "

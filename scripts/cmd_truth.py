@@ -89,8 +89,10 @@ def run(args: argparse.Namespace) -> int:
     truth = truth_document(style, args.samples, args.seed, catalog, rooms)
     kept: dict[tuple[str, str], list[int]] = {}
     for _, _, k in parts:
-        for key, (n, y) in k.items():
-            kept[key] = [kept.get(key, [0, 0])[0] + n, kept.get(key, [0, 0])[1] + y]
+        for key, row in k.items():
+            acc = kept.setdefault(key, [0] * len(row))
+            for i, v in enumerate(row):
+                acc[i] += v
     truth["persistence"] = persistence(style, kept, catalog)
     if isinstance(style, HouseStyle):  # room context over the same houses
         rt = RoomTruth.of_contents([w for _, worlds, _ in parts for w in worlds], catalog)
@@ -136,9 +138,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_persistence(doc: dict) -> None:
     """The persistence table: per small type, configured stay and measured share (y of n)."""
-    print(f"persistence, day {doc['from_day']} -> {doc['to_day']} (same type and pose):")
-    print(f"{'type':<12} {'stay':>6} {'measured':>8} {'se':>6} {'y':>6} {'n':>6}")
+    print(
+        f"persistence, day {doc['from_day']} -> {doc['to_day']} (measured: same type and pose; "
+        "near: an instance of the type within 0.5 m, STILL-WHERE-SEEN):"
+    )
+    print(f"{'type':<12} {'stay':>6} {'measured':>8} {'se':>6} {'y':>6} {'n':>6} {'near':>6}")
     for e in doc["types"]:
         p = "-" if e["p"] is None else f"{e['p']:.3f}"
         se = "-" if e["se"] is None else f"{e['se']:.3f}"
-        print(f"{e['type']:<12} {e['stay']:6.3f} {p:>8} {se:>6} {e['y']:6d} {e['n']:6d}")
+        near = "-" if e.get("p_near") is None else f"{e['p_near']:.3f}"
+        print(f"{e['type']:<12} {e['stay']:6.3f} {p:>8} {se:>6} {e['y']:6d} {e['n']:6d} {near:>6}")

@@ -72,7 +72,9 @@ def test_furniture_stays_small_objects_move(catalog, name):
 
 
 def _drift_style(catalog, tmp_path: Path, drift: str) -> Path:
-    text = Path(load_style("office", catalog).path).read_text() + drift
+    """The office with ``drift`` and its small objects placed anew every day (the rules' drift
+    alone)."""
+    text = Path(load_style("office", catalog).path).read_text() + '\n[stay]\n"*" = 0.0\n' + drift
     path = tmp_path / "office_drift.toml"
     path.write_text(text)
     return path

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +56,7 @@ from ctxsearch.agent.search.priors import KnowledgeSource, make_priors
 from ctxsearch.agent.search.registry import resolve
 from ctxsearch.agent.search.runner import PolicyRun, WorldRuns, search_world
 from ctxsearch.envs.floorplan import generate_layout
-from ctxsearch.envs.styles import Drift, Style, load_style
+from ctxsearch.envs.styles import EVERY_TYPE, Drift, Style, load_style
 from ctxsearch.envs.truth import estimate, sample_counts
 from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
@@ -113,6 +113,10 @@ class DriftBenchConfig:
     truth_samples: int = 30  # day draws of the worlds per phase for p_true
     episodes: int = 4
     perception: str = "oracle"
+    # every small type's stay probability in the drifting worlds (the style's [stay] "*"): 0, the
+    # small objects placed anew each day, isolates the rules' drift from persistence (the set the
+    # forgetting methods were measured on); None: the style's own
+    stay: float | None = 0.0
 
     def forgettings(self) -> dict[str, Forgetting]:
         """Each method with this configuration's parameters (detect tests on every day)."""
@@ -123,8 +127,11 @@ class DriftBenchConfig:
 
 
 def drifting_style(config: DriftBenchConfig, catalog: Catalog) -> Style:
-    """The style with its drift schedule (``config.drift``, its own, or DEFAULT_DRIFT)."""
+    """The style with its drift schedule (``config.drift``, its own, or DEFAULT_DRIFT) and
+    ``config.stay`` for every small type (if set)."""
     st = load_style(config.style, catalog)
+    if config.stay is not None:
+        st = replace(st, stays=((EVERY_TYPE, float(config.stay)),))
     if config.drift:
         specs = config.drift
     elif st.drift:
