@@ -38,7 +38,8 @@ A room in progress in the store is replayed (agent.resume): its stored examinati
 back instead of perceived, with the same choices, motions and clock.
 
 Days (``learn --days``). A world persists across days: its furniture stays (same ids and poses),
-its small objects are placed anew. On a later day the objects of the room examined on earlier
+its small objects stay or move by their type's stay probability (the checks of the places
+where the previous day's map saw them: agent.home.PlaceChecks). On a later day the objects of the room examined on earlier
 days (``known``: furniture) start in EXAMINED (lines 1-2): the paper's robot never examines an
 object twice in a run (``Run.reexamine`` ``never``). With ``impact``, a known object starts in
 UNEXAMINED instead when its type's d_A (eq. 3 averaged as in line 11) under the run's forgetting
@@ -59,6 +60,7 @@ depth images for the map (charged as the stored run was), so it rebuilds the sam
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -68,7 +70,7 @@ from ctxsearch.agent.exam_volumes import group_volume_members, relation_boxes
 from ctxsearch.agent.exploration import Explorer
 from ctxsearch.agent.frontiers import FrontierExplorer
 from ctxsearch.agent.grid_costs import GridCosts
-from ctxsearch.agent.home import home_map
+from ctxsearch.agent.home import PlaceChecks, home_map
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.learn_log import RunLog
 from ctxsearch.agent.mapping import BuiltMap
@@ -109,6 +111,7 @@ class RoomLearner:
         prior: Sequence[StoredExam] = (),
         day: int = 0,
         known: Sequence[ObjectInstance] = (),
+        previous: HomeMap | None = None,
     ):
         self.run, self.log, self.layout, self.room_index = run, log, layout, room_index
         self.day = int(day)
@@ -153,6 +156,12 @@ class RoomLearner:
         det = run.settings.detector
         fp = det is not None and not det.perfect and det.fp_per_image > 0
         self.recognized = Recognized(det.fp_max_score if fp else 0.0)
+        # the places of the small objects the run's previous map of this world remembers,
+        # checked by this visit's images (agent.home.PlaceChecks; nothing on a given map)
+        self.places = PlaceChecks(
+            previous if self.built is not None else None, self.day, self.catalog, det,
+            self.spec, self.body.width, self.body.height,
+        )  # fmt: skip
 
     def _remember(self, known: Sequence[ObjectInstance]) -> int:
         """Lines 1-2 on a later day (see the module docstring): each known object goes into
@@ -226,6 +235,7 @@ class RoomLearner:
         frame = self.body.capture(rgb=self.log.recording, depth=True)
         self._mapped(frame)
         objs = self.perception.see(frame)
+        self.places.observe(frame, self.perception.last_detections)
         self.log.frame(self, frame, objs, purpose=purpose)
         return objs
 
@@ -372,6 +382,7 @@ class RoomLearner:
             if need_images:
                 objs = self.perception.see(frame)
                 self.recognized.scores(self.perception.last_detections)
+                self.places.observe(frame, self.perception.last_detections)
                 seen.update((o.id, o) for o in objs)
                 self.log.frame(self, frame, objs, purpose="examine")
                 frames.append(frame)
@@ -390,18 +401,27 @@ class RoomLearner:
 
     def home_map(self) -> HomeMap | None:
         """What the robot keeps of the world at the end of a visit on its own map done to the
-        end (agent.home): its built map, its rooms and the furniture it recognised (each with
-        its best confidence and the examinations that reported it); None on a given map or a
-        visit the budget ended early."""
+        end (agent.home): its built map, its rooms, the furniture and the small objects it
+        recognised (each with its best confidence and the examinations that reported it), the
+        remembered small objects no image showed, and its checks of the places of those the
+        images showed (agent.home.PlaceChecks); None on a given map or a visit the budget ended
+        early."""
         if self.built is None or self.left_early:
             return None
         rec, lay = self.recognized, self.layout
-        furniture = [
+        seen = [
             RememberedObject(o.type, o.id, o.position, o.yaw, o.size,
                              min(1.0, rec.best.get(o.id, 1.0)), sum(rec.reports[o.id].values()))
-            for o in rec.objects() if self.catalog.type(o.type).is_furniture
+            for o in rec.objects()
         ]  # fmt: skip
-        return home_map(self.built, lay, self.day, furniture)
+        furniture = [o for o in seen if self.catalog.type(o.type).is_furniture]
+        small = [o for o in seen if not self.catalog.type(o.type).is_furniture]
+        home = home_map(self.built, lay, self.day, furniture)
+        return replace(
+            home,
+            small=tuple(sorted(small, key=lambda o: o.id)) + tuple(self.places.carried()),
+            checks=tuple(self.places.checks()),
+        )
 
     def _replays_by_images(self) -> bool:
         """A detector that errs reports poses and objects (false positives, look-alikes) the
@@ -423,6 +443,7 @@ class RoomLearner:
             self._mapped(frame)  # the built map learns from these images as it did the first time
             seen.update((o.id, o) for o in self.perception.see(frame))
             self.recognized.scores(self.perception.last_detections)
+            self.places.observe(frame, self.perception.last_detections)
         related = self.perception.related(obj, list(seen.values()))
         if sorted({(r, o.type, o.id) for r, o in related}) != sorted(set(stored.related)):
             raise resume_error(self.layout, f"examination of object {obj.id} saw other objects")

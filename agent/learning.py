@@ -8,8 +8,8 @@ rooms.
 
 A run is identified by (strategy, perception, seed, room budget) (``run_id``): runs with another
 budget are separate runs in the same store. With ``days`` the run visits the same rooms (worlds)
-on days 0 .. days-1, day after day (the furniture stays, the small objects are placed anew: envs
-``generate_layout``'s day); the number of days is not part of the run key, so ``--days 5``
+on days 0 .. days-1, day after day (the furniture stays, the small objects stay or move by their type's
+stay probability: envs ``generate_layout``'s day); the number of days is not part of the run key, so ``--days 5``
 after ``--days 3`` adds days 3 and 4. Re-examination of known objects on later days
 (``reexamine`` other than ``never``) is part of the key, with its rate and forgetting method. Rooms done in the store are skipped and a room in
 progress is replayed (agent.resume), so a resumed run makes exactly the choices of an
@@ -301,8 +301,8 @@ class _Rooms:
         return self.layouts(index, seed) if day == 0 else self.layouts(index, seed, day)
 
     def _known(self, layout: RoomLayout, seed: int, day: int) -> list:
-        """The room's objects examined on an earlier day of the run that are still there (its
-        furniture: small objects are placed anew every day)."""
+        """The room's furniture examined on an earlier day of the run (it stays; small objects
+        that stayed are found again, their places checked: agent.home.PlaceChecks)."""
         run = self.run
         if day == 0:
             return []
@@ -315,8 +315,11 @@ class _Rooms:
         the call's examination limit stopped it before the room was done."""
         run, store, summary = self.run, self.run.services.store, self.summary
         layout = self._layout(index, seed, day)
+        previous = None
+        if day > 0:  # the run's latest map of this world: the places its small objects were seen
+            previous = store.home_map(run.settings.style, seed, run.settings.key, upto_day=day - 1)
         L = RoomLearner(run, self.log, layout, index, self.history.replay(seed, day), day,
-                        self._known(layout, seed, day))  # fmt: skip
+                        self._known(layout, seed, day), previous)  # fmt: skip
         summary.revisits += L.revisits
         try:
             if store.room_status(run.settings.key, run.settings.style, seed, day) is None:

@@ -10,7 +10,13 @@ A ``HomeMap`` holds what the robot made of one world (style, seed) on the day it
 - the furniture it recognised (``RememberedObject``: the type reported most often, the mean of
   its estimated poses, its best detector confidence, the images that showed it). The ids are the
   detector's instance ids: in simulation the renderer's, so a later detection of the same piece
-  is known as the same piece.
+  is known as the same piece;
+- the small objects it recognised (``small``: the same records, each with the day it was last
+  seen: a visit keeps what it saw today and carries over the earlier sightings it did not look
+  at again), the robot's "where did I see it last";
+- what it found when it looked again at a place where an earlier day's map had a small object
+  (``checks``: ``PersistenceCheck``, one per remembered sighting whose place its images showed),
+  the trials of the learned persistence (knowledge.persistence).
 
 It is data, in numpy and the standard library: ``to_bytes`` and ``from_bytes`` write and read it
 as a NumPy ``.npz`` archive without pickles (a JSON header and plain arrays), and ``from_bytes``
@@ -34,7 +40,8 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 
 FORMAT = "ctxsearch-home-map"
-VERSION = 1
+VERSION = 2  # 2: small objects and persistence checks; version 1 (neither) is read as well
+READS = (1, 2)
 MAX_CELLS = 4_000_000  # a map larger than this (cells) is not one this project writes
 MAX_OBJECTS = 10_000
 MAX_BYTES = 64 * 1024 * 1024
@@ -69,10 +76,27 @@ class RememberedObject:
     size: tuple[float, float, float]
     confidence: float
     sightings: int
+    day: int | None = None  # the day it was last seen (None: the map's own day)
 
     def instance(self) -> ObjectInstance:
         """As an ObjectInstance (what the location constraint reads)."""
         return ObjectInstance(self.type, self.id, self.position, self.yaw, self.size)
+
+
+@dataclass(frozen=True)
+class PersistenceCheck:
+    """A visit looked again at the place where an earlier map had a small object of ``type``
+    (seen ``age`` days before): ``recall`` is the probability that its images would have
+    reported an instance standing there (one minus the product of each image's miss, by the
+    detector's recall at that distance), ``false_rate`` the probability they reported one there
+    that was not (0: the model's choice, knowledge.persistence), and ``still`` whether one of
+    them reported an instance of the type within the persistence radius of the place."""
+
+    type: str
+    age: int
+    recall: float
+    false_rate: float
+    still: bool
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,6 +118,8 @@ class HomeMap:
     furniture: tuple[RememberedObject, ...] = ()
     support: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     images: int = 0  # the depth images it was built from
+    small: tuple[RememberedObject, ...] = ()  # small objects, each with its last day seen
+    checks: tuple[PersistenceCheck, ...] = ()  # places of earlier sightings looked at again
 
     def __post_init__(self) -> None:
         _check(self, "HomeMap")
@@ -107,6 +133,14 @@ class HomeMap:
         """The remembered furniture as ObjectInstances."""
         return [o.instance() for o in self.furniture]
 
+    def seen_day(self, o: RememberedObject) -> int:
+        """The day ``o`` was last seen."""
+        return self.day if o.day is None else o.day
+
+    def last_seen(self, type_name: str) -> list[RememberedObject]:
+        """The remembered small objects of ``type_name``."""
+        return [o for o in self.small if o.type == type_name]
+
     def room_count(self) -> int:
         """How many rooms its segmentation holds."""
         return len(np.unique(self.rooms[self.rooms >= 0]))
@@ -119,11 +153,12 @@ class HomeMap:
             "day": int(self.day), "bounds": [float(v) for v in self.bounds],
             "top": float(self.top), "x0": float(self.x0), "y0": float(self.y0),
             "resolution": float(self.resolution), "images": int(self.images),
-            "furniture": [
-                {"type": o.type, "id": int(o.id), "position": [float(v) for v in o.position],
-                 "yaw": float(o.yaw), "size": [float(v) for v in o.size],
-                 "confidence": float(o.confidence), "sightings": int(o.sightings)}
-                for o in self.furniture
+            "furniture": [_record(o) for o in self.furniture],
+            "small": [_record(o) for o in self.small],
+            "checks": [
+                {"type": c.type, "age": int(c.age), "recall": float(c.recall),
+                 "false_rate": float(c.false_rate), "still": bool(c.still)}
+                for c in self.checks
             ],
         }  # fmt: skip
         buf = io.BytesIO()
@@ -172,20 +207,23 @@ def _from_parts(arrays: dict, where: object) -> HomeMap:
         raise HomeMapError(where, "bad header") from None
     if not isinstance(head, dict) or head.get("format") != FORMAT:
         raise HomeMapError(where, "not a ctxsearch remembered map")
-    if head.get("version") != VERSION:
-        raise HomeMapError(where, f"version {head.get('version')!r} (this code reads {VERSION})")
+    version = head.get("version")
+    if isinstance(version, bool) or version not in READS:
+        raise HomeMapError(where, f"version {version!r} (this code reads {READS})")
     for k, t in _ARRAYS.items():
         if arrays[k].dtype != np.dtype(t):
             raise HomeMapError(where, f"array '{k}' is {arrays[k].dtype}, not {np.dtype(t)}")
     try:
         furniture = tuple(_object(o) for o in _list(head, "furniture"))
+        small = () if version < 2 else tuple(_object(o) for o in _list(head, "small"))
+        checks = () if version < 2 else tuple(_check_entry(c) for c in _list(head, "checks"))
         return HomeMap(
             _str(head, "style"), _int(head, "seed", 0, 2**63 - 1), _int(head, "day", 0, 10**6),
             tuple(_num(v, "bounds") for v in _list(head, "bounds")),  # type: ignore[arg-type]
             _num(head.get("top"), "top"), _num(head.get("x0"), "x0"), _num(head.get("y0"), "y0"),
             _num(head.get("resolution"), "resolution"), arrays["floor"], arrays["occupied"],
             arrays["top_z"], arrays["rooms"], furniture, arrays["support"],
-            _int(head, "images", 0, 2**31),
+            _int(head, "images", 0, 2**31), small, checks,
         )  # fmt: skip
     except HomeMapError as e:
         raise HomeMapError(where, str(e).split("remembered map: ", 1)[-1]) from None
@@ -217,10 +255,12 @@ def _check(m: HomeMap, where: str) -> None:
         raise HomeMapError(where, "support of a bad shape")
     if m.rooms.size and int(m.rooms.min()) < -1:
         raise HomeMapError(where, "room labels below -1")
-    if len(m.furniture) > MAX_OBJECTS:
+    if len(m.furniture) + len(m.small) > MAX_OBJECTS or len(m.checks) > MAX_OBJECTS:
         raise HomeMapError(where, f"more than {MAX_OBJECTS} objects")
     if len({o.id for o in m.furniture}) != len(m.furniture):
         raise HomeMapError(where, "an object id twice")
+    if any(o.day is not None and not 0 <= o.day <= m.day for o in m.small):
+        raise HomeMapError(where, "a small object last seen after the map's day")
 
 
 def _list(head: dict, key: str) -> list:
@@ -256,24 +296,44 @@ def _triple(v: object, what: str) -> tuple[float, float, float]:
     return tuple(_num(x, what) for x in v)  # type: ignore[return-value]
 
 
+def _record(o: RememberedObject) -> dict:
+    out = {"type": o.type, "id": int(o.id), "position": [float(v) for v in o.position],
+           "yaw": float(o.yaw), "size": [float(v) for v in o.size],
+           "confidence": float(o.confidence), "sightings": int(o.sightings)}  # fmt: skip
+    if o.day is not None:
+        out["day"] = int(o.day)
+    return out
+
+
 def _object(o: object) -> RememberedObject:
     if not isinstance(o, dict):
-        raise HomeMapError("", "a furniture entry is not a table")
+        raise HomeMapError("", "an object entry is not a table")
     size = _triple(o.get("size"), "size")
     conf = _num(o.get("confidence"), "confidence")
     if min(size) <= 0 or not 0.0 <= conf <= 1.0:
-        raise HomeMapError("", "a furniture entry's size or confidence is out of range")
+        raise HomeMapError("", "an object entry's size or confidence is out of range")
+    day = None if o.get("day") is None else _int(o, "day", 0, 10**6)
     return RememberedObject(
         _str(o, "type"), _int(o, "id", -(2**63), 2**63 - 1), _triple(o.get("position"), "position"),
-        _num(o.get("yaw"), "yaw"), size, conf, _int(o, "sightings", 0, 2**31),
+        _num(o.get("yaw"), "yaw"), size, conf, _int(o, "sightings", 0, 2**31), day,
     )  # fmt: skip
+
+
+def _check_entry(c: object) -> PersistenceCheck:
+    if not isinstance(c, dict):
+        raise HomeMapError("", "a check entry is not a table")
+    recall, false = _num(c.get("recall"), "recall"), _num(c.get("false_rate"), "false_rate")
+    still = c.get("still")
+    if not (0.0 <= recall <= 1.0 and 0.0 <= false <= 1.0) or not isinstance(still, bool):
+        raise HomeMapError("", "a check entry's recall, false rate or outcome is out of range")
+    return PersistenceCheck(_str(c, "type"), _int(c, "age", 1, 10**6), recall, false, still)
 
 
 def check_types(m: HomeMap, known: Iterable[str], where: object) -> HomeMap:
     """``m`` if every remembered type is one of ``known`` (the catalog's); a one-line error
     naming the first that is not."""
     names = set(known)
-    for o in m.furniture:
+    for o in (*m.furniture, *m.small, *m.checks):
         if o.type not in names:
             raise HomeMapError(where, f"unknown type {o.type!r}")
     return m

@@ -41,8 +41,8 @@ The uniqueness key ``EXAM_KEY`` (run, style, room_seed, day, object_id) is what 
 examination of a run: a second process learning the same run on the same store cannot add an
 examination twice (its write fails with a one-line StoreError and nothing of it is written);
 different runs on one store never collide. ``day`` (version 4) is the day of the world's visit
-(``learn --days``): a world persists across days (its furniture stays, its small objects are
-placed anew every day), so a desk examined yesterday is a new trial today, and still at most one
+(``learn --days``): a world persists across days (its furniture stays, its small objects stay
+or move by their type's stay probability), so a desk examined yesterday is a new trial today, and still at most one
 per day.
 
 Older stores are read as they are: version 1 (no rooms.end_time; its rooms have no end time),

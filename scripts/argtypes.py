@@ -23,6 +23,17 @@ from ctxsearch.scripts.integers import (  # noqa: F401
 MAX_SECONDS = 1e9
 
 
+def positive_ints(text: str) -> tuple[int, ...]:
+    """``1,2,4``: strictly increasing whole numbers >= 1 (one-line errors)."""
+    parts = [x.strip() for x in text.split(",")]
+    if not text.strip() or "" in parts:
+        raise argparse.ArgumentTypeError(f"a comma-separated list of whole numbers, got {text!r}")
+    values = tuple(positive_int(x) for x in parts)
+    if any(b <= a for a, b in zip(values, values[1:], strict=False)):
+        raise argparse.ArgumentTypeError(f"numbers must increase, got {text!r}")
+    return values
+
+
 def out_dir(text: str) -> Path:
     """An output directory: one that exists, or a path where none is (it is created later)."""
     p = Path(text)

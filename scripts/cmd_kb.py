@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sqlite3
@@ -15,6 +16,7 @@ from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.drift import ForgetKnowledgeBase, evidence_of
 from ctxsearch.knowledge.errors import CatalogError, CtxsearchError, StoreError
 from ctxsearch.knowledge.options import Forget, IntervalMethod, Rank
+from ctxsearch.knowledge.persistence import STILL, LearnedPersistence, listing, store_checks
 from ctxsearch.knowledge.pooling import PooledCounts, interval_rows
 from ctxsearch.knowledge.room_context import RoomContext, relation_name
 from ctxsearch.knowledge.store import EvidenceStore, merge_stores
@@ -290,6 +292,7 @@ def _open_kb(args: argparse.Namespace, pooled: bool = False):
                 "catalog": str(catalog.path),
                 "created": store.meta.get("created", ""),
                 "room_context": store.room_context(),
+                "persistence": LearnedPersistence(store_checks(store), kb.alpha),
             }
     except sqlite3.DatabaseError as exc:  # damage found past the checks of open()
         raise StoreError(
@@ -428,8 +431,14 @@ def run_show(args: argparse.Namespace) -> int:
     rooms = []
     if not pooled and args.forget == Forget.NONE:
         rooms = room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
+    persist = []
+    if not pooled and args.forget == Forget.NONE and args.related is None:
+        learned: LearnedPersistence = info["persistence"]
+        for t in [args.ref_type] if args.ref_type else learned.types():
+            persist += learned.of_type(t)
     if args.json:
-        _emit(json.dumps([_row_dict(r) for r in [*rows, *rooms]], indent=1))
+        extra = [dataclasses.asdict(e) | {"relation": STILL} for e in persist]
+        _emit(json.dumps([_row_dict(r) for r in [*rows, *rooms]] + extra, indent=1))
         return 0
     cat = kb.catalog
     class_names = tuple(c.name for c in classes.classes) if pooled else ()
@@ -461,6 +470,9 @@ def run_show(args: argparse.Namespace) -> int:
     if rooms:
         out.append(f"room context: {rc.rooms} rooms of the robot's maps held furniture")
         out.append(format_rows(rooms))
+    if persist:
+        out.append("persistence: the robot's checks of places where its maps saw small objects")
+        out += listing(persist)
     _emit("\n".join(out))
     return 0
 

@@ -26,6 +26,8 @@ from ctxsearch.scripts.sweep import add_sweep_arguments
 POLICY_NAMES = tuple(POLICIES)
 DEFAULT_POLICIES = {m: ",".join(default_policies(m)) for m in MapMode}
 DEFAULT_POLICY = {m: with_role(m, Role.CONTEXT) for m in MapMode}  # `search --policy`
+HOME_ARMS = default_policies(MapMode.REMEMBERED)  # `bench home`'s arms
+HOME_GAPS = (1, 2, 4)  # `bench home --days-after`: days between the robot's map and the queries
 
 # Each flag that sets a configuration key: argparse's dest -> the key (agent.search.config).
 # A flag not given leaves the key as the defaults and --config set it; --set comes last.
@@ -249,6 +251,16 @@ def _search_config(args: argparse.Namespace) -> SearchConfig:
     return config
 
 
+def _memory_and_first_step(log: list[str]) -> list[str]:
+    """What the search remembered of the target (its last sightings) and its first step, from
+    the result's log."""
+    memory = [line for line in log if "] last saw " in line]
+    if len(memory) > 5:
+        memory = memory[:5] + [f"  ... and {len(memory) - 5} more sightings"]
+    first = next((line for line in log if "] look into " in line or "] explore " in line), None)
+    return memory + ([f"{first} (the first step)"] if first else [])
+
+
 def run_search(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch search``."""
     # Imported here: the search stack pulls in MuJoCo and scipy, which `--help` must not wait for.
@@ -280,6 +292,8 @@ def run_search(args: argparse.Namespace) -> int:
         f"room: {ep.style} seed {ep.room_seed} ({_provenance(c, ep.day)}); start ({s.x:.2f}, "
         f"{s.y:.2f}) heading {s.yaw:.2f} rad; target {ep.target}; policy {res.policy}"
     )
+    for line in _memory_and_first_step(res.log):
+        print(line)
     print(f"{'FOUND' if res.success else 'NOT FOUND'}: {res.summary()}")
     detector = c.detector_model(catalog).name
     print(f"detector: {detector}; intervals: {c.knowledge.interval}; map: {c.scenario}")
@@ -300,6 +314,12 @@ def _provenance(config, day: int) -> str:
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench search`` and ``bench home``."""
+    _register_bench_search(bench_sub)
+    register_home(bench_sub)
+
+
+def _register_bench_search(bench_sub: argparse._SubParsersAction) -> None:
     """Add ``bench search``."""
     p = bench_sub.add_parser(
         "search",
@@ -375,5 +395,79 @@ def run_bench(args: argparse.Namespace) -> int:
             print(f.read_text())
     for f in res.files:
         print(f"wrote {f}")
+    print(f"({res.wall_s:.0f} s wall)")
+    return 0
+
+
+def register_home(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench home``."""
+    p = bench_sub.add_parser(
+        "home",
+        help="the changing home: memory and context on the remembered map, days after",
+        description="The robot lives in the houses of --kb (learned with ctxsearch learn --days "
+        "on the built map: its remembered maps and the persistence it learned) and is asked for "
+        "a small type on a day --days-after its latest map, half the queries for a type an "
+        "instance of which stands where one stood on the map's day, half for one that moved. "
+        f"Runs the arms ({', '.join(HOME_ARMS)}) on the same episodes at each gap and prints each "
+        "against uniform, and memory-location against memory only and relations only, with the "
+        "geometric mean of the paired ratio, its interval, wins/losses/ties and the signed-rank "
+        "p, overall and within the stayed and moved queries. Writes DIR/home.json, DIR/home.md "
+        "and each gap's bench search files in DIR/d=GAP/.",
+    )
+    p.add_argument(
+        "--style",
+        default=None,
+        help="house style (assets/houses/) or room style (assets/styles/): name or TOML path "
+        "(default: office)",
+    )
+    p.add_argument(
+        "--episodes", type=argtypes.positive_int, default=None, help="queries per gap (default: 40)"
+    )
+    p.add_argument(
+        "--days-after",
+        type=argtypes.positive_ints,
+        default=HOME_GAPS,
+        metavar="D[,D...]",
+        help="days between the robot's latest map and the queries (default: "
+        f"{','.join(map(str, HOME_GAPS))})",
+    )
+    p.add_argument(
+        "--policies", default=None, help=f"comma-separated (default: {','.join(HOME_ARMS)})"
+    )
+    p.add_argument("--out", type=argtypes.out_dir, default=None, help="output directory (required)")
+    p.add_argument("--seed", type=argtypes.seed, default=None, help="episode seed (default: 0)")
+    p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
+    p.add_argument(
+        "--draw-cache", type=argtypes.out_dir, default=None, metavar="DIR",
+        help="keep the episode draws in DIR and reuse them (default: not kept)",
+    )  # fmt: skip
+    _add_common(p)
+    add_sweep_arguments(p)
+    p.set_defaults(func=run_home)
+
+
+def run_home(args: argparse.Namespace) -> int:
+    """Handler of ``ctxsearch bench home``."""
+    if args.map not in (None, MapMode.REMEMBERED.value):
+        raise CtxsearchError(f"bench home: --map {args.map}: the home is the remembered map")
+    config = config_from_args(args).updated({"map.scenario": "remembered"}, "bench home")
+    if args.show_config:
+        return show_config(config)
+    if args.out is None:
+        raise CtxsearchError("bench home: --out DIR is required")
+    if config.knowledge.kb is None:
+        raise CtxsearchError("bench home: --kb is required (learn with ctxsearch learn --days)")
+    from ctxsearch.agent.search.episode import check_budget
+
+    check_budget(config.budget_s)
+    from ctxsearch.scripts.experiments.bench_home import bench_home
+    from ctxsearch.scripts.sweep import SweepOptions
+
+    res = bench_home(
+        config, args.out, args.days_after, progress=None if args.quiet else print,
+        sweep=SweepOptions.from_args(args), bar=not args.quiet,
+    )  # fmt: skip
+    print(res.table)
+    print(f"wrote {args.out / 'home.json'}, {args.out / 'home.md'} and each gap's files")
     print(f"({res.wall_s:.0f} s wall)")
     return 0

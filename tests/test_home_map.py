@@ -13,6 +13,7 @@ import subprocess
 import sys
 import tracemalloc
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.home_map import (
     HomeMap,
     HomeMapError,
+    PersistenceCheck,
     RememberedObject,
     check_types,
 )
@@ -53,7 +55,8 @@ def make_map(style="apartment", seed=1, day=0, types=("Bed", "Sofa"), images=3, 
 
 def same(a: HomeMap, b: HomeMap) -> bool:
     """Whether two maps hold the same values (HomeMap compares by identity)."""
-    fields = ("style", "seed", "day", "bounds", "top", "x0", "y0", "resolution", "furniture")
+    fields = ("style", "seed", "day", "bounds", "top", "x0", "y0", "resolution", "furniture",
+              "small", "checks")  # fmt: skip
     return all(getattr(a, f) == getattr(b, f) for f in (*fields, "images")) and all(
         getattr(a, k).dtype == getattr(b, k).dtype and np.array_equal(getattr(a, k), getattr(b, k))
         for k in ARRAYS
@@ -85,6 +88,35 @@ def test_a_map_round_trips_through_its_bytes():
     assert same(HomeMap.from_bytes(memoryview(m.to_bytes())), m)
 
 
+def test_small_objects_and_checks_round_trip_and_a_version_1_map_reads_without_them():
+    m = make_map(day=4)
+    small = (
+        RememberedObject("Cup", 7, (1.0, 2.0, 0.8), 0.1, (0.1, 0.1, 0.1), 0.7, 2),
+        RememberedObject("Book", 9, (2.0, 1.0, 0.9), 0.0, (0.2, 0.1, 0.3), 0.9, 1, day=2),
+    )
+    checks = (
+        PersistenceCheck("Cup", 1, 0.8, 0.0, False),
+        PersistenceCheck("Book", 2, 0.5, 0, True),
+    )
+    m = replace(m, small=small, checks=checks)
+    back = HomeMap.from_bytes(m.to_bytes(), "here")
+    assert same(back, m) and back.small == small and back.checks == checks
+    assert [back.seen_day(o) for o in back.small] == [4, 2]
+    assert [o.id for o in back.last_seen("Book")] == [9] and back.last_seen("Pen") == []
+    old = json.loads(_header(m)) | {"version": 1}
+    del old["small"], old["checks"]
+    v1 = HomeMap.from_bytes(_npz(old), "old")
+    assert v1.small == () and v1.checks == () and v1.furniture == m.furniture
+    with pytest.raises(HomeMapError, match="unknown type 'Mug'"):
+        check_types(replace(m, small=(replace(small[0], type="Mug"),)), ["Cup", "Bed", "Sofa"], "x")
+    with pytest.raises(HomeMapError, match="unknown type 'Mug'"):
+        check_types(
+            replace(m, small=(), checks=(replace(checks[0], type="Mug"),)),
+            ["Cup", "Bed", "Sofa"],
+            "x",
+        )
+
+
 def _npz(head: dict | bytes | None = None, **arrays) -> bytes:
     """An archive as to_bytes writes it, with ``head`` (a dict, or raw header bytes) and
     ``arrays`` replacing the map's."""
@@ -114,6 +146,11 @@ def _entry(i: int, **fields) -> dict:
     """A furniture entry of the header as to_bytes writes one."""
     return {"type": "Bed", "id": i, "position": [0, 0, 0], "yaw": 0, "size": [1, 1, 1],
             "confidence": 0.5, "sightings": 1} | fields  # fmt: skip
+
+
+def _check(**fields) -> dict:
+    """A persistence check of the header as to_bytes writes one."""
+    return {"type": "Cup", "age": 1, "recall": 0.8, "false_rate": 0.0, "still": True} | fields
 
 
 def _other_npz() -> bytes:
@@ -170,7 +207,17 @@ HOSTILE = {
     "arrays of other shapes": (lambda: _npz(rooms=np.zeros((3, 5), np.int16)), "grid's shape"),
     "nested header": (lambda: _npz(b"[" * 100_000 + b"]" * 100_000), "bad header"),
     "other format": (lambda: _npz({"format": "pickle"}), "not a ctxsearch remembered map"),
-    "newer version": (lambda: _npz({"version": 2}), "version 2"),
+    "newer version": (lambda: _npz({"version": 3}), "version 3"),
+    "version true": (lambda: _npz({"version": True}), "version True"),
+    "small not a list": (lambda: _npz({"small": {}}), "'small' is not a list"),
+    "check not a table": (lambda: _npz({"checks": [1]}), "a check entry is not a table"),
+    "check recall": (lambda: _npz({"checks": [_check(recall=1.5)]}), "out of range"),
+    "check outcome": (lambda: _npz({"checks": [_check(still=1)]}), "out of range"),
+    "check age 0": (lambda: _npz({"checks": [_check(age=0)]}), "'age' is not an integer"),
+    "seen after the map": (
+        lambda: _npz({"small": [_entry(3, type="Cup", day=9)]}),
+        "last seen after the map's day",
+    ),
     "bomb": (_bomb, "array 'floor' is too large"),
 }
 

@@ -23,7 +23,7 @@ from ctxsearch.envs.world import World
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
-from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.options import MapMode, Needs
 from tests.rrd_files import read_rrd
 
 DESK = ObjectInstance("Desk", 7, (2.0, 0.0, 0.37), 0.0, (0.7, 1.4, 0.74))
@@ -41,12 +41,21 @@ def office_tour(catalog):
     return layout, home
 
 
-def test_the_registry_runs_location_against_its_twin_on_the_remembered_map():
+def test_the_registry_runs_memory_and_location_against_their_twin_on_the_remembered_map():
     r = MapMode.REMEMBERED
-    assert default_policies(r) == ("uniform", "location", "oracle-prior", "oracle")
-    assert with_role(r, Role.BASELINE) == "uniform" and with_role(r, Role.CONTEXT) == "location"
+    assert default_policies(r) == (
+        "uniform", "memory", "location", "memory-location", "oracle-memory", "oracle",
+    )  # fmt: skip
+    assert with_role(r, Role.BASELINE) == "uniform"
+    assert with_role(r, Role.CONTEXT) == "memory-location"
+    assert with_role(r, Role.ASYMPTOTE) == "oracle-memory"
     (spec,) = resolve(("location",), r, room_context=True)
-    assert spec.uses_room_context
+    assert spec.uses_room_context and spec.memory is Needs.NONE
+    mem, both, bound = resolve(("memory", "memory-location", "oracle-memory"), r, True)
+    assert (mem.memory, both.memory, bound.memory) == (Needs.KB, Needs.KB, Needs.TRUTH)
+    assert not mem.uses_room_context and both.uses_room_context and bound.needs is Needs.TRUTH
+    with pytest.raises(CtxsearchError, match="needs --map"):
+        resolve(("memory",), MapMode.GIVEN)
     with pytest.raises(CtxsearchError, match="needs --map"):
         resolve(("frontier",), r)
 

@@ -125,7 +125,8 @@ class MapConfig:
     days_after: int | None = setting(
         None,
         "the search happens this many days after day 0 (on the remembered map: after the day "
-        "its map was made); small objects are placed anew each day, furniture stays; none: 1 on "
+        "its map was made); furniture stays, small objects stay or move by their type's stay "
+        "probability; none: 1 on "
         "the remembered map, 0 otherwise",
         0,
         1000,

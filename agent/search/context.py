@@ -34,6 +34,7 @@ from ctxsearch.envs.detector import Detection
 from ctxsearch.envs.robot_spec import RobotSpec, TimeModel, wrap_angle
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
+from ctxsearch.knowledge.persistence import Persistence
 
 # A detection of the target is confirmed by a second image from the same pose before the search
 # ends: a target-type detection in it within this distance (m, on the floor plane) of the first
@@ -106,6 +107,9 @@ class SearchContext:
         config: SearchConfig | None = None,
     ):
         self.episode, self.catalog, self.maps = episode, catalog, maps
+        # P(still where seen after d days) for the remembered sightings (agent.search.memory;
+        # None, unless the runner sets it: the policy has no memory)
+        self.persistence: Persistence | None = None
         # the settings the behaviours read (``online``, ``belief``, ``map``)
         self.config = config or SearchConfig()
         # called at each online decision (agent.search.online.OnlineSearch): (search, belief,

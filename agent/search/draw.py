@@ -48,6 +48,7 @@ from ctxsearch.envs.world import World
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import Targets
+from ctxsearch.knowledge.persistence import still_where_seen
 
 MAX_START_TRIES = 6  # starts drawn in a world before it is dropped as visible from every one
 EPISODE_TAG = 0xE915  # the episode stream of world i: (seed, i, EPISODE_TAG)
@@ -60,7 +61,7 @@ WorldRunner = Callable[[Callable[[int], "WorldDraw"], list[int], str], list["Wor
 @dataclass(frozen=True)
 class DrawSpec:
     """What a draw is asked for: ``episodes`` episodes of ``style`` for benchmark seed ``seed``
-    with the catalog of ``fingerprint``, each of budget ``budget_s``, never in the rooms of
+    with the catalog of ``fingerprint`` (its ``world_fingerprint``), each of budget ``budget_s``, never in the rooms of
     ``exclude_seeds`` (sorted), looking for ``target`` (None: a small type drawn per world), the
     checks reading images with ``detector`` (None: perfect). Hashable: the memo and cache key."""
 
@@ -86,6 +87,13 @@ class DrawSpec:
     # the houses the episodes are drawn in, in turn (the store's remembered homes: room seeds
     # the knowledge was learned in, never excluded); empty: held-out worlds
     homes: tuple[int, ...] = ()
+    # the day of the robot's map (a remembered map's): each episode records whether an instance
+    # of its target stands where one stood that day (``Episode.stayed``, knowledge.persistence
+    # .still_where_seen); None: not asked
+    since: int | None = None
+    # with ``since``: half the episodes (rounded up) of targets that stayed, half that moved,
+    # taken in world order as each half has room
+    split: bool = False
 
     @classmethod
     def make(
@@ -108,7 +116,7 @@ class DrawSpec:
         worlds = draw_worlds(int(seed), int(episodes))
         exclude = tuple(sorted({int(s) for s in exclude_seeds} & worlds.keys()))
         return cls(
-            style, int(episodes), int(seed), catalog.fingerprint, float(budget_s), exclude,
+            style, int(episodes), int(seed), catalog.world_fingerprint, float(budget_s), exclude,
             target, detector, **more,
         )  # fmt: skip
 
@@ -161,9 +169,14 @@ def draw_world(spec: DrawSpec, catalog: Catalog, i: int) -> WorldDraw:
         return WorldDraw(None, "infeasible", redraws)
     if not spec.first_view:
         view = None
+    stayed = None
+    if spec.since is not None:
+        before = generate_layout(spec.style, room_seed, catalog, day=spec.since)
+        stayed = still_where_seen(before.objects, layout.objects, tgt)
     ep = Episode(
-        -1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, spec.day, first_view=view
-    )
+        -1, spec.style.name, room_seed, tgt, start, spec.budget_s, keep, spec.day,
+        first_view=view, stayed=stayed,
+    )  # fmt: skip
     return WorldDraw(ep, None, redraws)
 
 
@@ -233,6 +246,11 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
     if len(draw.episodes) != spec.episodes or min(counts) < 0:
         return False
     seeds = draw_worlds(spec.seed, spec.episodes)
+    room = split_quota(spec)
+    if room is not None and any(
+        sum(ep.stayed is s for ep in draw.episodes) != room[s] for s in (True, False)
+    ):
+        return False
     last = -1
     for k, ep in enumerate(draw.episodes):
         asked = (ep.index, ep.style, ep.budget_s) == (k, spec.style.name, spec.budget_s)
@@ -246,6 +264,8 @@ def check_draw(draw: EpisodeDraw, spec: DrawSpec, catalog: Catalog) -> bool:
         if spec.target is not None and ep.target != spec.target:
             return False
         if (ep.instance is not None) != (spec.targets is Targets.INSTANCE) or ep.day != spec.day:
+            return False
+        if (ep.stayed is None) != (spec.since is None):
             return False
         last = world
         if not _episode_fits(ep, spec, catalog):
@@ -281,6 +301,7 @@ def _draw_worlds(
 ) -> EpisodeDraw:
     """The worlds of a draw checked in rounds."""
     n = spec.episodes
+    room = split_quota(spec)
     draw = EpisodeDraw([])
     limit = world_limit(n)
     check = functools.partial(draw_world, spec, catalog)
@@ -309,8 +330,21 @@ def _draw_worlds(
             elif world.dropped == "infeasible":
                 draw.infeasible += 1
             elif world.episode is not None:
+                if room is not None:
+                    if room[world.episode.stayed] <= 0:
+                        continue
+                    room[world.episode.stayed] -= 1
                 draw.episodes.append(replace(world.episode, index=len(draw.episodes)))
     return draw
+
+
+def split_quota(spec: DrawSpec) -> dict[bool | None, int] | None:
+    """How many episodes of targets that stayed (True) and moved (False) a split draw takes."""
+    if not spec.split:
+        return None
+    if spec.since is None:
+        raise CtxsearchError("a draw split by what moved needs the day of the robot's map")
+    return {True: spec.episodes - spec.episodes // 2, False: spec.episodes // 2, None: 0}
 
 
 _drawn: dict[DrawSpec, EpisodeDraw] | None = None  # inside remembered_draws: the draws so far

@@ -128,6 +128,12 @@ def to_json(draw: EpisodeDraw) -> dict:
     }
 
 
+def _flag(v: object) -> bool | None:
+    if v is not None and not isinstance(v, bool):
+        raise TypeError("stayed is not a flag")
+    return v
+
+
 def from_json(doc: dict) -> EpisodeDraw:
     """The ``EpisodeDraw`` ``to_json`` wrote; ValueError, KeyError or TypeError on anything
     else."""
@@ -144,6 +150,7 @@ def from_json(doc: dict) -> EpisodeDraw:
             instance=None if e.get("instance") is None else int(e["instance"]),
             day=int(e.get("day", 0)),
             first_view=_view(e["first_view"]),
+            stayed=_flag(e.get("stayed")),
         )
         for e in doc["episodes"]
     ]

@@ -62,13 +62,17 @@ class Episode:
     # ``--targets instance``: the one instance of the target the world keeps (the others are
     # taken out of it: ``episode_layout``); None: every instance of the type counts.
     instance: int | None = None
-    # the day of the world (envs.floorplan: furniture stays, small objects are placed anew on
-    # each later day): the remembered map's searches happen on a day after its tour
+    # the day of the world (envs.floorplan: furniture stays, small objects stay or move by
+    # their type's stay probability): the remembered map's searches happen on a day after its
+    # map was made
     day: int = 0
     # The oracle's first plan (``oracle_view`` from ``start`` at second 0), as the episode draw
     # computed it to check the episode is feasible: the Oracle policy starts from it instead of
     # planning the same view again. Not part of the episode's identity.
     first_view: OracleView | None = field(default=None, compare=False, repr=False)
+    # on the remembered map: whether an instance of the target stands where one stood on the
+    # day of the robot's map (agent.search.draw's ``since``); None: not asked
+    stayed: bool | None = None
 
     def to_json(self) -> dict:
         """A JSON-serialisable dict."""
@@ -82,6 +86,7 @@ class Episode:
             "budget_s": self.budget_s,
             **({} if self.instance is None else {"instance": self.instance}),
             **({"day": self.day} if self.day else {}),
+            **({} if self.stayed is None else {"stayed": self.stayed}),
         }
 
 

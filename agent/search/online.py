@@ -38,6 +38,7 @@ from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.context import BELIEF_ENTITY, SearchContext
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
+from ctxsearch.agent.search.memory import memory_prior
 from ctxsearch.agent.search.room_prior import RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import MapMode
@@ -117,6 +118,12 @@ class OnlineSearch:
         self.rooms = RoomPrior.for_search(
             probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms
         )
+        # the remembered map's last sightings of the target (agent.search.memory)
+        self.sightings = memory_prior(
+            ctx.maps.home, ctx.target, ctx.episode.day, ctx.persistence, ctx.seen
+        )
+        for line in self.sightings.describe() if self.sightings else ():
+            ctx.note(line)
         self.gains = {v.type: v.gain for v in self.vias}
         self.via_spent: dict[str, float] = {}  # seconds spent looking for each intermediate type
         # the total a whole world is expected to hold (P(rel(T)) units), or 1
@@ -226,8 +233,9 @@ class OnlineSearch:
         """Where the target may be (``Belief``): the prior (the known objects' relation volumes
         with this search's P(rel(T)), ``space.target_density``; every point alike without
         knowledge or before a known volume has any; times the room factor where the knowledge
-        has room context) times the miss field, normalised over the points still worth a look
-        (agent.search.belief)."""
+        has room context; mixed with the remembered sightings of the target where the policy
+        has memory, agent.search.memory) times the miss field, normalised over the points still
+        worth a look (agent.search.belief)."""
         ctx = self.ctx
         todo = self.explorer.target_todo()
         keep = ~self.explorer.given_up()
@@ -243,6 +251,9 @@ class OnlineSearch:
         f = self.rooms.factor(self.known_objects(), ctx.built) if self.rooms else None
         if f is not None:  # the rooms of known furniture (agent.search.room_prior)
             prior = prior * f
+        if self.sightings:  # the last sightings first (agent.search.memory)
+            prior = self.sightings.prior(prior, stand, self.prior)
+            regions += self.sightings.regions(ctx.looked_into | ctx.waiting)
         miss = ctx.misses.miss
         weights = belief.belief_weights(prior, miss, todo)
         ctx.belief_now = lambda: belief.belief_weights(prior, ctx.misses.miss, todo)

@@ -22,6 +22,9 @@ facts (scenarios, what they need, roles) are ``agent.search.registry``'s; the or
   constraint around what it detected.
 - ``oracle-prior``, ``oracle-prior-indirect``: ``location`` and ``indirect`` with the true
   probabilities (the registry's ``needs``: the runner gives them the truth's table).
+- ``memory``, ``memory-location``, ``oracle-memory`` (remembered map): ``uniform``,
+  ``location`` and ``oracle-prior`` with the remembered sightings of the target in the belief
+  (agent.search.memory), weighted by the learned persistence (the world's for the oracle's).
 
 Which value of the interval ranks candidates is the probability source's rank (``low`` by
 default, chosen by measurement: docs/results.md, Search).
@@ -265,8 +268,11 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
     "map-only": MapOnly,
     "exhaustive": Exhaustive,
     "uniform": Online,
+    "memory": Online,
     "location": Location,
+    "memory-location": Location,
     "oracle-prior": Location,
+    "oracle-memory": Location,
     "indirect": _INDIRECT,
     "oracle-prior-indirect": _INDIRECT,
 }

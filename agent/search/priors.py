@@ -1,7 +1,9 @@
 """Where each policy's probabilities come from (the registry's ``needs``): the learned knowledge
 store, read as intervals (``open_knowledge``) or pooled over the type hierarchy (backoff), or the
 ground truth estimated from the style (``truth_probabilities``, the oracle-prior policies only).
-The rooms a store learned in are never searched (``learned_seeds``).
+The rooms a store learned in are never searched (``learned_seeds``). The persistence of the
+remembered sightings (the registry's ``memory``) comes from the store's maps' checks (learned,
+knowledge.persistence) or from the world's rule (``true_persistence``).
 """
 
 from __future__ import annotations
@@ -13,13 +15,19 @@ from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.config import KnowledgeConfig
 from ctxsearch.agent.search.registry import PolicySpec
 from ctxsearch.agent.search.truth_store import cached_ground_truth, cached_room_truth
-from ctxsearch.envs.houses import WorldStyle, resolve_style
+from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
 from ctxsearch.envs.truth import load_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
 from ctxsearch.knowledge.options import Estimate, IntervalMethod, Needs, Rank
+from ctxsearch.knowledge.persistence import (
+    LearnedPersistence,
+    Persistence,
+    TruePersistence,
+    store_persistence,
+)
 from ctxsearch.knowledge.pooling import PooledCounts
 from ctxsearch.knowledge.room_context import RoomContext
 from ctxsearch.knowledge.store import EvidenceStore
@@ -107,6 +115,19 @@ def truth_probabilities(
     return table
 
 
+def true_persistence(style: WorldStyle, catalog: Catalog) -> TruePersistence:
+    """The world's persistence rule: the room style's one-day stay probability of each type
+    (``Style.stay``); in a house, the mean over its room styles that place the type (the stock
+    houses' rooms agree: catalog defaults), to the power of the days."""
+    rooms = [st for st, _ in style.rooms] if isinstance(style, HouseStyle) else [style]
+
+    def stay(type_name: str) -> float:
+        place = [st for st in rooms if type_name in st.types] or rooms
+        return sum(st.stay(type_name, catalog) for st in place) / len(place)
+
+    return TruePersistence(stay)
+
+
 @dataclass(frozen=True)
 class Priors:
     """Where each policy's probabilities come from: the learned knowledge or the ground truth."""
@@ -118,6 +139,8 @@ class Priors:
     pooled: PooledCounts | None = None  # evidence over the hierarchy: the backoff estimate
     min_evidence: int = ss.DEFAULT_MIN_EVIDENCE
     room_context: RoomContext | None = None  # learned room context (knowledge.room_context)
+    persistence: Persistence | None = None  # learned (the store's maps' checks), if a policy has it
+    true_persistence: Persistence | None = None  # the world's rule, if a policy has it
 
     def check(self, specs: tuple[PolicySpec, ...]) -> None:
         """A one-line error if a policy needs a knowledge store and none was given."""
@@ -137,6 +160,14 @@ class Priors:
             return probs.with_room_context(self.room_context)
         if spec.needs is Needs.TRUTH:
             return self.truth
+        return None
+
+    def persistence_for(self, spec: PolicySpec) -> Persistence | None:
+        """The persistence policy ``spec`` weighs its remembered sightings by (None: no memory)."""
+        if spec.memory is Needs.KB:
+            return self.persistence
+        if spec.memory is Needs.TRUTH:
+            return self.true_persistence
         return None
 
 
@@ -189,8 +220,17 @@ def make_priors(
                 f"{path}: --room-context: the store holds no room context (it is "
                 "learned in houses, by ctxsearch learn from schema 6 on)"
             )
+    persistence = true = None
+    if any(s.memory is Needs.KB for s in specs):
+        persistence = LearnedPersistence(())  # nothing learned: every sighting at 1/2
+        if path is not None:
+            with EvidenceStore.open(Path(path), catalog, read_only=True) as store:
+                persistence = store_persistence(store)
+    if any(s.memory is Needs.TRUTH for s in specs):
+        true = true_persistence(style, catalog)
     priors = Priors(
-        kb, frozenset(learned), knowledge.rank, truth, pooled, knowledge.min_evidence, rooms
-    )
+        kb, frozenset(learned), knowledge.rank, truth, pooled, knowledge.min_evidence, rooms,
+        persistence, true,
+    )  # fmt: skip
     priors.check(specs)
     return priors

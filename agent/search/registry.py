@@ -41,6 +41,9 @@ class PolicyInfo:
     summary: str = ""
     # the scenarios in which its belief takes room context (P(SAME-ROOM-AS-F(T))) when it is on
     room_context: tuple[MapMode, ...] = ()
+    # where the persistence of its remembered sightings comes from (agent.search.memory): NONE
+    # (no memory), KB (learned by the robot: the store's maps' checks) or TRUTH (the world's rule)
+    memory: Needs = Needs.NONE
 
     def role(self, mode: MapMode) -> Role | None:
         """Its role in scenario ``mode`` (None: not run there by default)."""
@@ -54,17 +57,27 @@ REGISTRY: tuple[PolicyInfo, ...] = (
                summary="no context: the belief with every point alike, on the robot's own map"),
     PolicyInfo("uniform", (_G, _R), ((_G, Role.BASELINE), (_R, Role.BASELINE)),
                summary="no context: the belief with every point alike (location's twin)"),
+    PolicyInfo("memory", (_R,), ((_R, Role.REFERENCE),), memory=Needs.KB,
+               summary="memory only: the last sightings by the learned persistence, the rest "
+                       "alike"),
     PolicyInfo("map-only", (_G, _R), ((_G, Role.REFERENCE),),
                summary="no context: every relation volume of the known furniture, a short tour"),
-    PolicyInfo("location", (_G, _R), ((_G, Role.CONTEXT), (_R, Role.CONTEXT)), Needs.KB,
+    PolicyInfo("location", (_G, _R), ((_G, Role.CONTEXT), (_R, Role.REFERENCE)), Needs.KB,
                summary="location constraint: the belief over relation volumes by P(rel(T))",
                room_context=(_G, _R)),
+    PolicyInfo("memory-location", (_R,), ((_R, Role.CONTEXT),), Needs.KB,
+               summary="memory and the location constraint: the last sightings by the learned "
+                       "persistence, the rest by P(rel(T))",
+               room_context=(_R,), memory=Needs.KB),
     PolicyInfo("indirect", (_B, _G, _R), ((_B, Role.CONTEXT),), Needs.KB,
                summary="detectability-driven: intermediate types, volumes and frontier",
                room_context=(_B, _R)),
-    PolicyInfo("oracle-prior", (_G, _R), ((_G, Role.ASYMPTOTE), (_R, Role.ASYMPTOTE)),
+    PolicyInfo("oracle-prior", (_G, _R), ((_G, Role.ASYMPTOTE),),
                Needs.TRUTH, summary="location with the true probabilities",
                room_context=(_G, _R)),
+    PolicyInfo("oracle-memory", (_R,), ((_R, Role.ASYMPTOTE),), Needs.TRUTH,
+               summary="memory-location with the world's persistence and the true "
+                       "probabilities", room_context=(_R,), memory=Needs.TRUTH),
     PolicyInfo("oracle-prior-indirect", (_B, _G, _R), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
                summary="indirect with the true probabilities", room_context=(_B, _R)),
     PolicyInfo("oracle", (_B, _G, _R), ((_B, Role.BOUND), (_G, Role.BOUND), (_R, Role.BOUND)),
@@ -117,6 +130,11 @@ class PolicySpec:
     def needs(self) -> Needs:
         """Where its probabilities come from."""
         return self.info.needs
+
+    @property
+    def memory(self) -> Needs:
+        """Where the persistence of its remembered sightings comes from (NONE: no memory)."""
+        return self.info.memory
 
     @property
     def uses_room_context(self) -> bool:

@@ -110,6 +110,7 @@ class FurnitureMemory:
 
 
 REMEMBERED_ENTITY = "world/search/remembered"  # the recording's remembered furniture
+LAST_SEEN_ENTITY = "world/search/last_seen"  # the remembered small objects (where seen last)
 
 
 def confidence_color(c: float) -> tuple[float, float, float]:
@@ -120,8 +121,21 @@ def confidence_color(c: float) -> tuple[float, float, float]:
 
 def log_remembered(rec: Recorder, home: HomeMap) -> None:
     """The remembered furniture as boxes coloured by the detector's best confidence, labelled
-    with its type, id, confidence and the images that showed it (static: the map at the start)."""
-    if not rec.enabled or not home.furniture:
+    with its type, id, confidence and the images that showed it, and the remembered small
+    objects in blue, labelled with the day each was last seen (static: the map at the
+    start)."""
+    if not rec.enabled:
+        return
+    if home.small:
+        rec.log_volumes(
+            LAST_SEEN_ENTITY,
+            [o.instance().box() for o in home.small],
+            [f"{o.type} last seen day {home.seen_day(o)}" for o in home.small],
+            static=True,
+            show_labels=False,
+            colors=[(0.3, 0.6, 1.0)] * len(home.small),
+        )
+    if not home.furniture:
         return
     objs = home.furniture
     rec.log_volumes(

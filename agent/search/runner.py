@@ -63,6 +63,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
 from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.persistence import Persistence
 from ctxsearch.knowledge.store import EvidenceStore
 
 
@@ -100,22 +101,29 @@ class SearchRun:
     # the remembered map from the store (``map.home`` store): room seed -> its latest map's day
     homes: dict[int, int] = field(default_factory=dict)
 
-    def draw_spec(self, episodes: int, target: str | None = None) -> DrawSpec:
+    def draw_spec(self, episodes: int, target: str | None = None, split: bool = False) -> DrawSpec:
         """The episode draw this run searches: ``episodes`` episodes (``target``: of that type
-        only), never in the worlds the knowledge was learned in."""
+        only), never in the worlds the knowledge was learned in. On the remembered map each
+        episode records whether its target stayed where an instance stood on the map's day;
+        ``split``: half of them did, half did not."""
         c = self.config
         homes = tuple(sorted(self.homes))
         day = max(self.homes.values(), default=0) + days_after(c)
+        since = day - days_after(c) if c.scenario is MapMode.REMEMBERED else None
+        if split and since is None:
+            raise CtxsearchError("a draw split by what moved needs --map remembered")
         return DrawSpec.make(
             self.style, episodes, c.seed, self.catalog, c.budget_s, self.priors.learned, target,
-            self.detector, targets=c.targets, day=day, homes=homes,
+            self.detector, targets=c.targets, day=day, homes=homes, since=since, split=split,
         )  # fmt: skip
 
     def runs(self, records: Sequence[Path | None] | None = None) -> tuple[PolicyRun, ...]:
-        """Each policy with its probabilities (and ``records[i]``: its own recording)."""
+        """Each policy with its probabilities and persistence (and ``records[i]``: its own
+        recording)."""
         recs = list(records) if records is not None else [None] * len(self.specs)
+        p = self.priors
         return tuple(
-            PolicyRun(s, self.priors.for_policy(s), r)
+            PolicyRun(s, p.for_policy(s), r, p.persistence_for(s))
             for s, r in zip(self.specs, recs, strict=True)
         )
 
@@ -219,11 +227,13 @@ class EpisodeSensor:
 @dataclass(frozen=True)
 class PolicyRun:
     """One policy to run in an episode's world: its spec, the probabilities it ranks by (None:
-    none) and its own rerun recording (None: none)."""
+    none), its own rerun recording (None: none) and the persistence it weighs the remembered
+    sightings by (None: it has no memory)."""
 
     spec: PolicySpec
     probs: ss.ProbabilitySource | None = None
     record: Path | None = None
+    persistence: Persistence | None = None  # of its remembered sightings (None: no memory)
 
 
 @dataclass
@@ -271,6 +281,7 @@ class EpisodeWorld:
             recorder=recorder, config=self.config,
         )  # fmt: skip
         ctx.observer = self.observer
+        ctx.persistence = run.persistence
         return policy, ctx
 
     def judged(self, res: SearchResult) -> SearchResult:

@@ -11,8 +11,9 @@ map, never on a detection.
 
 What it keeps is a ``knowledge.home_map.HomeMap``: the built map's occupancy, which search-lattice
 points rest on a surface (those the tour never saw count as possible surfaces), its own room
-segmentation of the map (agent.room_segmentation), and the furniture it recognised
-(``Sightings``): every instance the detector reported, under the type reported most often (ties:
+segmentation of the map (agent.room_segmentation), the small objects it recognised by the same
+rule (the map's last sightings, for the search's memory: agent.search.memory), and the furniture
+it recognised (``Sightings``): every instance the detector reported, under the type reported most often (ties:
 the first by name), at the mean of its estimated positions (the circular mean of its yaws), with
 its best confidence and how many images reported it, kept if that type is furniture and, where
 the detector has false positives, if its best confidence beats the highest a false positive
@@ -31,7 +32,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,7 @@ from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.home_map import HomeMap, HomeMapError, RememberedObject, check_types
 
-TOUR_FORMAT = 1
+TOUR_FORMAT = 2  # 2: the map keeps the small objects seen
 
 
 # ============================================================================= what a tour saw
@@ -85,11 +86,23 @@ class Sightings:
 
     def furniture(self, catalog: Catalog, min_score: float = 0.0) -> list[RememberedObject]:
         """The recognised furniture (module docstring), by id."""
+        return self.recognised(catalog, min_score, furniture=True)
+
+    def small(self, catalog: Catalog, min_score: float = 0.0) -> list[RememberedObject]:
+        """The recognised small objects (the same rule as the furniture's), by id."""
+        return self.recognised(catalog, min_score, furniture=False)
+
+    def recognised(
+        self, catalog: Catalog, min_score: float, furniture: bool
+    ) -> list[RememberedObject]:
+        """The recognised objects of the kind ``furniture`` says, by id."""
         out = []
         for i in sorted(self.by_id):
             s = self.by_id[i]
             kind = max(sorted(s.types), key=s.types.__getitem__)
-            if not catalog.type(kind).is_furniture or (min_score > 0 and s.best <= min_score):
+            if catalog.type(kind).is_furniture != furniture or (
+                min_score > 0 and s.best <= min_score
+            ):
                 continue
             xyz = tuple(float(v) for v in np.mean(np.array(s.xyz), axis=0))
             yaw = math.atan2(float(np.mean(np.sin(s.yaws))), float(np.mean(np.cos(s.yaws))))
@@ -159,7 +172,9 @@ def tour(
     assert built is not None
     min_score = detector.fp_max_score if detector is not None and not detector.perfect else 0.0
     support = ctx.seen.support | ~np.isfinite(ctx.seen.best)  # a place never seen may hold one
-    return home_map(built, layout, day, ctx.sightings.furniture(catalog, min_score), support)
+    seen = ctx.sightings
+    home = home_map(built, layout, day, seen.furniture(catalog, min_score), support)
+    return replace(home, small=tuple(seen.small(catalog, min_score)))
 
 
 # ============================================================================= tours kept on disk

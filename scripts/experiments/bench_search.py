@@ -97,7 +97,20 @@ EPISODES_PER_UNIT = 2  # episodes per sweep unit (a room is built per episode ei
 BASELINES = (
     "frontier", "uniform", "map-only", "exhaustive", "oracle-prior", "oracle-prior-indirect"
 )  # fmt: skip
+# On the remembered map with memory arms, also each part alone and the bound: memory and
+# relations together against memory only and relations only (and against the true values).
+MEMORY_BASELINES = ("memory", "location", "oracle-memory")
 ORACLE = "oracle"
+
+
+def baselines_of(names) -> tuple[str, ...]:
+    """The baselines of a run of the policies ``names``, in order (those that ran)."""
+    bases = BASELINES
+    if "memory" in names or "memory-location" in names:
+        bases = bases + MEMORY_BASELINES
+    return tuple(b for b in bases if b in names)
+
+
 # An early stop (before the budget, nothing found) with more than this share of the belief's
 # detectable mass left counts as premature (the aim: none).
 EARLY_STOP_MASS = 0.10
@@ -175,8 +188,8 @@ def aggregate(results: dict[str, list[SearchResult]], seed: int = 0) -> dict[str
                 setattr(st, attr, st.median_s / out[ref].median_s)
     times = {n: np.array([r.time_to_find for r in rs], float) for n, rs in results.items()}
     for name in results:
-        for base in BASELINES:
-            if base in results and base != name:
+        for base in baselines_of(results):
+            if base != name:
                 out[name].paired[base] = paired_ratio(times[name], times[base], seed=seed)
                 out[name].paired_stats[base] = paired_stats(times[name], times[base], seed=seed)
         if "exhaustive" in results:
@@ -193,7 +206,9 @@ def episode_facts(style: WorldStyle, eps: Sequence[Episode], catalog: Catalog) -
     """What each episode is like, for the strata of search.json's ``paired_by``: the target's
     group (``detect_group``), whether an instance stands in the room the robot starts in (a
     single room: always), and how many instances the world holds (``1``, ``2-3``, ``4+``). Read
-    from the true layout: a report, not the robot's knowledge."""
+    from the true layout: a report, not the robot's knowledge. On the remembered map also
+    whether an instance of the target stands where one stood on the map's day (``memory``:
+    ``stayed`` or ``moved``; agent.search.draw's ``since``)."""
     out = []
     for ep in eps:
         layout = episode_layout(generate_layout(style, ep.room_seed, catalog, day=ep.day), ep)
@@ -201,11 +216,14 @@ def episode_facts(style: WorldStyle, eps: Sequence[Episode], catalog: Catalog) -
         start = _room_at(layout, ep.start.x, ep.start.y)
         same = not layout.rooms or any(layout.room_of.get(o.id) == start for o in inst)
         k = len(inst)
-        out.append({
+        fact = {
             "target_group": detect_group(catalog, ep.target),
             "start_room": "instance in the start room" if same else "none in the start room",
             "instances": "1" if k <= 1 else "2-3" if k <= 3 else "4+",
-        })  # fmt: skip
+        }
+        if ep.stayed is not None:  # the remembered map: did the target stay where it was seen
+            fact["memory"] = "stayed" if ep.stayed else "moved"
+        out.append(fact)
     return out
 
 
@@ -218,7 +236,7 @@ def _room_at(layout: RoomLayout, x: float, y: float) -> int | None:
     return None
 
 
-STRATA = ("target_group", "start_room", "instances")
+STRATA = ("target_group", "start_room", "instances", "memory")
 
 
 def paired_strata(
@@ -226,9 +244,11 @@ def paired_strata(
 ) -> dict[str, dict]:
     """``paired_stats`` of every policy against every baseline that ran, within each stratum of
     ``STRATA``: {stratum: {value: {"n": episodes, policy: {baseline: stats}}}}."""
-    bases = [b for b in BASELINES if b in results]
+    bases = baselines_of(results)
     out: dict[str, dict] = {}
     for kind in STRATA:
+        if not facts or kind not in facts[0]:
+            continue
         out[kind] = {}
         for value in sorted({f[kind] for f in facts}):
             idx = [i for i, f in enumerate(facts) if f[kind] == value]
@@ -326,7 +346,7 @@ def headline_table(stats: dict[str, PolicyStats]) -> str:
 def format_table(stats: dict[str, PolicyStats], n: int, budget_s: float) -> str:
     """The Markdown tables of search.md: the headline statistics (``headline_table``), then the
     paired medians, success, spl and times."""
-    bases = [b for b in BASELINES if b in stats]
+    bases = list(baselines_of(stats))
 
     def f(x, d=1):
         return "-" if x is None or not math.isfinite(x) else f"{x:.{d}f}"
@@ -398,13 +418,15 @@ def bench_search(
     bar: bool = True,
     kb: KnowledgeBase | None = None,
     observer: Callable | None = None,
+    split: bool = False,
 ) -> BenchResult:
     """The benchmark of ``config`` (module docstring): run, aggregate, write the four files to
     ``out``. ``progress`` gets a line per episode and policy (in episode order, as batches
     finish), ``bar`` shows a progress bar over the sweep's units; ``kb``: the knowledge in
     memory instead of the store ``config.knowledge.kb`` (``bench curve``'s empty store at
     k = 0); ``observer``: called at every online decision (``SearchContext.observer``; the
-    episodes then run in this process)."""
+    episodes then run in this process); ``split``: on the remembered map, half the episodes of
+    targets that stayed where an instance stood on the map's day, half of targets that moved."""
     t_wall = time.perf_counter()
     sweep = sweep or SweepOptions()
     if observer is not None and (sweep.workers > 1 or sweep.ray_address):
@@ -412,7 +434,7 @@ def bench_search(
     run = prepare(config, source=KnowledgeSource(kb), progress=bar)
     run = replace(run, observer=observer)
     config = run.config
-    spec = run.draw_spec(config.episodes)
+    spec = run.draw_spec(config.episodes, split=split)
     runner = sweep_worlds(sweep, bar)
     with session(sweep, bar):  # one Ray for the draw's rounds and the searches
         draw = draw_episodes(
@@ -580,7 +602,7 @@ def _write_files(run: SearchRun, out: Path, res: BenchResult) -> list[Path]:
         "oracle_violations": sum(st.oracle_violations for st in stats.values())
         if ORACLE in stats
         else None,
-        "baselines": [b for b in BASELINES if b in stats],
+        "baselines": list(baselines_of(stats)),
         "policies": {n: st.to_json() for n, st in stats.items()},
         "paired_by": paired_strata(results, res.facts, config.seed) if res.facts else {},
         "by_target": breakdown(eps, results, lambda ep: ep.target),

@@ -75,7 +75,8 @@ def scenario_config(
     tour, unless set): the stores compared learned maps of their own houses or none, and every
     store must search the same episodes."""
     changes: dict[str, object] = {
-        "policies": tuple(policies or scenario.policies), "map.scenario": scenario.name
+        "policies": tuple(policies or scenario.policies),
+        "map.scenario": scenario.name,
     }
     if scenario.name == MapMode.REMEMBERED.value and base.map.home is None:
         changes["map.home"] = HomeSource.TOUR
