@@ -8,7 +8,7 @@ STAMP := $(VENV)/.ctxsearch-installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test bench bench-timing bench-a bench-b lint syscheck clean help
+.PHONY: demo test bench bench-timing bench-a bench-b bench-home-full kb-home lint syscheck clean help
 
 help:
 	@echo "make demo   - learn in a few office rooms, then search with and without context (writes demo/)"
@@ -79,6 +79,28 @@ bench-a: $(STAMP)
 # The robot's rooms against the plans: 10 houses of every stock house style, explored and segmented.
 	$(T) $(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
 	$(T) $(CTX) room --style family_house --seed 1 --views 0 --out results/rooms/family_house_1
+# The changing home: the robot lives 4 days in 12 apartments (two learning runs, one core each,
+# merged), then is asked for small types 1 and 4 days after its last map, half the queries for
+# types that stayed where it saw them (every arm: uniform, memory, location, both, the bound).
+	$(MAKE) --no-print-directory kb-home
+	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 40 --days-after 1,4 --room-context --quiet --out results/home --workers $(WORKERS) --draw-cache build/draws
+
+# The store the changing home's benchmarks search in: learned anew by make bench (kb-home), once
+# by make bench-home-full if it is missing.
+build/kb_home.sqlite:
+	$(MAKE) --no-print-directory kb-home
+
+kb-home: $(STAMP)
+	rm -f build/kb_home.sqlite build/kb_home0.sqlite build/kb_home1.sqlite build/kb_home*.sqlite-*
+	mkdir -p build
+	$(T) $(CTX) learn --style apartment --rooms 6 --days 4 --detector realistic --seed 0 --kb build/kb_home0.sqlite --no-progress
+	$(T) $(CTX) learn --style apartment --rooms 6 --days 4 --detector realistic --seed 1 --kb build/kb_home1.sqlite --no-progress
+	$(CTX) kb merge build/kb_home.sqlite build/kb_home0.sqlite build/kb_home1.sqlite
+
+# The changing home at 400 paired queries a day after the robot's last map (about 30 minutes on
+# 2 cores; results/home_400).
+bench-home-full: build/kb_home.sqlite
+	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
 
 bench-b: $(STAMP)
 # Does learning pay? The paired search ratio after k learned houses, built and given map (issue
@@ -96,7 +118,7 @@ bench-b: $(STAMP)
 	mkdir -p build && cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --set map.days_after=1 --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_given_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
 	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)

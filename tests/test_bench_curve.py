@@ -267,7 +267,7 @@ def test_the_remembered_scenario_searches_toured_held_out_houses_at_every_k():
     base = SearchConfig(style="apartment")
     got = scenario_config(base, DEFAULT_SCENARIOS["remembered"])
     assert got.map.home is HomeSource.TOUR
-    assert got.policies == ("uniform", "location", "oracle-prior")
+    assert got.policies == ("uniform", "memory-location", "oracle-memory")
     assert scenario_config(base, DEFAULT_SCENARIOS["given"]).map.home is None
     mine = base.updated({"map.home": "store"})
     assert scenario_config(mine, DEFAULT_SCENARIOS["remembered"]).map.home is HomeSource.STORE

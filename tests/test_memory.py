@@ -4,6 +4,7 @@ prior (agent.search.memory), and ``bench home``'s command line."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -11,13 +12,14 @@ import pytest
 
 from ctxsearch.agent.home import PlaceChecks
 from ctxsearch.agent.search import space as ss
-from ctxsearch.agent.search.memory import LAST_SEEN, MemoryPrior, memory_prior
+from ctxsearch.agent.search.memory import ELSEWHERE, LAST_SEEN, MemoryPrior, memory_prior
 from ctxsearch.envs.camera import Frame, camera_at
 from ctxsearch.envs.detector import Detection, load_detector
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
 from ctxsearch.knowledge import intervals
+from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import PersistenceCheck, RememberedObject
 from ctxsearch.knowledge.persistence import (
@@ -142,8 +144,9 @@ def test_a_sighting_adds_its_persistence_at_its_place(office_seen):
     assert len(s.points) and near.max() <= RADIUS_M + 1e-9
     stand = np.ones(len(seen.points))
     rel = np.ones(len(seen.points))
-    prior = mem.prior(rel, stand, expected=2.0)
-    assert prior.sum() == pytest.approx(2.25)
+    prior = mem.prior(rel, stand)  # one book remembered: 0.25 there, 0.75 + ELSEWHERE elsewhere
+    assert prior.sum() == pytest.approx(1.0 + ELSEWHERE)
+    assert prior[s.points].sum() >= 0.25
     assert prior[s.points].min() > prior.min()
     (region,) = mem.regions()
     assert region.members == [(LAST_SEEN, -6)] and region.p == pytest.approx(0.25)
@@ -176,3 +179,49 @@ def test_bench_home_refuses_bad_gaps(capsys, days):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "home", "--days-after", days, "--out", "x"])
     assert exc.value.code == 2 and "--days-after" in capsys.readouterr().err
+
+
+# ---- a few days in a home, then the changing home's benchmark ------------------------------------
+def test_living_in_a_room_for_days_learns_persistence_and_bench_home_runs_the_arms(
+    tmp_path, capsys
+):
+    kb, out = tmp_path / "home.sqlite", tmp_path / "home"
+    argv = ["learn", "--style", "living_room", "--rooms", "1", "--days", "2", "--map", "built",
+            "--detector", "realistic", "--kb", str(kb), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    catalog = load_catalog()
+    with EvidenceStore.open(kb, catalog, read_only=True) as store:
+        (run, style, seed, _), (_, _, _, day) = store.home_maps()
+        day0 = store.home_map(style, seed, run, upto_day=0)
+        day1 = store.home_map(style, seed, run, upto_day=1)
+        learned = store_persistence(store)
+    assert day == 1 and day0.small and not day0.checks
+    assert day1.checks and all(c.age == 1 and 0 < c.recall <= 1 for c in day1.checks)
+    assert {c.type for c in day1.checks} <= {o.type for o in day0.small}
+    assert learned.types()
+    capsys.readouterr()
+    argv = ["bench", "home", "--kb", str(kb), "--style", "living_room", "--episodes", "1",
+            "--days-after", "1", "--policies", "uniform,memory,memory-location", "--quiet",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "1 day(s) after the robot's map: 1 queries (1 stayed, 0 moved)" in printed
+    doc = json.loads((out / "home.json").read_text())
+    gap = doc["gaps"]["1"]
+    assert set(gap["vs_uniform"]) == {"memory", "memory-location"}
+    assert gap["context_vs"]["memory"]["n"] == 1
+    assert (out / "d=1" / "search.json").exists() and (out / "home.md").exists()
+
+
+def test_a_drawn_episode_keeps_whether_its_target_stayed_through_the_draw_cache():
+    from ctxsearch.agent.search import draw_store
+    from ctxsearch.agent.search.episode import Episode, EpisodeDraw
+
+    eps = [Episode(i, "apartment", 5, "Cup", RobotPose(1.0, 2.0, 0.5), day=2, stayed=s)
+           for i, s in enumerate((True, False, None))]  # fmt: skip
+    back = draw_store.from_json(json.loads(json.dumps(draw_store.to_json(EpisodeDraw(eps)))))
+    assert [e.stayed for e in back.episodes] == [True, False, None] and back.episodes == eps
+    doc = draw_store.to_json(EpisodeDraw(eps[:1]))
+    doc["episodes"][0]["stayed"] = "yes"
+    with pytest.raises(TypeError):
+        draw_store.from_json(doc)

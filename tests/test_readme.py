@@ -34,6 +34,7 @@ SKIP = {
     "ctxsearch search": "draws a held-out episode: ~10 s each (tests/test_cli_search.py)",
     "ctxsearch bench learning": "minutes even when shrunk (tests/test_bench_tables.py)",
     "ctxsearch bench search": "draws episodes: ~20 s even for 1 (tests/test_cli_search.py)",
+    "ctxsearch bench home": "learns over days and searches with every arm (tests/test_memory.py)",
     "ctxsearch bench hierarchy": "learns 20 rooms (tests/test_hierarchy.py)",
     "ctxsearch bench intervals": "camera learning runs per detector setting",
     "ctxsearch bench curve": "learning and search per k (tests/test_bench_curve.py)",

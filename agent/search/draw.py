@@ -313,9 +313,13 @@ def _draw_worlds(
                 f"none of the {len(spec.homes)} remembered house(s)" if spec.homes
                 else "no held-out room"
             )  # fmt: skip
+            half = (
+                f" ({room[True]} more that stayed and {room[False]} more that moved since day "
+                f"{spec.since} wanted)" if room is not None else ""
+            )  # fmt: skip
             raise CtxsearchError(
                 f"{where} of style '{spec.style.name}' holds {what} on day {spec.day} that can be "
-                f"searched for (tried {limit} draws)"
+                f"searched for (tried {limit} draws){half}"
             )
         # A round: as many worlds as episodes still needed (at least two per worker).
         m = min(limit - i, max(n - len(draw.episodes), 2 * workers))

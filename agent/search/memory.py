@@ -6,22 +6,23 @@ remembered sighting s of T (seen on day t_s) is a place where an instance may st
 probability pi_s = P(STILL-WHERE-SEEN(T) after t - t_s days) from the policy's persistence
 (knowledge.persistence: the robot's learned intervals, or the world's rule for the bound).
 
-The prior the online search ranks by (agent.search.online) is a density of expected instances
-of T, and memory adds to it:
+The prior the online search ranks by (agent.search.online) is a density of instances of T, and
+memory splits it in two:
 
-    prior(x) = sum_s pi_s k_s(x) + E rel(x) / sum rel
+    prior(x) = sum_s pi_s k_s(x) + (max(N - sum_s pi_s, 0) + ELSEWHERE) rel(x) / sum rel
 
 where k_s spreads one instance over the lattice points within ``knowledge.persistence.RADIUS_M``
-of s (on the floor plane, and within that height of it; by where an object can stand), rel is
-the density the policy has without memory (the relation volumes' P(rel(T)) and room context, or
-every point alike for the memory-only arm) and E the instances of T a whole world is expected to
-hold by the policy's knowledge (agent.search.space.expected_mass: the sum of P(rel(T)) over what
-a world holds; 1 without knowledge). A remembered place thus holds pi_s instances more than the
-relations give it, and a type of many instances keeps most of its mass where the relations put
-it: the nearest likely volume can still be worth more per second than a far remembered place.
-That a remembered instance is also one of the E (counted twice, where it stayed) is this
-module's simplification, as is the whole choice (the paper has no persistence); the belief
-normalises the prior and treats "the target" as the first instance found, as it does everywhere.
+of s (on the floor plane, and within that height of it; by where an object can stand), N is the
+number of instances of T the map remembers (at least 1), and rel the density the policy has
+without memory (the relation volumes' P(rel(T)) and room context, or every point alike for the
+memory-only arm). The instances the robot remembers are where it saw them with their
+persistence; those that moved, plus ``ELSEWHERE`` of an instance (one it never saw: this
+module's stated choice, not fitted), are where the relations put them. So a remembered monitor
+that stays holds nearly all the mass at its place, a type of many instances that wander keeps
+most of it where the relations put it, and after a look at a remembered place finds nothing the
+miss field moves the mass to the rest, as it does everywhere. The split is this module's (the
+paper has no persistence); the belief normalises the prior and treats "the target" as the first
+instance found, as it does everywhere.
 
 Each sighting is also a candidate region (``regions``: a box of the radius around it, its
 probability pi_s), so the online decision can plan close gazes into it as it does into a relation
@@ -40,6 +41,7 @@ from ctxsearch.knowledge.home_map import HomeMap, RememberedObject
 from ctxsearch.knowledge.persistence import RADIUS_M, Persistence
 
 LAST_SEEN = "LAST-SEEN"  # the members' relation name of a sighting's region
+ELSEWHERE = 0.25  # instances of the type the robot never saw, in the prior (module docstring)
 
 
 @dataclass(frozen=True)
@@ -83,17 +85,19 @@ class MemoryPrior:
             if p > 0 and len(idx):
                 items.append(Sighting(s, age, p, idx))
         self.sightings: list[Sighting] = items
+        self.remembered = max(1, len(home.last_seen(target)))  # N of the module docstring
 
     def __bool__(self) -> bool:
         return bool(self.sightings)
 
-    def prior(self, rel: np.ndarray, stand: np.ndarray, expected: float = 1.0) -> np.ndarray:
-        """The prior of the module docstring: ``rel`` (N,) (the density without memory) scaled
-        to ``expected`` instances, plus each sighting's persistence spread over its points by
-        ``stand`` (N,) (where an object can stand)."""
+    def prior(self, rel: np.ndarray, stand: np.ndarray) -> np.ndarray:
+        """The prior of the module docstring: ``rel`` (the lattice's density without memory)
+        scaled to the instances not at remembered places, plus each sighting's persistence
+        spread over its points by ``stand`` (where an object can stand)."""
         rel = np.asarray(rel, float)
         total = float(rel.sum())
-        out = expected * rel / total if total > 0 else np.zeros(len(rel))
+        rest = max(self.remembered - sum(s.p for s in self.sightings), 0.0) + ELSEWHERE
+        out = rest * rel / total if total > 0 else np.zeros(len(rel))
         for s in self.sightings:
             w = np.asarray(stand, float)[s.points]
             w = w / w.sum() if w.sum() > 0 else np.full(len(s.points), 1.0 / len(s.points))

@@ -252,7 +252,7 @@ class OnlineSearch:
         if f is not None:  # the rooms of known furniture (agent.search.room_prior)
             prior = prior * f
         if self.sightings:  # the last sightings first (agent.search.memory)
-            prior = self.sightings.prior(prior, stand, self.prior)
+            prior = self.sightings.prior(prior, stand)
             regions += self.sightings.regions(ctx.looked_into | ctx.waiting)
         miss = ctx.misses.miss
         weights = belief.belief_weights(prior, miss, todo)

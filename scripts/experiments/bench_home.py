@@ -16,7 +16,8 @@ Per gap: each arm against ``uniform``, and ``memory-location`` against ``memory`
 ``uniform``), with the geometric mean of the paired ratio and its interval, wins/losses/ties,
 the signed-rank p and n; the same within the stayed and the moved queries. And the learned
 persistence per type beside the world's (``persistence``: the store's intervals, whether they
-hold the measured share, envs.truth's ``still_where_seen``).
+hold the share measured in sample worlds of the style over the days the robot checked:
+``persistence_coverage``).
 
 Writes ``DIR/home.json``, ``DIR/home.md`` and every gap's ``bench search`` files in
 ``DIR/d=GAP/``.
@@ -33,13 +34,20 @@ from pathlib import Path
 from ctxsearch.agent.search.config import SearchConfig, to_dict
 from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.agent.search.registry import default_policies
+from ctxsearch.envs.floorplan import generate_layout
+from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.truth import persistence_counts
+from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.persistence import near_place, store_persistence
+from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_search import BenchResult, bench_search, paired_strata
 from ctxsearch.scripts.sweep import SweepOptions
 
 ARMS = default_policies(MapMode.REMEMBERED)  # the remembered map's default policies
 CONTEXT = "memory-location"
+PERSISTENCE_WORLDS = 60  # sample worlds of the truth's persistence (persistence_coverage)
 
 
 @dataclass
@@ -79,10 +87,12 @@ def bench_home(
         results[g] = bench_search(
             c, out / f"d={g}", progress=progress, sweep=sweep, bar=bar, split=True
         )
+    first = results[min(results)]
     summary = {
         "benchmark": "home",
-        "config": to_dict(results[min(results)].config or config),
+        "config": to_dict(first.config or config),
         "gaps": {str(g): gap_summary(r) for g, r in results.items()},
+        "persistence": persistence_coverage(first, PERSISTENCE_WORLDS),
     }
     table = home_table(summary)
     out.mkdir(parents=True, exist_ok=True)
@@ -92,6 +102,60 @@ def bench_home(
     for r in results.values():
         files += r.files
     return HomeResult(results, summary, table, files, time.perf_counter() - t0)
+
+
+def persistence_coverage(res: BenchResult, worlds: int) -> dict:
+    """The store's learned one-day persistence per type against the truth (module docstring).
+    ``true``: over the places the robot's maps remembered a small object on one day and a map
+    of the next day exists (the places its checks were drawn from), the share where an instance
+    of the type stood within the radius on that next day in the true world: the value the
+    checks estimate, without the detector. ``true_all``: the same share over every instance of
+    ``worlds`` sample worlds of the style (seeds 0 .. worlds-1) from day 0 to the store's
+    latest map day (objects the robot never remembers included: clutter wanders more). An
+    interval ``covered`` its type's ``true``."""
+    c = res.config
+    assert c is not None and c.knowledge.kb is not None
+    catalog = load_catalog()
+    style = resolve_style(c.style, catalog)
+    places: dict[str, list[int]] = {}
+    with EvidenceStore.open(Path(c.knowledge.kb), catalog, read_only=True) as store:
+        learned = store_persistence(store)
+        visits = [v for v in store.home_maps() if v[1] == style.name]
+        last = max((d for *_, d in visits), default=1)
+        for run, st, seed, day in visits:
+            prev = store.home_map(st, seed, run, upto_day=day - 1) if day else None
+            if prev is None or prev.day != day - 1:
+                continue
+            world = generate_layout(style, seed, catalog, day=day)
+            for o in prev.small:
+                acc = places.setdefault(o.type, [0, 0])
+                acc[0] += 1
+                acc[1] += near_place(o.position, world.objects, o.type)
+    every: dict[str, list[int]] = {}
+    for seed in range(worlds):
+        days = [generate_layout(style, seed, catalog, day=d) for d in range(max(last, 1) + 1)]
+        for before, after in zip(days, days[1:], strict=False):
+            for (_room, t), (n, _y, near) in persistence_counts(before, after, catalog).items():
+                acc = every.setdefault(t, [0, 0])
+                acc[0] += n
+                acc[1] += near
+    rows = []
+    for t in sorted(set(every) | set(places)):
+        n, near = places.get(t, (0, 0))
+        n_all, near_all = every.get(t, (0, 0))
+        row = {"type": t, "true": near / n if n else None, "places": n,
+               "true_all": near_all / n_all if n_all else None, "instances": n_all}  # fmt: skip
+        e = learned.estimate(t, 1)
+        if e is not None:
+            row |= {"low": e.low, "high": e.high, "p": e.p, "checks": e.checks}
+            if row["true"] is not None:
+                row["covered"] = e.low <= row["true"] <= e.high
+        rows.append(row)
+    judged = [r for r in rows if "covered" in r]
+    return {
+        "worlds": worlds, "days": [0, max(last, 1)], "types": rows,
+        "covered": sum(r["covered"] for r in judged), "judged": len(judged),
+    }  # fmt: skip
 
 
 def gap_summary(res: BenchResult) -> dict:
@@ -150,6 +214,28 @@ def home_table(summary: dict) -> str:
                     lines.append(
                         f"| {n} | {geo_cell(u) if u else '-'} | {geo_cell(loc) if loc else '-'} |"
                     )
+        lines.append("")
+    pc = summary.get("persistence")
+    if pc:
+        lines += [
+            f"## Learned persistence against the worlds' ({pc['covered']} of {pc['judged']} "
+            f"types covered; truth: {pc['worlds']} worlds, days {pc['days'][0]}-{pc['days'][1]})",
+            "",
+            "| type | learned P(STILL-WHERE-SEEN after 1 day) | checks | true at the remembered "
+            "places (places) | covered | true over every instance |",
+            "|---|---|---|---|---|---|",
+        ]
+
+        def f(x):
+            return "-" if x is None else f"{x:.3f}"
+
+        for r in pc["types"]:
+            learned = f"[{r['low']:.3f}, {r['high']:.3f}]" if r.get("checks") else "-"
+            cov = {True: "yes", False: "no"}.get(r.get("covered"), "-")
+            lines.append(
+                f"| {r['type']} | {learned} | {r.get('checks', 0)} | {f(r['true'])} "
+                f"({r['places']}) | {cov} | {f(r['true_all'])} |"
+            )
         lines.append("")
     lines.append(
         "Per query, the policy's simulated seconds to find over the baseline's on the same "
