@@ -337,21 +337,26 @@ def _register_bench_search(bench_sub: argparse._SubParsersAction) -> None:
         "location@low,location@p0,location@high. With --workers N the episodes run in batches "
         "as Ray tasks (same files).",
     )
+    _add_bench_flags(
+        p,
+        "paired episodes (default: 40)",
+        "comma-separated policies (default with --map built: "
+        f"{DEFAULT_POLICIES['built']}; with --map given: {DEFAULT_POLICIES['given']})",
+    )
+    p.set_defaults(func=run_bench)
+
+
+def _add_bench_flags(p: argparse.ArgumentParser, episodes_help: str, policies_help: str) -> None:
+    """The flags ``bench search`` and ``bench home`` share (then ``_add_common``'s and the
+    sweep's)."""
     p.add_argument(
         "--style",
         default=None,
         help="room style (assets/styles/) or house style (assets/houses/): name or TOML path "
         "(default: office)",
     )
-    p.add_argument(
-        "--episodes", type=argtypes.positive_int, default=None, help="paired episodes (default: 40)"
-    )
-    p.add_argument(
-        "--policies",
-        default=None,
-        help="comma-separated policies (default with --map built: "
-        f"{DEFAULT_POLICIES['built']}; with --map given: {DEFAULT_POLICIES['given']})",
-    )
+    p.add_argument("--episodes", type=argtypes.positive_int, default=None, help=episodes_help)
+    p.add_argument("--policies", default=None, help=policies_help)
     p.add_argument("--out", type=argtypes.out_dir, default=None, help="output directory (required)")
     p.add_argument("--seed", type=argtypes.seed, default=None, help="episode seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
@@ -365,7 +370,6 @@ def _register_bench_search(bench_sub: argparse._SubParsersAction) -> None:
     )
     _add_common(p)
     add_sweep_arguments(p)
-    p.set_defaults(func=run_bench)
 
 
 def run_bench(args: argparse.Namespace) -> int:
@@ -414,14 +418,8 @@ def register_home(bench_sub: argparse._SubParsersAction) -> None:
         "p, overall and within the stayed and moved queries. Writes DIR/home.json, DIR/home.md "
         "and each gap's bench search files in DIR/d=GAP/.",
     )
-    p.add_argument(
-        "--style",
-        default=None,
-        help="house style (assets/houses/) or room style (assets/styles/): name or TOML path "
-        "(default: office)",
-    )
-    p.add_argument(
-        "--episodes", type=argtypes.positive_int, default=None, help="queries per gap (default: 40)"
+    _add_bench_flags(
+        p, "queries per gap (default: 40)", f"comma-separated (default: {','.join(HOME_ARMS)})"
     )
     p.add_argument(
         "--days-after",
@@ -431,18 +429,6 @@ def register_home(bench_sub: argparse._SubParsersAction) -> None:
         help="days between the robot's latest map and the queries (default: "
         f"{','.join(map(str, HOME_GAPS))})",
     )
-    p.add_argument(
-        "--policies", default=None, help=f"comma-separated (default: {','.join(HOME_ARMS)})"
-    )
-    p.add_argument("--out", type=argtypes.out_dir, default=None, help="output directory (required)")
-    p.add_argument("--seed", type=argtypes.seed, default=None, help="episode seed (default: 0)")
-    p.add_argument("--quiet", action="store_true", help="no line per episode, no progress bar")
-    p.add_argument(
-        "--draw-cache", type=argtypes.out_dir, default=None, metavar="DIR",
-        help="keep the episode draws in DIR and reuse them (default: not kept)",
-    )  # fmt: skip
-    _add_common(p)
-    add_sweep_arguments(p)
     p.set_defaults(func=run_home)
 
 
