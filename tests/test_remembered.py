@@ -137,7 +137,9 @@ def test_a_search_on_the_remembered_map_finds_on_a_later_day_and_repeats(catalog
     assert one.episode.day == 1 and one.results[0].success
     assert one.results[0].sim_time == two.results[0].sim_time
     assert one.config.map.home is HomeSource.TOUR  # no store: a held-out house toured on day 0
-    assert "/world/search/remembered" in read_rrd(tmp_path / "s.rrd").entities
+    entities = read_rrd(tmp_path / "s.rrd").entities
+    assert "/world/search/remembered" in entities
+    assert "/world/search/last_seen" in entities  # the small objects the tour saw
 
 
 def test_a_tour_is_kept_and_a_damaged_file_is_a_miss(catalog, tmp_path, monkeypatch):
