@@ -23,8 +23,9 @@ checks, else the one-day estimate to the power d (a day-to-day Markov chain: eac
 instance stays or moves independently, as the simulated homes do, envs.rooms), else nothing
 known (the interval [0, 1], its midpoint 1/2).
 
-``TruePersistence`` is the world's own rule (the room style's stay probability, catalog default
-or the style's ``[stay]`` table) to the power d: the bound arm's persistence.
+``TruePersistence`` is a one-day probability per type to the power d: the bound arm's, the true
+share of places where an instance stood that hold one the next day (agent.search.priors
+.true_persistence).
 """
 
 from __future__ import annotations
@@ -129,14 +130,13 @@ class LearnedPersistence:
 
 
 class TruePersistence:
-    """The world's rule (module docstring): ``stay(type)`` (the room style's one-day stay
-    probability of a type) to the power ``age``."""
+    """A known one-day persistence (module docstring): ``stay(type)`` to the power ``age``."""
 
     def __init__(self, stay: Callable[[str], float]):
         self.stay = stay
 
     def p(self, type_name: str, age: int) -> float:
-        """P(still where seen after ``age`` days) by the world's rule."""
+        """P(still where seen after ``age`` days)."""
         return 1.0 if age <= 0 else float(self.stay(type_name)) ** int(age)
 
 

@@ -4,7 +4,7 @@ A robot that lives in a home remembers where it saw small objects (knowledge.hom
 ``small``: each with the day it was last seen). For a search on day t for type T, every
 remembered sighting s of T (seen on day t_s) is a place where an instance may still stand, with
 probability pi_s = P(STILL-WHERE-SEEN(T) after t - t_s days) from the policy's persistence
-(knowledge.persistence: the robot's learned intervals, or the world's rule for the bound).
+(knowledge.persistence: the robot's learned intervals, or the true worlds' for the bound).
 
 The prior the online search ranks by (agent.search.online) is a density of instances of T, and
 memory splits it in two:

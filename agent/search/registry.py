@@ -42,7 +42,7 @@ class PolicyInfo:
     # the scenarios in which its belief takes room context (P(SAME-ROOM-AS-F(T))) when it is on
     room_context: tuple[MapMode, ...] = ()
     # where the persistence of its remembered sightings comes from (agent.search.memory): NONE
-    # (no memory), KB (learned by the robot: the store's maps' checks) or TRUTH (the world's rule)
+    # (no memory), KB (learned by the robot: the store's maps' checks) or TRUTH (the true worlds)
     memory: Needs = Needs.NONE
 
     def role(self, mode: MapMode) -> Role | None:
@@ -76,7 +76,7 @@ REGISTRY: tuple[PolicyInfo, ...] = (
                Needs.TRUTH, summary="location with the true probabilities",
                room_context=(_G, _R)),
     PolicyInfo("oracle-memory", (_R,), ((_R, Role.ASYMPTOTE),), Needs.TRUTH,
-               summary="memory-location with the world's persistence and the true "
+               summary="memory-location with the true persistence and the true "
                        "probabilities", room_context=(_R,), memory=Needs.TRUTH),
     PolicyInfo("oracle-prior-indirect", (_B, _G, _R), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
                summary="indirect with the true probabilities", room_context=(_B, _R)),
