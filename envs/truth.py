@@ -240,6 +240,23 @@ def persistence_counts(
     return out
 
 
+def near_counts(
+    style: Style | HouseStyle, catalog: Catalog, worlds: int, last_day: int = 1
+) -> dict[str, tuple[int, int]]:
+    """Per small type, (n, near) summed over ``worlds`` sample worlds of ``style`` (seeds 0 ..
+    worlds-1) and each day d < ``last_day`` to d + 1 (``persistence_counts``): the instances and
+    those with an instance of their type within the persistence radius the next day."""
+    out: dict[str, list[int]] = {}
+    for seed in range(worlds):
+        days = [generate_layout(style, seed, catalog, day=d) for d in range(max(last_day, 1) + 1)]
+        for before, after in zip(days, days[1:], strict=False):
+            for (_room, t), (n, _y, near) in persistence_counts(before, after, catalog).items():
+                acc = out.setdefault(t, [0, 0])
+                acc[0] += n
+                acc[1] += near
+    return {t: (n, near) for t, (n, near) in out.items()}
+
+
 def persistence(
     style: Style | HouseStyle,
     counts: dict[tuple[str, str], list[int] | tuple[int, int]],

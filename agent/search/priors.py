@@ -15,9 +15,8 @@ from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.config import KnowledgeConfig
 from ctxsearch.agent.search.registry import PolicySpec
 from ctxsearch.agent.search.truth_store import cached_ground_truth, cached_room_truth
-from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
-from ctxsearch.envs.truth import load_truth, persistence_counts
+from ctxsearch.envs.truth import load_truth, near_counts
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -125,18 +124,11 @@ def true_persistence(
     """The true value of what the robot learns, P(STILL-WHERE-SEEN(T) after 1 day): over
     ``worlds`` sample worlds of the style (seeds 0 .. worlds-1), the share of day 0's instances
     of each small type with an instance of it within the persistence radius on day 1
-    (envs.truth.persistence_counts' ``near``; a type no sample holds: its stay probability),
+    (envs.truth.near_counts; a type no sample holds: its stay probability),
     to the power of the days. Not the stay probability itself: a cup that moved is often
     replaced by another where cups go (cups stay with 0.2, and 0.54 of the places where a cup
     stood hold one the next day in apartments)."""
-    counts: dict[str, list[int]] = {}
-    for seed in range(worlds):
-        before = generate_layout(style, seed, catalog)
-        after = generate_layout(style, seed, catalog, day=1)
-        for (_room, t), (n, _y, near) in persistence_counts(before, after, catalog).items():
-            acc = counts.setdefault(t, [0, 0])
-            acc[0] += n
-            acc[1] += near
+    counts = near_counts(style, catalog, worlds)
     rooms = [st for st, _ in style.rooms] if isinstance(style, HouseStyle) else [style]
 
     def stay(type_name: str) -> float:

@@ -36,7 +36,7 @@ from ctxsearch.agent.search.measures import geo_cell
 from ctxsearch.agent.search.registry import default_policies
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
-from ctxsearch.envs.truth import persistence_counts
+from ctxsearch.envs.truth import near_counts
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import MapMode
@@ -131,14 +131,7 @@ def persistence_coverage(res: BenchResult, worlds: int) -> dict:
                 acc = places.setdefault(o.type, [0, 0])
                 acc[0] += 1
                 acc[1] += near_place(o.position, world.objects, o.type)
-    every: dict[str, list[int]] = {}
-    for seed in range(worlds):
-        days = [generate_layout(style, seed, catalog, day=d) for d in range(max(last, 1) + 1)]
-        for before, after in zip(days, days[1:], strict=False):
-            for (_room, t), (n, _y, near) in persistence_counts(before, after, catalog).items():
-                acc = every.setdefault(t, [0, 0])
-                acc[0] += n
-                acc[1] += near
+    every = near_counts(style, catalog, worlds, last)
     rows = []
     for t in sorted(set(every) | set(places)):
         n, near = places.get(t, (0, 0))
