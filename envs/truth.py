@@ -356,6 +356,59 @@ def room_truth(
     )
 
 
+@dataclass(frozen=True)
+class RoomKindTruth:
+    """The true density of each type by room kind over sample houses: ``instances[(K, T)]`` the
+    instances of T in the rooms of kind (room style) K, ``area[K]`` those rooms' floor area
+    (m^2). The density ratio (``ratio``) is what a belief over points needs of a room's kind:
+    how much likelier a point of a room of kind K holds T than a point of the house at large.
+    Instances per area, not the share of rooms holding one: a belief's prior is a density, and
+    a large room of a kind holds more than a small one."""
+
+    instances: dict[tuple[str, str], int]
+    area: dict[str, float]
+    houses: int
+
+    @classmethod
+    def of_layouts(cls, layouts: Iterable[RoomLayout]) -> RoomKindTruth:
+        """Counted over ``layouts``' plans (a single-room world is one room of its style)."""
+        inst: dict[tuple[str, str], int] = {}
+        area: dict[str, float] = {}
+        n = 0
+        for layout in layouts:
+            n += 1
+            if not layout.is_house:
+                area[layout.style] = area.get(layout.style, 0.0) + layout.width * layout.depth
+                kinds = {0: layout.style}
+            else:
+                for r in layout.rooms:
+                    area[r.style] = area.get(r.style, 0.0) + r.area
+                kinds = {r.index: r.style for r in layout.rooms}
+            for o in layout.objects:
+                key = (kinds.get(layout.room_of.get(o.id, 0), layout.style), o.type)
+                inst[key] = inst.get(key, 0) + 1
+        return cls(inst, area, n)
+
+    def ratio(self, kind: str, type_name: str) -> float | None:
+        """The density of ``type_name`` in rooms of ``kind`` over its density in every room
+        (0: never there); None where no sample held the type or no room of the kind."""
+        total = sum(v for (_k, t), v in self.instances.items() if t == type_name)
+        area = sum(self.area.values())
+        if not total or self.area.get(kind, 0.0) <= 0.0 or area <= 0.0:
+            return None
+        here = self.instances.get((kind, type_name), 0) / self.area[kind]
+        return here / (total / area)
+
+
+def room_kind_truth(
+    style: Style | HouseStyle, samples: int, catalog: Catalog, seed: int = 0
+) -> RoomKindTruth:
+    """``RoomKindTruth`` over the worlds of ``style`` of seeds seed .. seed + samples - 1 (the
+    same worlds ``ground_truth`` counts)."""
+    seeds = range(int(seed), int(seed) + int(samples))
+    return RoomKindTruth.of_layouts(generate_layout(style, s, catalog) for s in seeds)
+
+
 def lookup(truth: dict, ref: str, relation: str, type_name: str) -> dict | None:
     """The entry for (ref, relation, type) in a ground-truth result, or None if n was 0."""
     for e in truth["entries"]:

@@ -29,6 +29,7 @@ from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.config import MapConfig, Segments
 from ctxsearch.agent.search.remembered import FurnitureMemory, home_rooms, home_seen, restored_map
+from ctxsearch.agent.search.room_prior import HandedRooms
 from ctxsearch.envs.detector import DetectorModel
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
@@ -92,6 +93,8 @@ class WorldMaps:
     views: dict = field(default_factory=dict, compare=False, repr=False)
     depth_range: float = _DEFAULT_MAP.depth_range_m  # m: how far a built map reads depth
     home: HomeMap | None = None  # the remembered map (``remembered``)
+    # a bound's room knowledge, handed at the start (agent.search.room_prior; None: none)
+    handed: HandedRooms | None = None
 
     def new_built_map(self, start: RobotPose, spec: RobotSpec) -> BuiltMap | None:
         """The robot's own map for one policy's run: empty over the footprint (``built``), the

@@ -118,6 +118,9 @@ class OnlineSearch:
         self.rooms = RoomPrior.for_search(
             probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms
         )
+        # a bound's room knowledge, handed at the start (agent.search.room_prior.HandedRooms)
+        handed = ctx.maps.handed
+        self.handed = handed.factor(ctx.seen.points) if handed is not None else None
         # the remembered map's last sightings of the target (agent.search.memory)
         self.sightings = memory_prior(
             ctx.maps.home, ctx.target, ctx.episode.day, ctx.persistence, ctx.seen
@@ -251,6 +254,8 @@ class OnlineSearch:
         f = self.rooms.factor(self.known_objects(), ctx.built) if self.rooms else None
         if f is not None:  # the rooms of known furniture (agent.search.room_prior)
             prior = prior * f
+        if self.handed is not None:  # a bound's rooms, handed (agent.search.room_prior)
+            prior = prior * self.handed
         if self.sightings:  # the last sightings first (agent.search.memory)
             prior = self.sightings.prior(prior, stand)
             regions += self.sightings.regions(ctx.looked_into | ctx.waiting)

@@ -22,6 +22,11 @@ facts (scenarios, what they need, roles) are ``agent.search.registry``'s; the or
   constraint around what it detected.
 - ``oracle-prior``, ``oracle-prior-indirect``: ``location`` and ``indirect`` with the true
   probabilities (the registry's ``needs``: the runner gives them the truth's table).
+- ``bound-rooms``, ``bound-target-room``, ``bound-plan`` (built map): bounds, each handed one
+  kind of exact knowledge of the house at the start (the registry's ``handed``; the runner
+  gives it): ``frontier`` with the prior weighted by every room's kind (the true density of the
+  target by room kind) or by which rooms hold the target (agent.search.room_prior.HandedRooms),
+  and ``location`` with the true probabilities over the furniture plan.
 - ``memory``, ``memory-location``, ``oracle-memory`` (remembered map): ``uniform``,
   ``location`` and ``oracle-prior`` with the remembered sightings of the target in the belief
   (agent.search.memory), weighted by the learned persistence (the world's for the oracle's).
@@ -275,6 +280,9 @@ _CLASSES: dict[str, type[SearchPolicy] | dict[MapMode, type[SearchPolicy]]] = {
     "oracle-memory": Location,
     "indirect": _INDIRECT,
     "oracle-prior-indirect": _INDIRECT,
+    "bound-rooms": Online,
+    "bound-target-room": Online,
+    "bound-plan": Location,
 }
 
 

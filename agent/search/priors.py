@@ -16,12 +16,12 @@ from ctxsearch.agent.search.config import KnowledgeConfig
 from ctxsearch.agent.search.registry import PolicySpec
 from ctxsearch.agent.search.truth_store import cached_ground_truth, cached_room_truth
 from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
-from ctxsearch.envs.truth import load_truth, near_counts
+from ctxsearch.envs.truth import RoomKindTruth, load_truth, near_counts, room_kind_truth
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, regular_file_exists
-from ctxsearch.knowledge.options import Estimate, IntervalMethod, Needs, Rank
+from ctxsearch.knowledge.options import Estimate, Handed, IntervalMethod, Needs, Rank
 from ctxsearch.knowledge.persistence import (
     LearnedPersistence,
     Persistence,
@@ -154,6 +154,8 @@ class Priors:
     room_context: RoomContext | None = None  # learned room context (knowledge.room_context)
     persistence: Persistence | None = None  # learned (the store's maps' checks), if a policy has it
     true_persistence: Persistence | None = None  # the true worlds', if a policy has it
+    # the true target density by room kind, if a bound is handed the rooms (envs.truth)
+    kinds: RoomKindTruth | None = None
 
     def check(self, specs: tuple[PolicySpec, ...]) -> None:
         """A one-line error if a policy needs a knowledge store and none was given."""
@@ -174,6 +176,10 @@ class Priors:
         if spec.needs is Needs.TRUTH:
             return self.truth
         return None
+
+    def kinds_for(self, spec: PolicySpec) -> RoomKindTruth | None:
+        """The true density by room kind, for a bound handed the rooms (else None)."""
+        return self.kinds if spec.info.handed is Handed.ROOMS else None
 
     def persistence_for(self, spec: PolicySpec) -> Persistence | None:
         """The persistence policy ``spec`` weighs its remembered sightings by (None: no memory)."""
@@ -241,9 +247,12 @@ def make_priors(
                 persistence = store_persistence(store)
     if any(s.memory is Needs.TRUTH for s in specs):
         true = true_persistence(style, catalog)
+    kinds = None
+    if any(s.info.handed is Handed.ROOMS for s in specs) and isinstance(style, HouseStyle):
+        kinds = room_kind_truth(style, knowledge.truth_samples, catalog)
     priors = Priors(
         kb, frozenset(learned), knowledge.rank, truth, pooled, knowledge.min_evidence, rooms,
-        persistence, true,
+        persistence, true, kinds,
     )  # fmt: skip
     priors.check(specs)
     return priors

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import MapMode, Needs, Rank, parse, values
+from ctxsearch.knowledge.options import Handed, MapMode, Needs, Rank, parse, values
 
 
 class Role(StrEnum):
@@ -25,7 +25,9 @@ class Role(StrEnum):
     BASELINE = "baseline"  # no context, the same machinery: the context policy's fair twin
     CONTEXT = "context"  # the learned knowledge
     ASYMPTOTE = "asymptote"  # the context policy with the true probabilities
-    BOUND = "bound"  # the oracle: a lower bound on time to find
+    # a lower bound on time to find: the oracle, and on the built map the ladder of what exact
+    # knowledge of one kind (the rooms, the target's room, the furniture plan) would buy
+    BOUND = "bound"
     REFERENCE = "reference"  # run by default for reference, compared with nothing
 
 
@@ -44,6 +46,8 @@ class PolicyInfo:
     # where the persistence of its remembered sightings comes from (agent.search.memory): NONE
     # (no memory), KB (learned by the robot: the store's maps' checks) or TRUTH (the true worlds)
     memory: Needs = Needs.NONE
+    # what of the true house it is handed at the start (a bound on the built map; NOTHING: none)
+    handed: Handed = Handed.NOTHING
 
     def role(self, mode: MapMode) -> Role | None:
         """Its role in scenario ``mode`` (None: not run there by default)."""
@@ -80,6 +84,17 @@ REGISTRY: tuple[PolicyInfo, ...] = (
                        "probabilities", room_context=(_R,), memory=Needs.TRUTH),
     PolicyInfo("oracle-prior-indirect", (_B, _G, _R), ((_B, Role.ASYMPTOTE),), Needs.TRUTH,
                summary="indirect with the true probabilities", room_context=(_B, _R)),
+    # The ladder of bounds on the built map: what one kind of knowledge of the house, handed
+    # at the start and exact, buys with the frontier's machinery (agent.search.room_prior).
+    PolicyInfo("bound-rooms", (_B,), ((_B, Role.BOUND),), handed=Handed.ROOMS,
+               summary="frontier, handed every room's extent and kind and the true target "
+                       "density by room kind"),
+    PolicyInfo("bound-target-room", (_B,), ((_B, Role.BOUND),), handed=Handed.TARGET_ROOM,
+               summary="frontier, handed which rooms hold the target (not where in them)"),
+    PolicyInfo("bound-plan", (_B,), ((_B, Role.BOUND),), Needs.TRUTH, handed=Handed.PLAN,
+               summary="the location constraint with the true probabilities, handed the "
+                       "furniture plan (the given map's furniture) on the built map",
+               room_context=(_B,)),
     PolicyInfo("oracle", (_B, _G, _R), ((_B, Role.BOUND), (_G, Role.BOUND), (_R, Role.BOUND)),
                reads_truth=True,
                summary="knows the target and the detector's draws: the lower bound"),

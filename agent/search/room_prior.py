@@ -129,3 +129,31 @@ class RoomPrior:
         for r, ratio in ratios.items():
             f[point_rooms == r] = ratio
         return f
+
+
+# A handed bound's factor where its knowledge rules the target out (a room of a kind that never
+# holds it, a room the target is not in, a point in no room): small, not 0, so that no point is
+# ever unsearchable and a search that misses keeps going.
+HANDED_FLOOR = 0.01
+
+
+class HandedRooms:
+    """A bound's room knowledge, handed at the start and fixed (agent.search.registry's
+    ``handed``): each plan room's factor on the prior density (``factors``: plan room index ->
+    factor, at least ``HANDED_FLOOR``; a room not listed and a point in no room get the floor).
+    Made by the episode runner from the true plan: with every room's kind, the true density
+    ratio of the target by kind (envs.truth.RoomKindTruth); with the target's rooms, 1 there.
+    It multiplies the frontier's every-point-alike prior, so the difference to ``frontier`` is
+    the room knowledge alone."""
+
+    def __init__(self, labels: RoomLabels, factors: dict[int, float]):
+        self.labels = labels
+        self.factors = {int(k): max(float(v), HANDED_FLOOR) for k, v in factors.items()}
+
+    def factor(self, points: np.ndarray) -> np.ndarray:
+        """(N,) the factor of every point of ``points`` (N, 3)."""
+        rooms = self.labels.at(np.asarray(points, float))
+        f = np.full(len(rooms), HANDED_FLOOR)
+        for r, v in self.factors.items():
+            f[rooms == r] = v
+        return f

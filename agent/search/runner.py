@@ -25,6 +25,7 @@ from pathlib import Path
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.recording import Recorder, open_stream
+from ctxsearch.agent.room_segmentation import RoomLabels
 from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
@@ -45,6 +46,7 @@ from ctxsearch.agent.search.policies import SearchPolicy, make_policy
 from ctxsearch.agent.search.priors import NO_KNOWLEDGE, KnowledgeSource, Priors, make_priors
 from ctxsearch.agent.search.registry import PolicySpec, default_policies, resolve
 from ctxsearch.agent.search.remembered import log_remembered
+from ctxsearch.agent.search.room_prior import HandedRooms
 from ctxsearch.agent.search.tour import cached_tour, tour
 from ctxsearch.envs.camera import Frame
 from ctxsearch.envs.detector import (
@@ -56,13 +58,14 @@ from ctxsearch.envs.detector import (
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import HouseStyle, WorldStyle, resolve_style
 from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.truth import RoomKindTruth
 from ctxsearch.envs.world import World
 from ctxsearch.knowledge import geometry
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.home_map import HomeMap
-from ctxsearch.knowledge.options import MapMode
+from ctxsearch.knowledge.options import Handed, MapMode
 from ctxsearch.knowledge.persistence import Persistence
 from ctxsearch.knowledge.store import EvidenceStore
 
@@ -123,7 +126,7 @@ class SearchRun:
         recs = list(records) if records is not None else [None] * len(self.specs)
         p = self.priors
         return tuple(
-            PolicyRun(s, p.for_policy(s), r, p.persistence_for(s))
+            PolicyRun(s, p.for_policy(s), r, p.persistence_for(s), p.kinds_for(s))
             for s, r in zip(self.specs, recs, strict=True)
         )
 
@@ -234,6 +237,8 @@ class PolicyRun:
     probs: ss.ProbabilitySource | None = None
     record: Path | None = None
     persistence: Persistence | None = None  # of its remembered sightings (None: no memory)
+    # the true target density by room kind, for a bound handed the rooms (None: not handed them)
+    kinds: RoomKindTruth | None = None
 
 
 @dataclass
@@ -249,11 +254,35 @@ class EpisodeWorld:
     given: WorldMaps | None = None  # the true layout's maps for the oracle (built scenario)
     observer: Callable | None = None  # SearchContext.observer
 
-    def maps_for(self, spec: PolicySpec) -> WorldMaps:
-        """The maps policy ``spec`` searches on (the oracle plans on the true layout's)."""
+    def maps_for(
+        self, spec: PolicySpec, target: str, kinds: RoomKindTruth | None = None
+    ) -> WorldMaps:
+        """The maps policy ``spec`` searches on for ``target``: the oracle plans on the true
+        layout's; a bound on the built map (the registry's ``handed``) gets the scenario's maps
+        with what it is handed of the true house: the furniture plan, or its room knowledge
+        (agent.search.room_prior.HandedRooms: with every room's kind the true density ratio of
+        ``target`` by kind from ``kinds``, with the target's rooms 1 there; in a single room
+        that knowledge is nothing)."""
         if spec.info.reads_truth and self.given is not None:
             return self.given
-        return self.maps
+        handed = spec.info.handed
+        if handed is Handed.NOTHING:
+            return self.maps
+        if handed is not Handed.PLAN and not self.layout.is_house:
+            return self.maps  # one room: knowing it tells nothing
+        if handed is Handed.PLAN:
+            plan = tuple(o for o in self.layout.objects if self.catalog.type(o.type).is_furniture)
+            return replace(self.maps, furniture=plan)
+        if handed is Handed.ROOMS:
+            if kinds is None:
+                raise CtxsearchError(f"policy '{spec.base}' needs the true density by room kind")
+            ratio = {r.index: kinds.ratio(r.style, target) for r in self.layout.rooms}
+            factors = {i: (1.0 if v is None else v) for i, v in ratio.items()}
+        else:
+            factors = {self.layout.room_of[o.id]: 1.0 for o in self.layout.objects
+                       if o.type == target and o.id in self.layout.room_of}  # fmt: skip
+        labels = RoomLabels.of_plan(self.layout)
+        return replace(self.maps, handed=HandedRooms(labels, factors))
 
     def policy(self, spec: PolicySpec, ep: Episode, maps: WorldMaps) -> SearchPolicy:
         """Policy ``spec`` for episode ``ep``; the oracle gets its view of the truth: the world
@@ -274,7 +303,7 @@ class EpisodeWorld:
     ) -> tuple[SearchPolicy, SearchContext]:
         """The policy of ``run`` and its context for episode ``ep`` in this world, sensing
         through the world's simulated detector."""
-        maps = self.maps_for(run.spec)
+        maps = self.maps_for(run.spec, ep.target, run.kinds)
         policy = self.policy(run.spec, ep, maps)
         ctx = SearchContext(
             ep, self.catalog, self.world, self.sensor(maps), maps, probs=run.probs,
