@@ -105,13 +105,14 @@ class Needs(StrEnum):
 class Handed(StrEnum):
     """What of the true house a bound on the built map is handed at the start, the rest being as
     on the built map (agent.search.room_prior.HandedRooms, agent.search.runner): nothing; every
-    room's extent and kind (``rooms``, with the true target density by room kind); which rooms
-    hold the target (``target-room``); the furniture plan, every piece's pose (``plan``)."""
+    room's extent and kind (``room-kinds``, with the true target density by room kind); which
+    rooms hold the target (``target-room``); the furniture plan, every piece's pose
+    (``furniture-plan``)."""
 
     NOTHING = "nothing"
-    ROOMS = "rooms"
+    ROOMS = "room-kinds"
     TARGET_ROOM = "target-room"
-    PLAN = "plan"
+    PLAN = "furniture-plan"
 
 
 E = TypeVar("E", bound=StrEnum)
