@@ -112,6 +112,8 @@ def test_the_plan_bound_is_handed_the_furniture_and_the_others_nothing(house, ca
     maps = world.maps_for(_spec("bound-plan"), "Cup")
     furniture = {o.id for o in house.objects if catalog.type(o.type).is_furniture}
     assert {o.id for o in maps.furniture} == furniture and maps.map is MapMode.BUILT
+    assert maps.seen is world.given.seen  # the plan's lattice: its solid parts and surfaces
+    assert maps.grid is world.maps.grid  # the free space it maps itself
     assert maps.handed is None
     assert world.maps_for(_spec("frontier"), "Cup") is world.maps
     single = generate_layout(resolve_style("office", catalog), 3, catalog)

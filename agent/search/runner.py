@@ -259,10 +259,11 @@ class EpisodeWorld:
     ) -> WorldMaps:
         """The maps policy ``spec`` searches on for ``target``: the oracle plans on the true
         layout's; a bound on the built map (the registry's ``handed``) gets the scenario's maps
-        with what it is handed of the true house: the furniture plan, or its room knowledge
-        (agent.search.room_prior.HandedRooms: with every room's kind the true density ratio of
-        ``target`` by kind from ``kinds``, with the target's rooms 1 there; in a single room
-        that knowledge is nothing)."""
+        with what it is handed of the true house: the furniture plan (the given map's furniture
+        poses and lattice: which points are solid and which surfaces things stand on), or its
+        room knowledge (agent.search.room_prior.HandedRooms: with every room's kind the true
+        density ratio of ``target`` by kind from ``kinds``, with the target's rooms 1 there; in a
+        single room that knowledge is nothing)."""
         if spec.info.reads_truth and self.given is not None:
             return self.given
         handed = spec.info.handed
@@ -271,8 +272,11 @@ class EpisodeWorld:
         if handed is not Handed.PLAN and not self.layout.is_house:
             return self.maps  # one room: knowing it tells nothing
         if handed is Handed.PLAN:
-            plan = tuple(o for o in self.layout.objects if self.catalog.type(o.type).is_furniture)
-            return replace(self.maps, furniture=plan)
+            if self.given is None:
+                raise CtxsearchError(f"policy '{spec.base}' runs on the built map only")
+            # the given map's furniture and its lattice (no point inside furniture, where
+            # things can stand from the plan's surfaces); the robot maps the free space itself
+            return replace(self.maps, furniture=self.given.furniture, seen=self.given.seen)
         if handed is Handed.ROOMS:
             if kinds is None:
                 raise CtxsearchError(f"policy '{spec.base}' needs the true density by room kind")
