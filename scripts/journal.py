@@ -115,12 +115,14 @@ class Journal:
         except (OverflowError, RecursionError, UnicodeError):
             return False, None
 
-    def save(self, unit: object, result: object) -> None:
-        """Keep ``unit``'s ``result`` (atomically; a warning if the directory cannot keep it)."""
+    def save(self, unit: object, result: object, cpu_s: float | None = None) -> None:
+        """Keep ``unit``'s ``result`` (atomically; a warning if the directory cannot keep it);
+        ``cpu_s``: the CPU seconds the unit took, if known (kept beside it for cost estimates,
+        never read back into a result)."""
         key = self.key(unit)
         payload = self.encode(result)
         doc = {"format": FORMAT, "key": key, "sha256": _payload_digest(payload),
-               "result": payload}  # fmt: skip
+               "cpu_s": None if cpu_s is None else round(cpu_s, 3), "result": payload}  # fmt: skip
         write_bytes(Path(self.directory), f"{key}.json", json.dumps(doc).encode(), "sweep journal")
 
 

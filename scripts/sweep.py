@@ -146,9 +146,10 @@ def run_units(
         freeze_long_lived()
         with _progress(len(units), desc, progress, len(units) - len(todo)) as bar:
             for i in todo:
+                t = time.process_time()
                 out[i] = fn(units[i])
                 if kept is not None:
-                    kept(units[i], out[i])
+                    kept(units[i], out[i], time.process_time() - t)
                 bar.update(1)
         return out
     _run_on_ray(fn, units, todo, out, (workers, ray_address, desc, progress, kept))

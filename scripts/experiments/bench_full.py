@@ -1,0 +1,259 @@
+"""``make bench-full``: the benchmark at the counts that give its comparisons their power, in
+steps that resume.
+
+The steps (``plan``), each one ``ctxsearch`` command run as a child process:
+
+- the learning curve in apartments (``bench curve``, k = 0, 1, 3, 10, 30, ``CURVE_EPISODES`` paired
+  episodes per k and map scenario); its store after 30 apartments is the apartments' knowledge;
+- a family-house store (``learn``, ``FAMILY_HOUSES`` houses, realistic detector);
+- per house style (apartment: ``APARTMENT_EPISODES`` paired episodes, family_house:
+  ``FAMILY_EPISODES``), per target kind (``instance``, "find my phone", the headline; ``type``
+  beside it) and per map scenario (``built``, ``given``, ``remembered``), ``bench search`` with
+  room context for the context policies; and, on the instance targets, the context policies
+  without room context on the same episodes (the draw is kept in ``BUILD/draws``);
+- the transfer table (``bench transfer``, ``TRANSFER_EPISODES`` paired episodes per cell);
+- ``summary.md`` / ``summary.json``: per style, target kind and scenario, each policy against the
+  scenario's no-context baseline, and the context policy with room context against itself
+  without (paired on the same episodes).
+
+Every command gets ``--journal BUILD/journal`` (scripts.journal), so a step stopped at any moment
+(a kill, even SIGKILL, a crash, a reboot) goes on where it stopped when ``make bench-full`` is run
+again: its finished units are read back, never run again, and the files are the same as an
+uninterrupted run's. A step that finished is skipped (its stamp ``BUILD/steps/NAME.json`` holds
+its command line; another command line runs it again). The learning steps resume as
+``ctxsearch learn`` does (agent.resume), the curve's as ``bench curve --journal`` does.
+
+Progress: a line per step with the time spent and an estimate of the time left (the steps'
+estimates from the measured costs, ``ESTIMATE_S``, scaled by how the steps run so far compared
+with theirs), and each command's own progress bars (their time left per step). Runs unchanged on
+a Ray cluster: ``--ray-address ADDR`` goes to every sweep.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+CURVE_ROOMS = "0,1,3,10,30"
+CURVE_EPISODES = 100
+APARTMENT_EPISODES = 400
+FAMILY_EPISODES = 200
+FAMILY_HOUSES = 10
+TRANSFER_EPISODES = 100
+TARGETS = ("instance", "type")
+MAPS = ("built", "given", "remembered")
+# The remembered map's policies ("find my phone": make bench's), and each scenario's baseline and
+# context policy (the one run again without room context).
+REMEMBERED_POLICIES = "uniform,location,oracle-prior,oracle"
+BASELINE = {"built": "frontier", "given": "uniform", "remembered": "uniform"}
+CONTEXT = {"built": "indirect", "given": "location", "remembered": "location"}
+
+# Estimated wall seconds per paired episode (every policy of the scenario) on 2 cores, and per
+# step of its own; measured with --workers 1 (CPU seconds per unit from the journal, halved for
+# two cores): docs/usage.md, "make bench-full".
+PER_EPISODE_S = {
+    ("apartment", "built"): 9.0,
+    ("apartment", "given"): 3.0,
+    ("apartment", "remembered"): 5.0,
+    ("family_house", "built"): 18.0,
+    ("family_house", "given"): 6.0,
+    ("family_house", "remembered"): 10.0,
+}
+CONTEXT_SHARE = 0.3  # the context policy alone: about this share of its scenario's episode
+DRAW_S = {"apartment": 1.5, "family_house": 3.0}  # per episode drawn (2 cores)
+ESTIMATE_S = {"curve": 1500.0, "learn-family": 600.0, "transfer": 900.0, "summary": 5.0}
+STEP_FIXED_S = 60.0  # each command's start: imports, ground truth for the oracle priors
+
+
+@dataclass(frozen=True)
+class Step:
+    """One command of the plan: its name, ``ctxsearch``'s arguments (the sweep's added by
+    ``main``, None for the summary, done here), and its estimated wall seconds on 2 cores."""
+
+    name: str
+    argv: tuple[str, ...] | None
+    estimate_s: float
+    sweep: bool = True  # takes --workers, --ray-address and --journal
+
+
+def search_steps(out: Path, build: Path, style: str, kb: Path, episodes: int) -> list[Step]:
+    """``bench search`` of ``style`` in every target kind and map scenario (room context on), and
+    on the instance targets the context policies without room context."""
+    steps = []
+    for targets in TARGETS:
+        for m in MAPS:
+            where = out / style / targets
+            base = ("bench", "search", "--kb", str(kb), "--style", style, "--map", m,
+                    "--targets", targets, "--episodes", str(episodes), "--quiet",
+                    "--draw-cache", str(build / "draws"))  # fmt: skip
+            pols = ("--policies", REMEMBERED_POLICIES) if m == "remembered" else ()
+            cost = PER_EPISODE_S[(style, m)] + DRAW_S[style] * (m != "given")
+            steps.append(Step(f"{style}-{targets}-{m}",
+                              (*base, *pols, "--room-context", "--out", str(where / m)),
+                              STEP_FIXED_S + episodes * cost))  # fmt: skip
+            if targets == "instance":
+                steps.append(Step(f"{style}-{targets}-{m}-no-room-context",
+                                  (*base, "--policies", CONTEXT[m], "--out",
+                                   str(where / f"{m}-no-room-context")),
+                                  STEP_FIXED_S + episodes * CONTEXT_SHARE
+                                  * PER_EPISODE_S[(style, m)]))  # fmt: skip
+    return steps
+
+
+def plan(out: Path, build: Path) -> list[Step]:
+    """Every step of ``make bench-full``, in order (the headline first)."""
+    apt_kb = out / "curve" / "stores" / "k=0030.sqlite"
+    fam_kb = build / "kb_family_house.sqlite"
+    steps = [
+        Step("curve", ("bench", "curve", "--style", "apartment", "--rooms", CURVE_ROOMS,
+                       "--seed", "0", "--episodes", str(CURVE_EPISODES), "--quiet",
+                       "--out", str(out / "curve")), ESTIMATE_S["curve"]),
+        *search_steps(out, build, "apartment", apt_kb, APARTMENT_EPISODES),
+        Step("learn-family", ("learn", "--style", "family_house", "--rooms", str(FAMILY_HOUSES),
+                              "--detector", "realistic", "--seed", "0", "--kb", str(fam_kb),
+                              "--no-progress"), ESTIMATE_S["learn-family"], sweep=False),
+        *search_steps(out, build, "family_house", fam_kb, FAMILY_EPISODES),
+        Step("transfer", ("bench", "transfer", "--styles", "office,biology_lab", "--rooms", "10",
+                          "--episodes", str(TRANSFER_EPISODES), "--quiet",
+                          "--out", str(out / "transfer")), ESTIMATE_S["transfer"]),
+        Step("summary", None, ESTIMATE_S["summary"], sweep=False),
+    ]  # fmt: skip
+    return steps
+
+
+def _hms(s: float) -> str:
+    s = max(0, int(round(s)))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def _say(line: str) -> None:
+    print(f"[bench-full] {line}", flush=True)
+
+
+def _stamp(build: Path, step: Step) -> Path:
+    return build / "steps" / f"{step.name}.json"
+
+
+def _finished(build: Path, step: Step, argv: list[str]) -> bool:
+    try:
+        return json.loads(_stamp(build, step).read_text()) == argv
+    except (OSError, ValueError, UnicodeError):
+        return False
+
+
+def _write_stamp(build: Path, step: Step, argv: list[str]) -> None:
+    path = _stamp(build, step)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(argv) + "\n")
+    os.replace(tmp, path)
+
+
+def _die_with_parent() -> None:
+    """In the child: a SIGTERM when the parent (this script) ends, however it ends (Linux's
+    PR_SET_PDEATHSIG; elsewhere nothing)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))
+    except (OSError, AttributeError):
+        pass
+
+
+def run_command(argv: list[str]) -> int:
+    """``ctxsearch argv`` as a child process; its stdout passed on without the per-episode lines
+    (its progress bars, on stderr, as they are); its exit status."""
+    cmd = [sys.executable, "-m", "ctxsearch.scripts.cli", *argv]
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True,
+                          preexec_fn=_die_with_parent) as p:  # fmt: skip
+        assert p.stdout is not None
+        for line in p.stdout:
+            if not line.startswith("episode "):
+                sys.stdout.write(line)
+                sys.stdout.flush()
+        return p.wait()
+
+
+def command(step: Step, build: Path, sweep: list[str]) -> list[str]:
+    """The step's full ``ctxsearch`` arguments (the sweep's and the journal's added)."""
+    assert step.argv is not None
+    if not step.sweep:
+        return list(step.argv)
+    return [*step.argv, *sweep, "--journal", str(build / "journal")]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run (or, with ``--list``, list) the steps not finished yet; the exit status of the first
+    that fails, else 0."""
+    a = _parser().parse_args(argv)
+    sweep = ["--workers", str(a.workers)] + (["--ray-address", a.ray_address]
+                                             if a.ray_address else [])  # fmt: skip
+    steps = plan(a.out, a.build)
+    todo = []
+    for s in steps:
+        full = command(s, a.build, sweep) if s.argv is not None else []
+        done = _finished(a.build, s, full)
+        todo.append((s, full, done))
+    left = sum(s.estimate_s for s, _f, done in todo if not done)
+    _say(f"{len(steps)} steps, {sum(not d for *_, d in todo)} to run; estimated "
+         f"{_hms(left)} on 2 cores (the whole: {_hms(sum(s.estimate_s for s in steps))})")  # fmt: skip
+    if a.list:
+        for i, (s, full, done) in enumerate(todo, 1):
+            what = "done" if done else f"~{_hms(s.estimate_s)}"
+            _say(f"{i:2d} {s.name} ({what}): ctxsearch {' '.join(full) or '(summary)'}")
+        return 0
+    t0 = time.monotonic()
+    spent = estimated = 0.0
+    for i, (s, full, done) in enumerate(todo, 1):
+        if done:
+            _say(f"step {i}/{len(steps)} {s.name}: finished before, skipped")
+            continue
+        scale = spent / estimated if estimated > 0 else 1.0
+        _say(f"step {i}/{len(steps)} {s.name}: starting; {_hms(time.monotonic() - t0)} spent, "
+             f"about {_hms(left * scale)} left")  # fmt: skip
+        t = time.monotonic()
+        if s.argv is None:
+            from ctxsearch.scripts.experiments.full_summary import write_summary
+
+            write_summary(a.out)
+            code = 0
+        else:
+            code = run_command(full)
+        took = time.monotonic() - t
+        if code != 0:
+            _say(f"step {s.name} failed (exit {code}) after {_hms(took)}; run again to resume")
+            return code
+        _write_stamp(a.build, s, full)
+        spent, estimated, left = spent + took, estimated + s.estimate_s, left - s.estimate_s
+        _say(f"step {i}/{len(steps)} {s.name}: done in {_hms(took)} (estimated "
+             f"{_hms(s.estimate_s)})")  # fmt: skip
+    _say(f"all steps done ({_hms(time.monotonic() - t0)} in this run)")
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bench_full", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=Path("results/full"), help="results (default: "
+                   "results/full)")  # fmt: skip
+    p.add_argument("--build", type=Path, default=Path("build/full"),
+                   help="the journal, the step stamps, the draws and the family-house store "
+                   "(default: build/full)")  # fmt: skip
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="local CPUs")
+    p.add_argument("--ray-address", default=None, help="an existing Ray cluster instead")
+    p.add_argument("--list", action="store_true", help="list the steps and estimates, run none")
+    return p
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        _say("interrupted; run again to resume")
+        sys.exit(130)
