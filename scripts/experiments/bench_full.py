@@ -42,34 +42,67 @@ from dataclasses import dataclass
 from pathlib import Path
 
 CURVE_ROOMS = "0,1,3,10,30"
-CURVE_EPISODES = 100
-APARTMENT_EPISODES = 400
-FAMILY_EPISODES = 200
 FAMILY_HOUSES = 10
-TRANSFER_EPISODES = 100
 TARGETS = ("instance", "type")
 MAPS = ("built", "given", "remembered")
-# The remembered map's policies ("find my phone": make bench's), and each scenario's baseline and
-# context policy (the one run again without room context).
-REMEMBERED_POLICIES = "uniform,location,oracle-prior,oracle"
+# The policies of each map scenario (the remembered map's: make bench's "find my phone"; the built
+# map's: without make bench's three bounds, which cost more than the other four together), and
+# each scenario's baseline and context policy (the one run again without room context).
+POLICIES = {
+    "built": "frontier,indirect,oracle-prior-indirect,oracle",
+    "given": "map-only,location,oracle-prior,oracle,exhaustive",
+    "remembered": "uniform,location,oracle-prior,oracle",
+}
 BASELINE = {"built": "frontier", "given": "uniform", "remembered": "uniform"}
 CONTEXT = {"built": "indirect", "given": "location", "remembered": "location"}
 
-# Estimated wall seconds per paired episode (every policy of the scenario) on 2 cores, and per
-# step of its own; measured with --workers 1 (CPU seconds per unit from the journal, halved for
-# two cores): docs/usage.md, "make bench-full".
-PER_EPISODE_S = {
-    ("apartment", "built"): 9.0,
-    ("apartment", "given"): 3.0,
-    ("apartment", "remembered"): 5.0,
-    ("family_house", "built"): 18.0,
-    ("family_house", "given"): 6.0,
-    ("family_house", "remembered"): 10.0,
+
+@dataclass(frozen=True)
+class Counts:
+    """Paired episodes per step: per house style and target kind (per map scenario each), the
+    curve's per k and scenario, the transfer's per cell."""
+
+    apartment: int = 400
+    apartment_type: int = 200
+    family: int = 200
+    family_type: int = 100
+    curve: int = 100
+    transfer: int = 100
+
+
+# CPU seconds per paired episode (every policy of POLICIES, the draw's worlds and the remembered
+# map's tour of the house included), measured with --workers 1 on 4 episodes each (the journal's
+# cpu_s per unit; docs/usage.md, "make bench-full"), per (style, target kind, map); and of the
+# context policy alone without room context (instance targets).
+CPU_S = {
+    ("apartment", "instance", "built"): 8.6,
+    ("apartment", "instance", "given"): 3.9,
+    ("apartment", "instance", "remembered"): 12.0,
+    ("apartment", "type", "built"): 3.1,
+    ("apartment", "type", "given"): 2.3,
+    ("apartment", "type", "remembered"): 8.0,
+    ("family_house", "instance", "built"): 10.6,
+    ("family_house", "instance", "given"): 9.0,
+    ("family_house", "instance", "remembered"): 15.0,
+    ("family_house", "type", "built"): 4.5,
+    ("family_house", "type", "given"): 4.0,
+    ("family_house", "type", "remembered"): 10.0,
 }
-CONTEXT_SHARE = 0.3  # the context policy alone: about this share of its scenario's episode
-DRAW_S = {"apartment": 1.5, "family_house": 3.0}  # per episode drawn (2 cores)
-ESTIMATE_S = {"curve": 1500.0, "learn-family": 600.0, "transfer": 900.0, "summary": 5.0}
-STEP_FIXED_S = 60.0  # each command's start: imports, ground truth for the oracle priors
+NO_ROOM_CONTEXT_CPU_S = {
+    ("apartment", "built"): 2.5,
+    ("apartment", "given"): 0.8,
+    ("apartment", "remembered"): 0.6,
+    ("family_house", "built"): 3.5,
+    ("family_house", "given"): 1.8,
+    ("family_house", "remembered"): 1.0,
+}
+CORES = 2  # the sweeps' units on two workers: wall = CPU / 2
+STEP_FIXED_S = 30.0  # each command's start: imports, the ground truth of the oracle priors
+# Wall seconds on 2 cores of the other steps (the curve's learning of 30 apartments and the
+# family-house learning are one core's): curve per episode and fixed, transfer likewise.
+CURVE_S = (4.0, 400.0)
+TRANSFER_S = (5.0, 150.0)
+LEARN_FAMILY_S = 300.0
 
 
 @dataclass(frozen=True)
@@ -83,47 +116,55 @@ class Step:
     sweep: bool = True  # takes --workers, --ray-address and --journal
 
 
-def search_steps(out: Path, build: Path, style: str, kb: Path, episodes: int) -> list[Step]:
-    """``bench search`` of ``style`` in every target kind and map scenario (room context on), and
-    on the instance targets the context policies without room context."""
+def search_steps(
+    out: Path, build: Path, style: str, kb: Path, counts: dict[str, int]
+) -> list[Step]:
+    """``bench search`` of ``style`` in every target kind (``counts``: its episodes) and map
+    scenario, room context on; on the instance targets also the context policies without it."""
     steps = []
     for targets in TARGETS:
+        n = counts[targets]
         for m in MAPS:
             where = out / style / targets
             base = ("bench", "search", "--kb", str(kb), "--style", style, "--map", m,
-                    "--targets", targets, "--episodes", str(episodes), "--quiet",
+                    "--targets", targets, "--episodes", str(n), "--quiet",
                     "--draw-cache", str(build / "draws"))  # fmt: skip
-            pols = ("--policies", REMEMBERED_POLICIES) if m == "remembered" else ()
-            cost = PER_EPISODE_S[(style, m)] + DRAW_S[style] * (m != "given")
+            if m == "remembered":  # held-out houses toured the day before (make bench's)
+                base = (*base, "--set", "map.home=tour")
+            cpu = CPU_S[(style, targets, m)]
             steps.append(Step(f"{style}-{targets}-{m}",
-                              (*base, *pols, "--room-context", "--out", str(where / m)),
-                              STEP_FIXED_S + episodes * cost))  # fmt: skip
+                              (*base, "--policies", POLICIES[m], "--room-context", "--out",
+                               str(where / m)), STEP_FIXED_S + n * cpu / CORES))  # fmt: skip
             if targets == "instance":
+                cpu = NO_ROOM_CONTEXT_CPU_S[(style, m)]
                 steps.append(Step(f"{style}-{targets}-{m}-no-room-context",
                                   (*base, "--policies", CONTEXT[m], "--out",
                                    str(where / f"{m}-no-room-context")),
-                                  STEP_FIXED_S + episodes * CONTEXT_SHARE
-                                  * PER_EPISODE_S[(style, m)]))  # fmt: skip
+                                  STEP_FIXED_S + n * cpu / CORES))  # fmt: skip
     return steps
 
 
-def plan(out: Path, build: Path) -> list[Step]:
+def plan(out: Path, build: Path, counts: Counts = Counts()) -> list[Step]:
     """Every step of ``make bench-full``, in order (the headline first)."""
+    c = counts
     apt_kb = out / "curve" / "stores" / "k=0030.sqlite"
     fam_kb = build / "kb_family_house.sqlite"
+    apt = {"instance": c.apartment, "type": c.apartment_type}
+    fam = {"instance": c.family, "type": c.family_type}
     steps = [
         Step("curve", ("bench", "curve", "--style", "apartment", "--rooms", CURVE_ROOMS,
-                       "--seed", "0", "--episodes", str(CURVE_EPISODES), "--quiet",
-                       "--out", str(out / "curve")), ESTIMATE_S["curve"]),
-        *search_steps(out, build, "apartment", apt_kb, APARTMENT_EPISODES),
+                       "--seed", "0", "--episodes", str(c.curve), "--quiet",
+                       "--out", str(out / "curve")), CURVE_S[1] + c.curve * CURVE_S[0]),
+        *search_steps(out, build, "apartment", apt_kb, apt),
         Step("learn-family", ("learn", "--style", "family_house", "--rooms", str(FAMILY_HOUSES),
                               "--detector", "realistic", "--seed", "0", "--kb", str(fam_kb),
-                              "--no-progress"), ESTIMATE_S["learn-family"], sweep=False),
-        *search_steps(out, build, "family_house", fam_kb, FAMILY_EPISODES),
+                              "--no-progress"), LEARN_FAMILY_S, sweep=False),
+        *search_steps(out, build, "family_house", fam_kb, fam),
         Step("transfer", ("bench", "transfer", "--styles", "office,biology_lab", "--rooms", "10",
-                          "--episodes", str(TRANSFER_EPISODES), "--quiet",
-                          "--out", str(out / "transfer")), ESTIMATE_S["transfer"]),
-        Step("summary", None, ESTIMATE_S["summary"], sweep=False),
+                          "--episodes", str(c.transfer), "--quiet",
+                          "--out", str(out / "transfer")), TRANSFER_S[1] + c.transfer
+                                                           * TRANSFER_S[0]),
+        Step("summary", None, 5.0, sweep=False),
     ]  # fmt: skip
     return steps
 
@@ -195,7 +236,9 @@ def main(argv: list[str] | None = None) -> int:
     a = _parser().parse_args(argv)
     sweep = ["--workers", str(a.workers)] + (["--ray-address", a.ray_address]
                                              if a.ray_address else [])  # fmt: skip
-    steps = plan(a.out, a.build)
+    counts = Counts(a.apartment_episodes, a.apartment_type_episodes, a.family_episodes,
+                    a.family_type_episodes, a.curve_episodes, a.transfer_episodes)  # fmt: skip
+    steps = plan(a.out, a.build, counts)
     todo = []
     for s in steps:
         full = command(s, a.build, sweep) if s.argv is not None else []
@@ -248,6 +291,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="local CPUs")
     p.add_argument("--ray-address", default=None, help="an existing Ray cluster instead")
     p.add_argument("--list", action="store_true", help="list the steps and estimates, run none")
+    d = Counts()
+    for name, default in (("apartment", d.apartment), ("apartment-type", d.apartment_type),
+                          ("family", d.family), ("family-type", d.family_type),
+                          ("curve", d.curve), ("transfer", d.transfer)):  # fmt: skip
+        p.add_argument(f"--{name}-episodes", type=int, default=default, metavar="N",
+                       help=f"paired episodes (default: {default})")  # fmt: skip
     return p
 
 
