@@ -62,3 +62,20 @@ def test_the_summary_pairs_room_context_with_and_without(tmp_path):
     assert s["vs_baseline"]["location (no room context)"]["geo_mean"] == 1.0
     assert s["room_context"]["with_vs_without"]["geo_mean"] == 0.5
     assert "with room context against without" in (tmp_path / "summary.md").read_text()
+
+
+def test_every_step_parses_and_its_policies_resolve(tmp_path):
+    """Each step's command line is one the CLI takes, and its policies run in its map scenario
+    with (or without) room context."""
+    from ctxsearch.agent.search.registry import resolve
+    from ctxsearch.scripts.cli import build_parser
+    from ctxsearch.scripts.cmd_search import config_from_args
+
+    parser = build_parser()
+    for step in bf.plan(tmp_path / "out", tmp_path / "build"):
+        if step.argv is None:
+            continue
+        args = parser.parse_args(bf.command(step, tmp_path / "build", ["--workers", "2"]))
+        if step.argv[:2] == ("bench", "search"):
+            c = config_from_args(args)
+            assert resolve(c.policies, c.map.scenario, c.knowledge.room_context)

@@ -127,7 +127,7 @@ def search_steps(
         for m in MAPS:
             where = out / style / targets
             base = ("bench", "search", "--kb", str(kb), "--style", style, "--map", m,
-                    "--targets", targets, "--episodes", str(n), "--quiet",
+                    "--targets", targets, "--episodes", str(n),
                     "--draw-cache", str(build / "draws"))  # fmt: skip
             if m == "remembered":  # held-out houses toured the day before (make bench's)
                 base = (*base, "--set", "map.home=tour")
@@ -153,15 +153,15 @@ def plan(out: Path, build: Path, counts: Counts = Counts()) -> list[Step]:
     fam = {"instance": c.family, "type": c.family_type}
     steps = [
         Step("curve", ("bench", "curve", "--style", "apartment", "--rooms", CURVE_ROOMS,
-                       "--seed", "0", "--episodes", str(c.curve), "--quiet",
+                       "--seed", "0", "--episodes", str(c.curve),
                        "--out", str(out / "curve")), CURVE_S[1] + c.curve * CURVE_S[0]),
         *search_steps(out, build, "apartment", apt_kb, apt),
         Step("learn-family", ("learn", "--style", "family_house", "--rooms", str(FAMILY_HOUSES),
-                              "--detector", "realistic", "--seed", "0", "--kb", str(fam_kb),
-                              "--no-progress"), LEARN_FAMILY_S, sweep=False),
+                              "--detector", "realistic", "--seed", "0", "--kb", str(fam_kb)),
+             LEARN_FAMILY_S, sweep=False),
         *search_steps(out, build, "family_house", fam_kb, fam),
         Step("transfer", ("bench", "transfer", "--styles", "office,biology_lab", "--rooms", "10",
-                          "--episodes", str(c.transfer), "--quiet",
+                          "--episodes", str(c.transfer),
                           "--out", str(out / "transfer")), TRANSFER_S[1] + c.transfer
                                                            * TRANSFER_S[0]),
         Step("summary", None, 5.0, sweep=False),
