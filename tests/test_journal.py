@@ -132,3 +132,12 @@ def test_a_bench_search_killed_part_way_resumes_with_the_same_files(tmp_path, de
     assert again.returncode == 0, again.stderr
     assert len(list(journal.glob("*.json"))) == 2
     assert _tree(out) == _tree(tmp_path / "a")
+
+
+def test_on_ray_only_the_missing_units_run_and_the_driver_keeps_them(tmp_path):
+    j = _journal(tmp_path / "j")
+    j.save(1, [9.0, 9.0, 9.0])  # a unit already kept: read back, not run
+    out = run_units(_third, [1, 2, 3], workers=2, progress=False, journal=j)
+    assert out == [[9.0, 9.0, 9.0], _third(2), _third(3)]
+    assert len(list((tmp_path / "j").glob("*.json"))) == 3  # each result kept as it arrived
+    assert run_units(_third, [1, 2, 3], progress=False, journal=j) == out
