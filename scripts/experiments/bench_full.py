@@ -68,6 +68,11 @@ class Counts:
     family_type: int = 100
     curve: int = 100
     transfer: int = 100
+    # the worlds learned: the curve's marks (its last is the apartments' store), the family
+    # houses, each transfer style's rooms (smaller for a quick run of the whole, not the benchmark)
+    curve_rooms: str = CURVE_ROOMS
+    family_houses: int = FAMILY_HOUSES
+    transfer_rooms: int = 10
 
 
 # CPU seconds per paired episode (every policy of POLICIES, the draw's worlds and the remembered
@@ -147,20 +152,21 @@ def search_steps(
 def plan(out: Path, build: Path, counts: Counts = Counts()) -> list[Step]:
     """Every step of ``make bench-full``, in order (the headline first)."""
     c = counts
-    apt_kb = out / "curve" / "stores" / "k=0030.sqlite"
+    last = int(c.curve_rooms.split(",")[-1])
+    apt_kb = out / "curve" / "stores" / f"k={last:04d}.sqlite"
     fam_kb = build / "kb_family_house.sqlite"
     apt = {"instance": c.apartment, "type": c.apartment_type}
     fam = {"instance": c.family, "type": c.family_type}
     steps = [
-        Step("curve", ("bench", "curve", "--style", "apartment", "--rooms", CURVE_ROOMS,
+        Step("curve", ("bench", "curve", "--style", "apartment", "--rooms", c.curve_rooms,
                        "--seed", "0", "--episodes", str(c.curve),
                        "--out", str(out / "curve")), CURVE_S[1] + c.curve * CURVE_S[0]),
         *search_steps(out, build, "apartment", apt_kb, apt),
-        Step("learn-family", ("learn", "--style", "family_house", "--rooms", str(FAMILY_HOUSES),
+        Step("learn-family", ("learn", "--style", "family_house", "--rooms", str(c.family_houses),
                               "--detector", "realistic", "--seed", "0", "--kb", str(fam_kb)),
              LEARN_FAMILY_S, sweep=False),
         *search_steps(out, build, "family_house", fam_kb, fam),
-        Step("transfer", ("bench", "transfer", "--styles", "office,biology_lab", "--rooms", "10",
+        Step("transfer", ("bench", "transfer", "--styles", "office,biology_lab", "--rooms", str(c.transfer_rooms),
                           "--episodes", str(c.transfer),
                           "--out", str(out / "transfer")), TRANSFER_S[1] + c.transfer
                                                            * TRANSFER_S[0]),
@@ -237,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
     sweep = ["--workers", str(a.workers)] + (["--ray-address", a.ray_address]
                                              if a.ray_address else [])  # fmt: skip
     counts = Counts(a.apartment_episodes, a.apartment_type_episodes, a.family_episodes,
-                    a.family_type_episodes, a.curve_episodes, a.transfer_episodes)  # fmt: skip
+                    a.family_type_episodes, a.curve_episodes, a.transfer_episodes,
+                    a.curve_rooms, a.family_houses, a.transfer_rooms)  # fmt: skip
     steps = plan(a.out, a.build, counts)
     todo = []
     for s in steps:
@@ -297,6 +304,26 @@ def _parser() -> argparse.ArgumentParser:
                           ("curve", d.curve), ("transfer", d.transfer)):  # fmt: skip
         p.add_argument(f"--{name}-episodes", type=int, default=default, metavar="N",
                        help=f"paired episodes (default: {default})")  # fmt: skip
+    p.add_argument(
+        "--curve-rooms",
+        default=d.curve_rooms,
+        help="the curve's k (default: "
+        f"{d.curve_rooms}; the last one's store is the apartments' knowledge)",
+    )
+    p.add_argument(
+        "--family-houses",
+        type=int,
+        default=d.family_houses,
+        metavar="N",
+        help=f"family houses learned (default: {d.family_houses})",
+    )
+    p.add_argument(
+        "--transfer-rooms",
+        type=int,
+        default=d.transfer_rooms,
+        metavar="N",
+        help=f"rooms learned per transfer style (default: {d.transfer_rooms})",
+    )
     return p
 
 
