@@ -63,9 +63,9 @@ class Counts:
     curve's per k and scenario, the transfer's per cell."""
 
     apartment: int = 400
-    apartment_type: int = 200
-    family: int = 200
-    family_type: int = 100
+    apartment_type: int = 150
+    family: int = 150
+    family_type: int = 75
     curve: int = 100
     transfer: int = 100
     # the worlds learned: the curve's marks (its last is the apartments' store), the family
@@ -80,33 +80,33 @@ class Counts:
 # cpu_s per unit; docs/usage.md, "make bench-full"), per (style, target kind, map); and of the
 # context policy alone without room context (instance targets).
 CPU_S = {
-    ("apartment", "instance", "built"): 8.6,
+    ("apartment", "instance", "built"): 9.0,
     ("apartment", "instance", "given"): 3.9,
-    ("apartment", "instance", "remembered"): 12.0,
-    ("apartment", "type", "built"): 3.1,
+    ("apartment", "instance", "remembered"): 13.7,
+    ("apartment", "type", "built"): 3.2,
     ("apartment", "type", "given"): 2.3,
-    ("apartment", "type", "remembered"): 8.0,
-    ("family_house", "instance", "built"): 10.6,
-    ("family_house", "instance", "given"): 9.0,
-    ("family_house", "instance", "remembered"): 15.0,
-    ("family_house", "type", "built"): 4.5,
+    ("apartment", "type", "remembered"): 5.0,
+    ("family_house", "instance", "built"): 11.2,
+    ("family_house", "instance", "given"): 8.1,
+    ("family_house", "instance", "remembered"): 22.0,
+    ("family_house", "type", "built"): 4.8,
     ("family_house", "type", "given"): 4.0,
-    ("family_house", "type", "remembered"): 10.0,
+    ("family_house", "type", "remembered"): 8.0,
 }
 NO_ROOM_CONTEXT_CPU_S = {
-    ("apartment", "built"): 2.5,
-    ("apartment", "given"): 0.8,
-    ("apartment", "remembered"): 0.6,
-    ("family_house", "built"): 3.5,
-    ("family_house", "given"): 1.8,
-    ("family_house", "remembered"): 1.0,
+    ("apartment", "built"): 2.4,
+    ("apartment", "given"): 1.1,
+    ("apartment", "remembered"): 1.2,
+    ("family_house", "built"): 4.0,
+    ("family_house", "given"): 2.3,
+    ("family_house", "remembered"): 2.4,
 }
 CORES = 2  # the sweeps' units on two workers: wall = CPU / 2
 STEP_FIXED_S = 30.0  # each command's start: imports, the ground truth of the oracle priors
 # Wall seconds on 2 cores of the other steps (the curve's learning of 30 apartments and the
 # family-house learning are one core's): curve per episode and fixed, transfer likewise.
 CURVE_S = (4.0, 400.0)
-TRANSFER_S = (5.0, 150.0)
+TRANSFER_S = (6.5, 100.0)
 LEARN_FAMILY_S = 300.0
 
 
