@@ -106,9 +106,9 @@ def _tree(d: Path) -> dict[str, bytes]:
 
 
 def test_a_bench_search_killed_part_way_resumes_with_the_same_files(tmp_path, desk_cup_store):
-    """SIGKILL after the first of two batches is kept; the same command again runs only the
-    second and writes byte-identical files (search.json, search.md, search.png, episodes.csv:
-    none holds a wall-clock field)."""
+    """SIGKILL after the first of four episodes is kept; the same command again runs only the
+    other three and writes byte-identical files (search.json, search.md, search.png,
+    episodes.csv: none holds a wall-clock field)."""
     store = desk_cup_store(tmp_path / "kb.sqlite")
     cmd = [sys.executable, "-m", "ctxsearch.scripts.cli", "bench", "search", "--kb", str(store),
            "--style", "office", "--episodes", "4", "--policies", "uniform,location", "--quiet",
@@ -126,11 +126,12 @@ def test_a_bench_search_killed_part_way_resumes_with_the_same_files(tmp_path, de
         time.sleep(0.02)
     os.killpg(p.pid, signal.SIGKILL)
     assert p.wait() == -signal.SIGKILL
-    assert len(list(journal.glob("*.json"))) == 1  # the first batch only
+    kept = len(list(journal.glob("*.json")))
+    assert 1 <= kept < 4  # the first episode, maybe the next, not all
     assert not (out / "search.json").exists()
     again = subprocess.run(resumed, cwd=ROOT, env=env, capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
-    assert len(list(journal.glob("*.json"))) == 2
+    assert len(list(journal.glob("*.json"))) == 4
     assert _tree(out) == _tree(tmp_path / "a")
 
 

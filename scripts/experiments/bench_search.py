@@ -43,7 +43,7 @@ known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``ma
 The episode checks and the episodes run as the units of sweeps (``scripts.sweep``: serially, or as
 Ray tasks with ``--workers N`` / ``--ray-address``; episodes in batches of ``EPISODES_PER_UNIT``);
 the files are the same either way, apart from the wall time. With ``--journal DIR`` every
-finished unit (a world of the draw, a batch of episodes) is kept in DIR
+finished unit (a world of the draw, an episode with every policy) is kept in DIR
 (scripts.experiments.journals) and a later run of the same command reads it back instead of
 running it again: a run stopped at any moment continues where it stopped, with the same files.
 """
@@ -490,9 +490,11 @@ def _run_batches(
     kb: KnowledgeBase | None = None,
 ) -> dict[str, list[SearchResult]]:
     """Every policy of ``run`` on every episode, ``EPISODES_PER_UNIT`` episodes per sweep
-    unit (kept in ``sweep.journal``, if any: ``kb`` is the knowledge held in memory, None for
-    the store's)."""
-    batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
+    unit; with ``sweep.journal`` one episode per unit, each kept there as it finishes (so a
+    run stopped part-way never runs a finished episode again; ``kb``: the knowledge held in
+    memory, None for the store's)."""
+    per = 1 if sweep.journal is not None else EPISODES_PER_UNIT
+    batches = [eps[i : i + per] for i in range(0, len(eps), per)]
     names = [s.name for s in run.specs]
     journal = None
     if sweep.journal is not None:
