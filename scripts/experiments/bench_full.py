@@ -41,10 +41,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ctxsearch.knowledge.options import MapMode, Targets
+
 CURVE_ROOMS = "0,1,3,10,30"
 FAMILY_HOUSES = 10
-TARGETS = ("instance", "type")
-MAPS = ("built", "given", "remembered")
+TARGETS = (Targets.INSTANCE, Targets.TYPE)
+MAPS = (MapMode.BUILT, MapMode.GIVEN, MapMode.REMEMBERED)
 # The policies of each map scenario (the remembered map's: make bench's "find my phone"; the built
 # map's: without make bench's three bounds, which cost more than the other four together), and
 # each scenario's baseline and context policy (the one run again without room context).
@@ -131,16 +133,16 @@ def search_steps(
         n = counts[targets]
         for m in MAPS:
             where = out / style / targets
-            base = ("bench", "search", "--kb", str(kb), "--style", style, "--map", m,
-                    "--targets", targets, "--episodes", str(n),
+            base = ("bench", "search", "--kb", str(kb), "--style", style, "--map", str(m),
+                    "--targets", str(targets), "--episodes", str(n),
                     "--draw-cache", str(build / "draws"))  # fmt: skip
-            if m == "remembered":  # held-out houses toured the day before (make bench's)
+            if m is MapMode.REMEMBERED:  # held-out houses toured the day before (make bench's)
                 base = (*base, "--set", "map.home=tour")
             cpu = CPU_S[(style, targets, m)]
             steps.append(Step(f"{style}-{targets}-{m}",
                               (*base, "--policies", POLICIES[m], "--room-context", "--out",
                                str(where / m)), STEP_FIXED_S + n * cpu / CORES))  # fmt: skip
-            if targets == "instance":
+            if targets is Targets.INSTANCE:
                 cpu = NO_ROOM_CONTEXT_CPU_S[(style, m)]
                 steps.append(Step(f"{style}-{targets}-{m}-no-room-context",
                                   (*base, "--policies", CONTEXT[m], "--out",
