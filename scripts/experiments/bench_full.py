@@ -3,15 +3,16 @@ steps that resume.
 
 The steps (``plan``), each one ``ctxsearch`` command run as a child process:
 
-- the learning curve in apartments (``bench curve``, k = 0, 1, 3, 10, 30, ``CURVE_EPISODES`` paired
+- the learning curve in apartments (``bench curve``, k = 0, 1, 3, 10, 30, ``Counts.curve`` paired
   episodes per k and map scenario); its store after 30 apartments is the apartments' knowledge;
-- a family-house store (``learn``, ``FAMILY_HOUSES`` houses, realistic detector);
-- per house style (apartment: ``APARTMENT_EPISODES`` paired episodes, family_house:
-  ``FAMILY_EPISODES``), per target kind (``instance``, "find my phone", the headline; ``type``
-  beside it) and per map scenario (``built``, ``given``, ``remembered``), ``bench search`` with
-  room context for the context policies; and, on the instance targets, the context policies
-  without room context on the same episodes (the draw is kept in ``BUILD/draws``);
-- the transfer table (``bench transfer``, ``TRANSFER_EPISODES`` paired episodes per cell);
+- a family-house store (``learn``, ``Counts.family_houses`` houses, realistic detector);
+- per house style (paired episodes: ``Counts.apartment``, ``Counts.family``; on type targets
+  ``Counts.apartment_type``, ``Counts.family_type``), per target kind (``instance``, "find my
+  phone", the headline; ``type`` beside it) and per map scenario (``built``, ``given``,
+  ``remembered``: ``POLICIES``), ``bench search`` with room context for the context policies;
+  and, on the instance targets, the context policies without room context on the same episodes
+  (the draw is kept in ``BUILD/draws``);
+- the transfer table (``bench transfer``, ``Counts.transfer`` paired episodes per cell);
 - ``summary.md`` / ``summary.json``: per style, target kind and scenario, each policy against the
   scenario's no-context baseline, and the context policy with room context against itself
   without (paired on the same episodes).
@@ -24,9 +25,11 @@ its command line; another command line runs it again). The learning steps resume
 ``ctxsearch learn`` does (agent.resume), the curve's as ``bench curve --journal`` does.
 
 Progress: a line per step with the time spent and an estimate of the time left (the steps'
-estimates from the measured costs, ``ESTIMATE_S``, scaled by how the steps run so far compared
-with theirs), and each command's own progress bars (their time left per step). Runs unchanged on
-a Ray cluster: ``--ray-address ADDR`` goes to every sweep.
+estimates from the measured costs, ``CPU_S`` and the others below, scaled by how the steps run
+so far compared with theirs), and each command's own progress bars (their time left per step).
+The default counts are sized to about 3.85 hours on 2 cores (docs/usage.md: the measured costs,
+the estimate and the power the counts give). Runs unchanged on a Ray cluster: ``--ray-address
+ADDR`` goes to every sweep.
 """
 
 from __future__ import annotations
@@ -66,8 +69,8 @@ class Counts:
 
     apartment: int = 400
     apartment_type: int = 150
-    family: int = 150
-    family_type: int = 75
+    family: int = 120
+    family_type: int = 60
     curve: int = 100
     transfer: int = 100
     # the worlds learned: the curve's marks (its last is the apartments' store), the family
@@ -90,7 +93,7 @@ CPU_S = {
     ("apartment", "type", "remembered"): 5.0,
     ("family_house", "instance", "built"): 11.2,
     ("family_house", "instance", "given"): 8.1,
-    ("family_house", "instance", "remembered"): 22.0,
+    ("family_house", "instance", "remembered"): 37.0,
     ("family_house", "type", "built"): 4.8,
     ("family_house", "type", "given"): 4.0,
     ("family_house", "type", "remembered"): 8.0,
