@@ -79,3 +79,11 @@ def test_every_step_parses_and_its_policies_resolve(tmp_path):
         if step.argv[:2] == ("bench", "search"):
             c = config_from_args(args)
             assert resolve(c.policies, c.map.scenario, c.knowledge.room_context)
+
+
+def test_the_summary_falls_back_to_a_baseline_that_ran(tmp_path):
+    _episodes(tmp_path / "family_house" / "type" / "given",
+              {"map-only": [10.0, 20.0], "location": [5.0, 10.0]})  # fmt: skip
+    write_summary(tmp_path)
+    s = json.loads((tmp_path / "summary.json").read_text())["family_house"]["type"]["given"]
+    assert s["baseline"] == "map-only" and s["vs_baseline"]["location"]["geo_mean"] == 0.5

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from ctxsearch.agent.search.measures import geo_cell, paired_stats
 from ctxsearch.scripts.experiments.bench_full import BASELINE, CONTEXT, MAPS, TARGETS
+from ctxsearch.scripts.experiments.bench_search import BASELINES
 
 STYLES = ("apartment", "family_house")
 NO_RC = "no room context"
@@ -33,12 +34,15 @@ def read_times(path: Path) -> dict[str, list[float]]:
 
 
 def scenario_summary(where: Path, m: str) -> dict | None:
-    """One scenario's comparisons (None: its run is missing)."""
+    """One scenario's comparisons against its baseline (``BASELINE``, else the first of bench
+    search's ``BASELINES`` that ran; None: the run is missing or has none)."""
     path = where / m / "episodes.csv"
     if not path.exists():
         return None
     t = read_times(path)
-    base = BASELINE[m]
+    base = BASELINE[m] if BASELINE[m] in t else next((b for b in BASELINES if b in t), None)
+    if base is None:
+        return None
     rows = {p: paired_stats(v, t[base]).to_json() for p, v in t.items() if p != base}
     doc: dict = {"episodes": len(t[base]), "baseline": base, "vs_baseline": rows}
     nrc = where / f"{m}-no-room-context" / "episodes.csv"
