@@ -33,7 +33,6 @@ from typing import TYPE_CHECKING, TypeVar
 
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.scripts import Stopped, received, reclaim_stop_signals
-from ctxsearch.scripts.argtypes import out_dir
 from ctxsearch.scripts.integers import positive_int
 
 if TYPE_CHECKING:  # scripts.journal imports the search's modules, which a loop never needs
@@ -74,6 +73,14 @@ class SweepOptions:
         return cls(args.workers, args.ray_address, args.journal)
 
 
+def _directory(text: str) -> Path:
+    """``--journal DIR``: a directory that exists, or a path where nothing is (made later)."""
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not a directory")
+    return p
+
+
 def add_sweep_arguments(p: argparse.ArgumentParser, journal: bool = False) -> None:
     """``--workers N`` and ``--ray-address ADDR`` for a command whose units can run in parallel
     (and ``--journal DIR`` with ``journal``: the command resumes, scripts.journal)."""
@@ -96,7 +103,7 @@ def add_sweep_arguments(p: argparse.ArgumentParser, journal: bool = False) -> No
     else:
         p.add_argument(
             "--journal",
-            type=out_dir,
+            type=_directory,
             default=None,
             metavar="DIR",
             help="keep every finished unit's result in DIR; the same command run again (after a "
