@@ -111,9 +111,9 @@ bench-home-full: build/kb_home.sqlite
 # table (100 per cell); summary.md. Every step resumes: kill it at any moment (even SIGKILL) and
 # run make bench-full again; finished steps are skipped, finished units read back (--journal),
 # and the files are those of an uninterrupted run. A line per step says the time spent and left.
-# Estimated time on 2 cores: about 3.85 hours (+-30%; from CPU seconds per episode measured on
+# Estimated time on 2 cores: about 3.8 hours (+-30%; from CPU seconds per episode measured on
 # 2026-12-05, docs/usage.md "make bench-full"); the counts the benchmark was first asked for
-# (family houses 200, type targets as many as instance targets) would take about 5.3, so the
+# (family houses 200, type targets as many as instance targets) would take about 5.2, so the
 # defaults are apartments 400 (instance) / 150 (type), family houses 120 / 60, the curve 100 per
 # k, the transfer 100 per cell. RAY_ADDRESS=HOST:PORT runs the sweeps on a Ray cluster.
 bench-full: $(STAMP)

@@ -27,7 +27,7 @@ its command line; another command line runs it again). The learning steps resume
 Progress: a line per step with the time spent and an estimate of the time left (the steps'
 estimates from the measured costs, ``CPU_S`` and the others below, scaled by how the steps run
 so far compared with theirs), and each command's own progress bars (their time left per step).
-The default counts are sized to about 3.85 hours on 2 cores (docs/usage.md: the measured costs,
+The default counts are sized to about 3.8 hours on 2 cores (docs/usage.md: the measured costs,
 the estimate and the power the counts give). Runs unchanged on a Ray cluster: ``--ray-address
 ADDR`` goes to every sweep.
 """
@@ -94,7 +94,7 @@ CPU_S = {
     ("apartment", "type", "remembered"): 5.0,
     ("family_house", "instance", "built"): 11.2,
     ("family_house", "instance", "given"): 8.1,
-    ("family_house", "instance", "remembered"): 37.0,
+    ("family_house", "instance", "remembered"): 33.8,
     ("family_house", "type", "built"): 4.8,
     ("family_house", "type", "given"): 4.0,
     ("family_house", "type", "remembered"): 8.0,
