@@ -8,12 +8,13 @@ STAMP := $(VENV)/.ctxsearch-installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test bench bench-timing bench-a bench-b bench-home-full kb-home lint syscheck clean help
+.PHONY: demo test bench bench-timing bench-a bench-b bench-home-full bench-full kb-home lint syscheck clean help
 
 help:
 	@echo "make demo   - learn in a few office rooms, then search with and without context (writes demo/)"
 	@echo "make test   - run the test suite"
 	@echo "make bench  - run the benchmarks (writes results/)"
+	@echo "make bench-full - the benchmark at full power, resumable (writes results/full/)"
 	@echo "make lint   - ruff"
 
 $(STAMP): pyproject.toml requirements.lock
@@ -101,6 +102,22 @@ kb-home: $(STAMP)
 # 2 cores; results/home_400).
 bench-home-full: build/kb_home.sqlite
 	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
+
+# The benchmark at full power (scripts/experiments/bench_full.py; results/full/, its journal, step
+# stamps, draws and family-house store in build/full/): the apartment learning curve (100 paired
+# episodes per k), apartments (APARTMENT_EPISODES paired episodes per map scenario) and family
+# houses (FAMILY_EPISODES), instance targets ("find my phone") and type targets, room context on
+# for the context policies and, on instance targets, those policies without it; the transfer
+# table (100 per cell); summary.md. Every step resumes: kill it at any moment (even SIGKILL) and
+# run make bench-full again; finished steps are skipped, finished units read back (--journal),
+# and the files are those of an uninterrupted run. A line per step says the time spent and left.
+# Estimated time on 2 cores: about 3.8 hours (+-30%; from CPU seconds per episode measured on
+# 2026-12-05, docs/usage.md "make bench-full"); the counts the benchmark was first asked for
+# (family houses 200, type targets as many as instance targets) would take about 5.2, so the
+# defaults are apartments 400 (instance) / 150 (type), family houses 120 / 60, the curve 100 per
+# k, the transfer 100 per cell. RAY_ADDRESS=HOST:PORT runs the sweeps on a Ray cluster.
+bench-full: $(STAMP)
+	$(PY) -m ctxsearch.scripts.experiments.bench_full --workers $(WORKERS) $(if $(RAY_ADDRESS),--ray-address $(RAY_ADDRESS))
 
 bench-b: $(STAMP)
 # Does learning pay? The paired search ratio after k learned houses, built and given map (issue

@@ -79,7 +79,7 @@ def _add_common(p: argparse.ArgumentParser, rooms_help: str) -> None:
     )
     argtypes.add_detector_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines or bars")
-    add_sweep_arguments(p)
+    add_sweep_arguments(p, journal=True)
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:

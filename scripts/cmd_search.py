@@ -369,7 +369,7 @@ def _add_bench_flags(p: argparse.ArgumentParser, episodes_help: str, policies_he
         "same code) is asked for again, e.g. by the other --map scenario (default: not kept)",
     )
     _add_common(p)
-    add_sweep_arguments(p)
+    add_sweep_arguments(p, journal=True)
 
 
 def run_bench(args: argparse.Namespace) -> int:

@@ -11,6 +11,9 @@ results plain data (numbers, strings, lists, dicts): they travel between process
 raises a CtxsearchError ends the sweep with that error (one line, as everywhere). An address where
 no cluster answers is a one-line error too, bounded in time (``RAY_CONNECT_TIMEOUT_S``): nothing
 listening fails at once, no answer after 5 s, something that is not Ray after about 20 s.
+With a journal (``run_units(..., journal=...)``, scripts.journal; ``--journal DIR``), the units
+it holds are read back, not run, and every other unit's result is kept as it comes back (with
+Ray: in the driver), so a sweep stopped at any moment runs again only what it had not finished.
 """
 
 from __future__ import annotations
@@ -25,11 +28,15 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.scripts import Stopped, received, reclaim_stop_signals
 from ctxsearch.scripts.integers import positive_int
+
+if TYPE_CHECKING:  # scripts.journal imports the search's modules, which a loop never needs
+    from ctxsearch.scripts.journal import Journal
 
 U = TypeVar("U")
 R = TypeVar("R")
@@ -52,19 +59,31 @@ _RAY_SIGNAL_ENV = {"RAY_DISABLE_FAILURE_SIGNAL_HANDLER": "1"}
 
 @dataclass(frozen=True)
 class SweepOptions:
-    """How a sweep runs (not what it computes: the results are the same either way)."""
+    """How a sweep runs (not what it computes: the results are the same either way).
+    ``journal``: a directory where every finished unit's result is kept and read back by a
+    later run of the same command (scripts.journal; None: not kept)."""
 
     workers: int = 1
     ray_address: str | None = None
+    journal: Path | None = None
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> SweepOptions:
         """From the flags ``add_sweep_arguments`` adds."""
-        return cls(args.workers, args.ray_address)
+        return cls(args.workers, args.ray_address, args.journal)
 
 
-def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
-    """``--workers N`` and ``--ray-address ADDR`` for a command whose units can run in parallel."""
+def _directory(text: str) -> Path:
+    """``--journal DIR``: a directory that exists, or a path where nothing is (made later)."""
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not a directory")
+    return p
+
+
+def add_sweep_arguments(p: argparse.ArgumentParser, journal: bool = False) -> None:
+    """``--workers N`` and ``--ray-address ADDR`` for a command whose units can run in parallel
+    (and ``--journal DIR`` with ``journal``: the command resumes, scripts.journal)."""
     p.add_argument(
         "--workers",
         type=positive_int,
@@ -79,12 +98,25 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
         metavar="ADDR",
         help="run the units on an existing Ray cluster (HOST:PORT, or 'auto') instead",
     )
+    if not journal:
+        p.set_defaults(journal=None)
+    else:
+        p.add_argument(
+            "--journal",
+            type=_directory,
+            default=None,
+            metavar="DIR",
+            help="keep every finished unit's result in DIR; the same command run again (after a "
+            "kill, say) reads them back and runs only the rest, with the same files "
+            "(default: not kept)",
+        )
 
 
-def _progress(total: int, desc: str, enabled: bool):
+def _progress(total: int, desc: str, enabled: bool, initial: int = 0):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="unit", disable=not enabled, leave=False)
+    return tqdm(total=total, initial=initial, desc=desc, unit="unit", disable=not enabled,
+                leave=False)  # fmt: skip
 
 
 def run_units(
@@ -95,21 +127,40 @@ def run_units(
     ray_address: str | None = None,
     desc: str = "units",
     progress: bool = True,
+    journal: Journal | None = None,
 ) -> list[R]:
     """``[fn(u) for u in units]``, serially or as Ray tasks (see the module docstring), with a
     progress bar over finished units. ``fn`` may be a ``functools.partial`` of a module-level
-    function."""
+    function. ``journal`` (scripts.journal): the units it holds are read back, not run, and every
+    other unit's result is kept in it as soon as it is back (the bar counts from the units read
+    back, so its rate and time left are those of the units that run)."""
     if workers < 1:
         raise CtxsearchError(f"--workers must be at least 1, got {workers}")
+    out: list = [None] * len(units)
+    todo = list(range(len(units)))
+    if journal is not None:
+        todo = []
+        for i, u in enumerate(units):
+            hit, res = journal.load(u)
+            if hit:
+                out[i] = res
+            else:
+                todo.append(i)
+    kept = journal.save if journal is not None else None
+    if not todo:
+        return out
     if workers == 1 and not ray_address:
-        out = []
         freeze_long_lived()
-        with _progress(len(units), desc, progress) as bar:
-            for u in units:
-                out.append(fn(u))
+        with _progress(len(units), desc, progress, len(units) - len(todo)) as bar:
+            for i in todo:
+                t = time.process_time()
+                out[i] = fn(units[i])
+                if kept is not None:
+                    kept(units[i], out[i], time.process_time() - t)
                 bar.update(1)
         return out
-    return _run_on_ray(fn, units, workers, ray_address, desc, progress)
+    _run_on_ray(fn, units, todo, out, (workers, ray_address, desc, progress, kept))
+    return out
 
 
 def _apply(fn: Callable[[U], R], unit: U) -> R:
@@ -359,7 +410,11 @@ def _running(pid: int) -> bool:
         return False
 
 
-def _run_on_ray(fn, units, workers, ray_address, desc, progress):
+def _run_on_ray(fn, units, todo, out, how) -> None:
+    """The units ``todo`` (indices into ``units``) as Ray tasks, their results into ``out``;
+    ``how``: workers, cluster address, the bar's description and whether it shows, and where a
+    result goes as it arrives (a journal's ``save``, or None)."""
+    workers, ray_address, desc, progress, kept = how
     # first: it imports Ray with its settings
     before = _descendants()
     started = _start_ray(workers, ray_address, progress)
@@ -369,22 +424,23 @@ def _run_on_ray(fn, units, workers, ray_address, desc, progress):
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(_apply)
         fn_ref = ray.put(fn)  # shipped to the workers once, not with every unit
-        pending = {task.remote(fn_ref, u): i for i, u in enumerate(units)}
-        out: list = [None] * len(units)
-        with _progress(len(units), desc, progress) as bar:
+        pending = {task.remote(fn_ref, units[i]): i for i in todo}
+        with _progress(len(units), desc, progress, len(units) - len(todo)) as bar:
             while pending:
                 reclaim_stop_signals()  # Ray's core may install its handlers after its start
                 done, _ = ray.wait(list(pending), num_returns=1)
                 for ref in done:
+                    i = pending.pop(ref)
                     try:
-                        out[pending.pop(ref)] = ray.get(ref)
+                        out[i] = ray.get(ref)
                     except RayTaskError as exc:
                         cause = exc.cause if isinstance(exc.cause, CtxsearchError) else None
                         if cause is not None:
                             raise cause from None
                         raise
+                    if kept is not None:
+                        kept(units[i], out[i])
                     bar.update(1)
-        return out
     finally:
         if started:
             _stop_ray(before)

@@ -98,6 +98,7 @@ SLOW_FILES_FIRST = (
     "test_search_protocol.py",
     "test_sweep.py",
     "test_bench_curve.py",
+    "test_journal.py",
     "test_gym_env.py",
     "test_search.py",
     "test_cli_search.py",

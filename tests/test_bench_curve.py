@@ -271,3 +271,32 @@ def test_the_remembered_scenario_searches_toured_held_out_houses_at_every_k():
     assert scenario_config(base, DEFAULT_SCENARIOS["given"]).map.home is None
     mine = base.updated({"map.home": "store"})
     assert scenario_config(mine, DEFAULT_SCENARIOS["remembered"]).map.home is HomeSource.STORE
+
+
+def _files(d: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*"))
+            if p.is_file() and p.suffix != ".sqlite" and "stores" not in p.parts}  # fmt: skip
+
+
+def test_a_journalled_curve_resumes_its_snapshots_and_searches(curve_dir, tmp_path, capsys):
+    """With --journal, a run stopped after the first snapshot (the later one and every file
+    gone) takes the missing snapshot from the run's store, reads the searches back and writes
+    the files the uninterrupted run wrote; another run's stores are refused."""
+    out, journal = tmp_path / "out", tmp_path / "journal"
+    argv = [*CURVE, *POLICY_FLAGS, *SMALL, "--journal", str(journal)]
+    assert main([*argv, "--out", str(out)]) == 0
+    whole = _files(out)
+    k1 = (out / "stores" / "k=0001.sqlite").read_bytes()
+    (out / "stores" / "k=0002.sqlite").unlink()
+    for p in out.rglob("*"):
+        if p.is_file() and "stores" not in p.parts:
+            p.unlink()
+    assert main([*argv, "--out", str(out)]) == 0
+    assert _files(out) == whole
+    assert (out / "stores" / "k=0001.sqlite").read_bytes() == k1  # kept, not taken again
+    assert _examinations(out / "stores" / "k=0002.sqlite") == _examinations(
+        curve_dir / "stores" / "k=0002.sqlite"
+    )
+    capsys.readouterr()
+    assert main([*argv, "--seed", "1", "--out", str(out)]) == 2
+    assert "another learning run's stores" in capsys.readouterr().err

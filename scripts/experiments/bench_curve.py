@@ -15,11 +15,17 @@ policy to the baseline and of the asymptote to the baseline), ``DIR/curve.md``, 
 repeats, at every k, the run made at ``measured_at_k``). The snapshots stay in
 ``DIR/stores/k=K.sqlite`` (stores of an earlier run there are an error, never overwritten),
 each snapshot's search files in ``DIR/k=K/MAP/``.
+
+With ``--journal DIR`` (scripts.journal) the command resumes: the searches' finished units are
+read back from the journal, the snapshots already taken are kept, and the learning run goes on
+from what ``stores/run.sqlite`` holds (agent.resume); ``stores/learning.json`` names the run the
+stores belong to (another run's are an error).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import time
 from dataclasses import dataclass, field
@@ -36,6 +42,7 @@ from ctxsearch.envs.houses import resolve_style
 from ctxsearch.knowledge.base import KnowledgeBase
 from ctxsearch.knowledge.catalog import load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
+from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_search import BenchResult
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
@@ -100,26 +107,77 @@ class CurveResult:
 
 
 def snapshot(src: Path, dst: Path) -> None:
-    """Copy the (closed) store ``src`` to ``dst`` with SQLite's backup API."""
-    dst.unlink(missing_ok=True)
-    with sqlite3.connect(f"file:{src}?mode=ro", uri=True) as a, sqlite3.connect(dst) as b:
+    """Copy the (closed) store ``src`` to ``dst`` with SQLite's backup API, into a temporary
+    file first, then renamed: ``dst`` is never half a copy."""
+    tmp = dst.with_name(f".{dst.name}.tmp")
+    tmp.unlink(missing_ok=True)
+    with sqlite3.connect(f"file:{src}?mode=ro", uri=True) as a, sqlite3.connect(tmp) as b:
         a.backup(b)
     a.close()
     b.close()
+    os.replace(tmp, dst)
+
+
+def _snapshot_path(stores: Path, k: int) -> Path:
+    return stores / f"k={k:04d}.sqlite"
+
+
+def _examinations(path: Path) -> int:
+    with EvidenceStore.open(path, load_catalog(), read_only=True) as st:
+        return st.examinations_count()
+
+
+def _check_resumable(config: CurveConfig, stores: Path) -> None:
+    """Before learning on in ``stores`` (``--journal``): the run there must be this one (its
+    settings in ``stores/learning.json``, written at its start), and no snapshot may be missing
+    before a present one (a snapshot is taken before the run learns past it)."""
+    s = config.search
+    mine = {"style": str(s.style), "seed": s.seed, "perception": config.perception,
+            "detector": None if s.detector is None else str(s.detector),
+            "rooms": list(config.rooms)}  # fmt: skip
+    marker = stores / "learning.json"
+    if marker.exists():
+        try:
+            theirs = json.loads(marker.read_text())
+        except (OSError, ValueError, UnicodeError):
+            theirs = None
+        if theirs != mine:
+            raise CtxsearchError(
+                f"{stores}: holds another learning run's stores (learning.json); remove it or "
+                "choose another --out"
+            )
+    else:
+        check_no_stores(stores)
+        stores.mkdir(parents=True, exist_ok=True)
+        marker.write_text(json.dumps(mine) + "\n")
+    present = [k for k in config.rooms if k > 0 and _snapshot_path(stores, k).exists()]
+    missing = [k for k in config.rooms if k > 0 and k not in present]
+    if present and missing and min(missing) < max(present):
+        raise CtxsearchError(
+            f"{stores}: the snapshot after k={min(missing)} is missing but a later one is there; "
+            f"remove {stores} to learn anew"
+        )
 
 
 def learn_snapshots(
-    config: CurveConfig, stores: Path, bar: bool = True
+    config: CurveConfig, stores: Path, bar: bool = True, resume: bool = False
 ) -> list[tuple[int, int, Path | None]]:
     """Learn through the largest k, copying the store after each k of ``config.rooms``:
-    (k, examinations, snapshot path or None for k = 0) per k."""
+    (k, examinations, snapshot path or None for k = 0) per k. ``resume``: a snapshot already in
+    ``stores`` is kept (it was taken before the run learned past it), and the run goes on from
+    what its store holds (agent.resume: a visit stopped half-way is replayed, the same choices
+    as an uninterrupted run)."""
     s = config.search
     stores.mkdir(parents=True, exist_ok=True)
-    run = stores / "run.sqlite"  # a fresh run (bench_curve checked that none is there)
+    run = stores / "run.sqlite"  # a fresh run (bench_curve checked that none is there) or resumed
     out: list[tuple[int, int, Path | None]] = []
     for k in config.rooms:
         if k == 0:
             out.append((0, 0, None))
+            continue
+        dst = _snapshot_path(stores, k)
+        if resume and dst.exists():
+            out.append((k, _examinations(dst), dst))
             continue
         lc = LearnConfig(style=s.style, rooms=k, kb_path=run, seed=s.seed,
                          perception=config.perception, detector=s.detector,
@@ -127,7 +185,6 @@ def learn_snapshots(
         summary = learn(lc)
         if summary.interrupted:
             raise KeyboardInterrupt
-        dst = stores / f"k={k:04d}.sqlite"
         snapshot(run, dst)
         out.append((k, summary.total_examinations, dst))
     return out
@@ -149,8 +206,12 @@ def bench_curve(
     resolve_style(config.search.style, catalog)  # one-line errors before any learning
     config.search.detector_model(catalog)
     check_policies(config.scenarios)
-    check_no_stores(out / "stores")
-    snaps = learn_snapshots(config, out / "stores", bar)
+    resume = sweep is not None and sweep.journal is not None
+    if resume:
+        _check_resumable(config, out / "stores")
+    else:
+        check_no_stores(out / "stores")
+    snaps = learn_snapshots(config, out / "stores", bar, resume)
     points: list[CurvePoint] = []
     with session(sweep or SweepOptions()), remembered_draws():
         for i, (k, exams, path) in enumerate(snaps):

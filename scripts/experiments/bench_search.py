@@ -42,7 +42,10 @@ known: map-only, location, oracle-prior, oracle, exhaustive); search.json's ``ma
 
 The episode checks and the episodes run as the units of sweeps (``scripts.sweep``: serially, or as
 Ray tasks with ``--workers N`` / ``--ray-address``; episodes in batches of ``EPISODES_PER_UNIT``);
-the files are the same either way, apart from the wall time.
+the files are the same either way, apart from the wall time. With ``--journal DIR`` every
+finished unit (a world of the draw, an episode with every policy) is kept in DIR
+(scripts.experiments.journals) and a later run of the same command reads it back instead of
+running it again: a run stopped at any moment continues where it stopped, with the same files.
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ from matplotlib.figure import Figure
 
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search.config import SearchConfig, to_dict
-from ctxsearch.agent.search.draw import WorldDraw, draw_episodes
+from ctxsearch.agent.search.draw import DrawSpec, WorldDraw, draw_episodes
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, SearchResult, episode_layout
 from ctxsearch.agent.search.measures import (
     BOOTSTRAP_SAMPLES,
@@ -84,6 +87,7 @@ from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.options import Estimate
 from ctxsearch.scripts.experiments.bench_indirect import indirect_analysis, write_indirect
+from ctxsearch.scripts.experiments.journals import draw_journal, search_journal
 from ctxsearch.scripts.experiments.tables import write_csv
 from ctxsearch.scripts.sweep import SweepOptions, run_units, session
 
@@ -435,13 +439,13 @@ def bench_search(
     run = replace(run, observer=observer)
     config = run.config
     spec = run.draw_spec(config.episodes, split=split)
-    runner = sweep_worlds(sweep, bar)
+    runner = sweep_worlds(sweep, bar, spec)
     with session(sweep, bar):  # one Ray for the draw's rounds and the searches
         draw = draw_episodes(
             spec, run.catalog, workers=sweep.workers, runner=runner, cache=config.draw_cache
         )
         eps = draw.episodes
-        results = _run_batches(eps, run, sweep, bar)
+        results = _run_batches(eps, run, sweep, bar, kb)
     names = [s.name for s in run.specs]
     if progress is not None:
         for i, ep in enumerate(eps):
@@ -460,25 +464,41 @@ def bench_search(
     return res
 
 
-def sweep_worlds(sweep: SweepOptions, bar: bool = False):
+def sweep_worlds(sweep: SweepOptions, bar: bool = False, spec: DrawSpec | None = None):
     """An episode draw's world runner (agent.search.draw.WorldRunner) on ``sweep``'s workers
-    (serial, or Ray tasks), a progress bar over each round's worlds with ``bar``."""
+    (serial, or Ray tasks), a progress bar over each round's worlds with ``bar``; with
+    ``sweep.journal``, each world checked for the draw of ``spec`` is kept there
+    (scripts.experiments.journals.draw_journal)."""
+    journal = None
+    if sweep.journal is not None and spec is not None:
+        journal = draw_journal(sweep.journal, spec)
 
     def run(check: Callable[[int], WorldDraw], indices: list[int], desc: str) -> list[WorldDraw]:
         return run_units(
             check, indices, workers=sweep.workers, ray_address=sweep.ray_address, desc=desc,
-            progress=bar,
+            progress=bar, journal=journal,
         )  # fmt: skip
 
     return run
 
 
 def _run_batches(
-    eps: list[Episode], run: SearchRun, sweep: SweepOptions, bar: bool
+    eps: list[Episode],
+    run: SearchRun,
+    sweep: SweepOptions,
+    bar: bool,
+    kb: KnowledgeBase | None = None,
 ) -> dict[str, list[SearchResult]]:
     """Every policy of ``run`` on every episode, ``EPISODES_PER_UNIT`` episodes per sweep
-    unit."""
-    batches = [eps[i : i + EPISODES_PER_UNIT] for i in range(0, len(eps), EPISODES_PER_UNIT)]
+    unit; with ``sweep.journal`` one episode per unit, each kept there as it finishes (so a
+    run stopped part-way never runs a finished episode again; ``kb``: the knowledge held in
+    memory, None for the store's)."""
+    per = 1 if sweep.journal is not None else EPISODES_PER_UNIT
+    batches = [eps[i : i + per] for i in range(0, len(eps), per)]
+    names = [s.name for s in run.specs]
+    journal = None
+    if sweep.journal is not None:
+        journal = search_journal(sweep.journal, run.config, names, kb)
     done = run_units(
         functools.partial(_batch_unit, run),
         batches,
@@ -486,8 +506,8 @@ def _run_batches(
         ray_address=sweep.ray_address,
         desc=f"bench search {run.style.name}",
         progress=bar,
+        journal=journal,
     )
-    names = [s.name for s in run.specs]
     results: dict[str, list[SearchResult]] = {n: [] for n in names}
     for batch in done:
         for per_policy in batch:

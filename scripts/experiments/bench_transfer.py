@@ -21,7 +21,9 @@ Writes ``DIR/transfer.json``, ``DIR/transfer.md`` and ``DIR/transfer.csv`` (one 
 searched-in, interval, scenario, episode and policy; the baseline's rows once per searched-in
 style, with no learned-in style and interval); stores in ``DIR/stores/`` (an earlier run's
 there are an error, never overwritten), every search's files
-in ``DIR/search/LEARNED_to_SEARCHED/MAP/INTERVAL/``.
+in ``DIR/search/LEARNED_to_SEARCHED/MAP/INTERVAL/``. With ``--journal DIR`` (scripts.journal)
+the learning runs and the searches' units are kept in DIR and read back by the same command run
+again (the stores are then written again from the journal's bytes).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.store import EvidenceStore
 from ctxsearch.scripts.experiments.bench_curve import snapshot
 from ctxsearch.scripts.experiments.bench_search import BenchResult
+from ctxsearch.scripts.experiments.journals import learn_journal
 from ctxsearch.scripts.experiments.scenarios import (
     RESULT_COLUMNS,
     Scenario,
@@ -137,6 +140,10 @@ def learn_stores(
     units = [(s, config.rooms, seed) for s in config.styles]
     if config.probe_rooms > 0:
         units += [(s, config.probe_rooms, seed + PROBE_SEED_OFFSET) for s in config.styles]
+    journal = None
+    if sweep.journal is not None:
+        what = ["bench transfer", config.perception, config.search.detector]
+        journal = learn_journal(sweep.journal, what)
     done = run_units(
         functools.partial(learn_unit, config.perception, config.search.detector),
         units,
@@ -144,6 +151,7 @@ def learn_stores(
         ray_address=sweep.ray_address,
         desc="bench transfer: learning",
         progress=bar,
+        journal=journal,
     )
     stores.mkdir(parents=True, exist_ok=True)
     out: dict[str, dict] = {s: {"probe": None, "probe_examinations": 0} for s in config.styles}
@@ -257,7 +265,8 @@ def bench_transfer(
     out = Path(out)
     sweep = sweep or SweepOptions()
     check_config(config)
-    check_no_stores(out / "stores")
+    if sweep.journal is None:  # with a journal the stores are its learning units' bytes again
+        check_no_stores(out / "stores")
     with session(sweep), remembered_draws():
         stores = learn_stores(config, out / "stores", sweep, bar)
         if progress is not None:
