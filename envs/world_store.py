@@ -2,13 +2,14 @@
 
 Building a world through dm_control's MJCF elements costs about 50-100 ms in a house (every
 element and attribute is a Python object, written out as XML attribute by attribute), compiling
-its XML about 4 ms. ``world_model(layout, catalog, spec)`` gives the compiled model of a layout's
-world and makes it once:
+its XML about 4 ms, generating its layout about 25 ms. ``world_model(layout, catalog, spec)``
+gives the compiled model of a layout's world and makes it once:
 
-- the XML is ``envs.task.RoomTask``'s, byte for byte: the shell (arena, walls, floors, lights and
-  the robot) from dm_control's elements, kept in this process per shell (the days of a house, its
-  episodes' layouts without the other instances share one), and the furniture and small objects
-  written directly (``envs.entities.objects_xml``, the same bytes as the elements give);
+- the XML is ``envs.task.RoomTask``'s, byte for byte, written as text: the robot's and the
+  arena's fixed elements from dm_control's once per robot (``_template``), the layout's walls,
+  floors, lights and ceiling (``_layout_elements``, kept per shell: the days of a house and its
+  episodes' layouts share one) and its furniture and small objects (``envs.entities.objects_xml``)
+  written directly, the same bytes as the elements give (tested in every style);
 - the compiled model is kept in this process (``MEMO_WORLDS`` worlds, most recent first); each
   World gets a copy of it (``mj_copyModel``: a World changes its model's colours and lights);
 - the XML is kept on disk in the cache directory's ``worlds/`` (``cache_dir``), so a later
@@ -49,16 +50,24 @@ import mujoco
 import numpy as np
 
 from ctxsearch.envs.arena import (
+    CEILING_RGBA,
     DOOR_HEIGHT,
+    KEY_LIGHTS,
     MAX_IMAGE_SIZE,
+    MAX_LIGHTS,
+    OVERHEAD_GEOM_GROUP,
     PHYSICS_TIMESTEP,
+    ROOM_GEOM_GROUP,
     VIEW_EXTENT,
+    WALL_RGBA,
     WALL_THICKNESS,
     _wall_boxes,
+    floor_rect,
+    room_floor_rgb,
 )
 from ctxsearch.envs.entities import body_name, object_geoms, objects_xml
 from ctxsearch.envs.floorplan import wall_boxes as house_wall_boxes
-from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.task import RoomTask
 from ctxsearch.knowledge.catalog import Catalog
@@ -156,21 +165,148 @@ def build_xml(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[st
 
 
 def _shell(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, str]:
-    """The XML of the layout's world without its objects, and the robot's, kept per shell."""
+    """The XML of the layout's world without its objects, and the robot's, kept per shell:
+    the robot's and the arena's fixed elements from dm_control's (``_template``, once per robot),
+    the layout's walls, floors, lights and ceiling written as ``RoomArena.set_layout`` makes them
+    (the same bytes: ``tests/test_world_store.py`` compares them with the composer task's)."""
     bare = replace(layout, objects=(), support={}, placed_by={}, room_of={})
     key = f"{spec!r}\n{bare!r}"
     got = _shells.get(key)
     if got is None:
-        task = RoomTask(catalog, layout=bare, spec=spec)
-        task.initialize_episode_mjcf(np.random.RandomState(0))  # the rng is not used
-        xml = task.root_entity.mjcf_model.to_xml_string()
-        if xml.count(EMPTY_OBJECTS) != 1:
-            raise RuntimeError("the arena's XML does not hold the objects' entity once")
-        got = _shells[key] = (xml, task.robot.mjcf_model.to_xml_string())
+        got = _shells[key] = _shell_text(bare, spec)
         if len(_shells) > MEMO_SHELLS:
             _shells.popitem(last=False)
     _shells.move_to_end(key)
     return got
+
+
+def composer_shell(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, str]:
+    """``_shell``'s XML as the composer task writes it, through dm_control's elements."""
+    bare = replace(layout, objects=(), support={}, placed_by={}, room_of={})
+    task = RoomTask(catalog, layout=bare, spec=spec)
+    task.initialize_episode_mjcf(np.random.RandomState(0))  # the rng is not used
+    xml = task.root_entity.mjcf_model.to_xml_string()
+    if xml.count(EMPTY_OBJECTS) != 1:
+        raise RuntimeError("the arena's XML does not hold the objects' entity once")
+    return xml, task.robot.mjcf_model.to_xml_string()
+
+
+# the robot's workspace while the template is made: its numbers are replaced by the layout's
+_SENTINEL = (-977.5, 977.5, -988.5, 988.5)
+
+
+@functools.lru_cache(maxsize=8)
+def _template(spec: RobotSpec) -> tuple[str, str, str, str]:
+    """The composer task's XML for ``spec`` cut where a layout's elements go: the part before
+    the house floors' assets, the robot's body, the part from the objects' entity on, and the
+    robot's own XML; their workspace is ``_SENTINEL``'s."""
+    x0, x1, y0, y1 = _SENTINEL
+    door = Door("north", 0.0, 0.9)
+    room = RoomLayout("template", 0, x1 * 2, y1 * 2, 2.5, door, ())
+    xml, robot_xml = composer_shell(room, None, spec)
+    head, rest = xml.split("  </asset>\n", 1)
+    start = rest.index('    <body name="robot/">\n')
+    end = rest.index("\n    </body>\n", start) + len("\n    </body>\n")
+    return head, rest[start:end], rest[rest.index(EMPTY_OBJECTS) :], robot_xml
+
+
+def _workspace(text: str, layout: RoomLayout) -> str:
+    """``text`` with the template's workspace replaced by ``layout``'s (``RoomTask``)."""
+    hw, hd = layout.width / 2, layout.depth / 2
+    x0, x1, y0, y1 = _SENTINEL
+    for (a, b), (c, d) in (((x0, x1), (-hw, hw)), ((y0, y1), (-hd, hd))):
+        text = text.replace(f'range="{_floats((a, b))}"', f'range="{_floats((c, d))}"')
+    return text
+
+
+def _floats(values) -> str:
+    return " ".join(f"{float(v):.17g}" for v in values)
+
+
+def _shell_text(layout: RoomLayout, spec: RobotSpec) -> tuple[str, str]:
+    """The composer task's XML of ``layout`` without objects, and the robot's (``_shell``)."""
+    head, robot_body, tail, robot_xml = _template(spec)
+    assets, elements = _layout_elements(layout)
+    t, h = WALL_THICKNESS, layout.height
+    if layout.is_house:
+        floor = '    <geom name="floor" class="/" type="plane" group="0" size="0.01 0.01 '
+        floor += f'{0.1:.17g}" material="floor" pos="0 0 -0.01"/>'
+    else:
+        size = (layout.width / 2 + t, layout.depth / 2 + t, 0.1)
+        floor = f'    <geom name="floor" class="/" type="plane" group="0" size="{_floats(size)}" '
+        floor += 'material="floor"/>'
+    lights = [
+        f'    <light name="{name}" class="/" directional="true" castshadow="false" '
+        f'pos="{_floats((0, 0, h))}" dir="{_floats(d)}" diffuse="{_floats([c] * 3)}" '
+        f'specular="{_floats([0.05] * 3)}"/>'
+        for name, d, c in KEY_LIGHTS
+    ]
+    xml = "".join(
+        [
+            head,
+            *(line + "\n" for line in assets),
+            "  </asset>\n  <worldbody>\n",
+            *(line + "\n" for line in (floor, *lights)),
+            _workspace(robot_body, layout),
+            *(line + "\n" for line in elements),
+            _workspace(tail, layout),
+        ]
+    )
+    return xml, _workspace(robot_xml, layout)
+
+
+def _layout_elements(layout: RoomLayout) -> tuple[list[str], list[str]]:
+    """The asset lines (the house floors' textures and materials) and the worldbody lines
+    (walls, room floors, room lights, ceiling) ``RoomArena.set_layout`` adds for ``layout``."""
+    t, h = WALL_THICKNESS, layout.height
+    hw, hd = layout.width / 2, layout.depth / 2
+    walls = house_wall_boxes(layout, t, DOOR_HEIGHT) if layout.is_house else _wall_boxes(layout)
+    out = [
+        _box_line(name, OVERHEAD_GEOM_GROUP if name.endswith("lintel") else ROOM_GEOM_GROUP,
+                  half, center, WALL_RGBA)
+        for name, center, half in walls
+    ]  # fmt: skip
+    assets: list[str] = []
+    if layout.is_house:
+        materials: dict[str, str] = {}
+        for room in layout.rooms:
+            if room.style not in materials:
+                k = materials[room.style] = f"house_floor{len(materials)}"
+                rgb = room_floor_rgb(room.style)
+                assets += [
+                    f'    <texture name="{k}" class="/" type="2d" builtin="checker" '
+                    f'rgb1="{_floats(rgb)}" rgb2="{_floats([0.92 * c for c in rgb])}" mark="edge" '
+                    f'markrgb="{_floats([0.8 * c for c in rgb])}" width="64" height="64"/>',
+                    f'    <material name="{k}" class="/" texture="{k}" texrepeat="1 1" '
+                    f'texuniform="true" specular="{0.1:.17g}" reflectance="0"/>',
+                ]
+            x0, y0, x1, y1 = floor_rect(room.outline, hw, hd, t)
+            size, pos = ((x1 - x0) / 2, (y1 - y0) / 2, 0.1), ((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+            out.append(
+                f'    <geom name="floor_room{room.index}" class="/" type="plane" group="0" '
+                f'size="{_floats(size)}" material="{materials[room.style]}" pos="{_floats(pos)}"/>'
+            )
+        largest = sorted(layout.rooms, key=lambda r: -r.area)[: MAX_LIGHTS - len(KEY_LIGHTS)]
+        for room in sorted(largest, key=lambda r: r.index):
+            cx, cy = room.center
+            out.append(
+                f'    <light name="room_light{room.index}" class="/" directional="false" '
+                f'castshadow="false" pos="{_floats((cx, cy, h - 0.3))}" dir="0 0 -1" '
+                f'attenuation="{_floats((1.0, 0.05, 0.0))}" diffuse="{_floats([0.12] * 3)}" '
+                'specular="0 0 0"/>'
+            )
+    out.append(
+        _box_line("ceiling", OVERHEAD_GEOM_GROUP, (hw + t, hd + t, t / 2), (0, 0, h + t / 2),
+                  CEILING_RGBA)
+    )  # fmt: skip
+    return assets, out
+
+
+def _box_line(name: str, group: int, size, pos, rgba) -> str:
+    return (
+        f'    <geom name="{name}" class="/" type="box" group="{group}" size="{_floats(size)}" '
+        f'pos="{_floats(pos)}" rgba="{_floats(rgba)}"/>'
+    )
 
 
 def _digest(xml: str, robot_xml: str) -> str:
