@@ -350,10 +350,15 @@ class World:
             height=self.height,
         )
 
-    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray:
+    def ray_instances(
+        self, origin: np.ndarray, points: np.ndarray, reach: float = 1e3
+    ) -> np.ndarray:
         """(N,) int: the object instance each ray from ``origin`` (3,) through ``points`` (N, 3)
         meets first among the geoms the head camera shows (-1: none, or the room's walls and
-        floor); no image, no time charged (``mj_multiRay``: about 3 us a ray in a house)."""
+        floor); no image, no time charged (``mj_multiRay``: about 3 us a ray in a house).
+        ``reach``: geoms farther than this (m) are left out (MuJoCo's cutoff): a ray that meets
+        nothing within it reads -1, one that does reads the same as without it, and the rays are
+        cheaper (about 30% for a small object's grid in an apartment)."""
         o = np.asarray(origin, float).reshape(3)
         vec = np.asarray(points, float).reshape(-1, 3) - o
         n = len(vec)
@@ -364,7 +369,7 @@ class World:
         dist = np.zeros(n)
         groups = np.asarray(self._head_option.geomgroup, np.uint8)
         mujoco.mj_multiRay(
-            self._m, self._d, o, vec.ravel(), groups, 1, -1, geom, dist, None, n, 1e3
+            self._m, self._d, o, vec.ravel(), groups, 1, -1, geom, dist, None, n, reach
         )
         return np.where(geom >= 0, self._geom_instance[np.maximum(geom, 0)], -1)
 
