@@ -160,11 +160,11 @@ def forget() -> None:
 def build_xml(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, str]:
     """The world's XML (``RoomTask(catalog, layout=layout, spec=spec)``'s, byte for byte) and
     the robot's own XML as attached to it."""
-    shell, robot_xml = _shell(layout, catalog, spec)
+    shell, robot_xml = _shell(layout, spec)
     return shell.replace(EMPTY_OBJECTS, objects_xml(layout, catalog)), robot_xml
 
 
-def _shell(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, str]:
+def _shell(layout: RoomLayout, spec: RobotSpec) -> tuple[str, str]:
     """The XML of the layout's world without its objects, and the robot's, kept per shell:
     the robot's and the arena's fixed elements from dm_control's (``_template``, once per robot),
     the layout's walls, floors, lights and ceiling written as ``RoomArena.set_layout`` makes them
@@ -180,7 +180,7 @@ def _shell(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, 
     return got
 
 
-def composer_shell(layout: RoomLayout, catalog: Catalog, spec: RobotSpec) -> tuple[str, str]:
+def composer_shell(layout: RoomLayout, catalog: Catalog | None, spec: RobotSpec) -> tuple[str, str]:
     """``_shell``'s XML as the composer task writes it, through dm_control's elements."""
     bare = replace(layout, objects=(), support={}, placed_by={}, room_of={})
     task = RoomTask(catalog, layout=bare, spec=spec)
