@@ -42,8 +42,14 @@ MAX_LIGHTS = 7
 VIEW_EXTENT = 10.0  # m: fixed model extent, so znear/zfar below are metric and room-independent
 
 _FLOOR_RGB = ((0.62, 0.58, 0.52), (0.56, 0.52, 0.47))
-_WALL_RGBA = (0.86, 0.85, 0.80, 1.0)
-_CEILING_RGBA = (0.93, 0.93, 0.92, 1.0)
+# Two oblique key lights from above and a weak upward "bounce" light: (name, direction, grey)
+KEY_LIGHTS = (
+    ("key0", (0.5, 0.3, -0.8), 0.45),
+    ("key1", (-0.4, -0.55, -0.75), 0.40),
+    ("bounce", (0.1, 0.2, 1.0), 0.22),
+)
+WALL_RGBA = (0.86, 0.85, 0.80, 1.0)
+CEILING_RGBA = (0.93, 0.93, 0.92, 1.0)
 
 
 class RoomArena(composer.Arena):
@@ -120,15 +126,11 @@ class RoomArena(composer.Arena):
                 directional=True,
                 castshadow=False,
                 pos=[0, 0, 3],
-                dir=d,
+                dir=list(d),
                 diffuse=[c] * 3,
                 specular=[0.05] * 3,
             )
-            for name, d, c in (
-                ("key0", [0.5, 0.3, -0.8], 0.45),
-                ("key1", [-0.4, -0.55, -0.75], 0.40),
-                ("bounce", [0.1, 0.2, 1.0], 0.22),
-            )
+            for name, d, c in KEY_LIGHTS
         ]
         self._shell: list[mjcf.Element] = []
         self._layout: RoomLayout | None = None
@@ -185,7 +187,7 @@ class RoomArena(composer.Arena):
                     type="box",
                     pos=center,
                     size=half,
-                    rgba=_WALL_RGBA,
+                    rgba=WALL_RGBA,
                     group=group,
                 )  # fmt: skip
             )
@@ -199,7 +201,7 @@ class RoomArena(composer.Arena):
                 type="box",
                 pos=[0, 0, h + t / 2],
                 size=[hw + t, hd + t, t / 2],
-                rgba=_CEILING_RGBA,
+                rgba=CEILING_RGBA,
                 group=OVERHEAD_GEOM_GROUP,
             )
         )
@@ -207,7 +209,7 @@ class RoomArena(composer.Arena):
     def _floor_material(self, style: str, k: int) -> mjcf.Element:
         """A checker floor material in the colour of room style ``style`` (the k-th one)."""
         root = self._mjcf_root
-        rgb = _room_floor_rgb(style)
+        rgb = room_floor_rgb(style)
         tex = root.asset.add(
             "texture",
             name=f"house_floor{k}",
@@ -238,7 +240,7 @@ class RoomArena(composer.Arena):
         for room in layout.rooms:
             if room.style not in materials:
                 materials[room.style] = self._floor_material(room.style, len(materials))
-            x0, y0, x1, y1 = _floor_rect(room.outline, hw, hd, t)
+            x0, y0, x1, y1 = floor_rect(room.outline, hw, hd, t)
             self._shell.append(
                 self._mjcf_root.worldbody.add(
                     "geom",
@@ -271,7 +273,7 @@ class RoomArena(composer.Arena):
             )
 
 
-def _floor_rect(
+def floor_rect(
     outline: tuple[float, float, float, float], hw: float, hd: float, t: float
 ) -> tuple[float, float, float, float]:
     """A room's floor: its outline grown to the centre line of each inner wall (so neighbouring
@@ -286,7 +288,7 @@ def _floor_rect(
     )
 
 
-def _room_floor_rgb(style: str) -> list[float]:
+def room_floor_rgb(style: str) -> list[float]:
     """A floor colour per room style: the common ones by name, others from the name's hash."""
     known = {
         "kitchen": (0.78, 0.78, 0.74),

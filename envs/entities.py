@@ -31,28 +31,71 @@ def body_name(instance_id: int) -> str:
     return f"obj{instance_id}"
 
 
-def add_object_body(parent: mjcf.Element, obj: ObjectInstance, otype: ObjectType) -> mjcf.Element:
-    """Add ``obj`` as one static body under ``parent``, one geom per solid part of its shape."""
+def object_geoms(obj: ObjectInstance, otype: ObjectType) -> list[tuple[str, str, list, list, list]]:
+    """The geoms of ``obj``'s body: (name, geom type, size, pos, rgba) per solid part of its
+    shape, in the order the body holds them (names unscoped)."""
     name = body_name(obj.id)
-    body = parent.add("body", name=name, pos=list(obj.position), euler=[0.0, 0.0, float(obj.yaw)])
-    base = np.asarray(otype.color, float)
+    base = [float(c) for c in otype.color]
+    out = []
     for part in solid_parts(otype.shape, obj.size):
-        rgb = np.asarray(part.color, float) if part.color is not None else base * part.color_scale
-        rgba = [*np.clip(rgb, 0.0, 1.0).tolist(), 1.0]
+        if part.color is not None:
+            rgb = [float(c) for c in part.color]
+        else:
+            rgb = [c * part.color_scale for c in base]
+        rgba = [min(max(c, 0.0), 1.0) for c in rgb] + [1.0]  # the same floats as np.clip
         if part.geom == "cylinder":
             size = [part.half[0], part.half[2]]
         else:
             size = list(part.half)
+        out.append((f"{name}_{part.name}", part.geom, size, list(part.center), rgba))
+    return out
+
+
+def add_object_body(parent: mjcf.Element, obj: ObjectInstance, otype: ObjectType) -> mjcf.Element:
+    """Add ``obj`` as one static body under ``parent``, one geom per solid part of its shape."""
+    body = parent.add(
+        "body", name=body_name(obj.id), pos=list(obj.position), euler=[0.0, 0.0, float(obj.yaw)]
+    )
+    for name, geom, size, pos, rgba in object_geoms(obj, otype):
         body.add(
-            "geom",
-            name=f"{name}_{part.name}",
-            type=part.geom,
-            pos=list(part.center),
-            size=size,
-            rgba=rgba,
-            group=OBJECT_GEOM_GROUP,
+            "geom", name=name, type=geom, pos=pos, size=size, rgba=rgba, group=OBJECT_GEOM_GROUP
         )
     return body
+
+
+def _xml_floats(values) -> str:
+    """Numbers as dm_control's MJCF writes them (``%.17g`` each, space-separated): they read
+    back to the same bits."""
+    return " ".join(f"{float(v):.17g}" for v in values)
+
+
+def objects_xml(layout: RoomLayout, catalog: Catalog, scope: str = "objects/") -> str:
+    """The ``<body>`` element that ``RoomObjects(layout, catalog)`` attached under the name scope
+    ``scope`` adds to the world's XML, byte for byte as dm_control's ``to_xml_string`` writes it
+    (indented for the world's ``<worldbody>``), written without building its MJCF elements: a
+    house's hundreds of elements cost dm_control tens of milliseconds, this string a few."""
+    if not layout.objects:
+        return f'    <body name="{scope}"/>\n'
+    lines = [f'    <body name="{scope}">']
+    for obj in layout.objects:
+        head = (
+            f'      <body name="{scope}{body_name(obj.id)}" pos="{_xml_floats(obj.position)}" '
+            f'euler="{_xml_floats((0.0, 0.0, obj.yaw))}"'
+        )
+        geoms = object_geoms(obj, catalog.type(obj.type))
+        if not geoms:
+            lines.append(head + "/>")
+            continue
+        lines.append(head + ">")
+        for name, geom, size, pos, rgba in geoms:
+            lines.append(
+                f'        <geom name="{scope}{name}" class="{scope}" type="{geom}" '
+                f'group="{OBJECT_GEOM_GROUP}" size="{_xml_floats(size)}" pos="{_xml_floats(pos)}" '
+                f'rgba="{_xml_floats(rgba)}"/>'
+            )
+        lines.append("      </body>")
+    lines.append("    </body>")
+    return "\n".join(lines) + "\n"
 
 
 class RoomObjects(composer.Entity):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import zlib
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -627,7 +628,27 @@ def generate_layout(
     style: WorldStyle, seed: int, catalog: Catalog | None = None, day: int = 0
 ) -> RoomLayout:
     """The world of a room style (``generate_room``) or a house style (``generate_house``), the
-    same for the same (style, seed, day); day 0 is the world as first generated."""
-    if isinstance(style, HouseStyle):
-        return generate_house(style, seed, catalog, day=day)
-    return generate_room(style, seed, catalog, day=day)
+    same for the same (style, seed, day); day 0 is the world as first generated. The
+    ``LAYOUTS_KEPT`` worlds asked for last are kept in this process and given again (a world's
+    draw, its episodes' searches, their checks and the truth ask for the same worlds in turn)."""
+    key = (style, int(seed), int(day), catalog)
+    layout = _layouts.get(key)
+    if layout is None:
+        if isinstance(style, HouseStyle):
+            layout = generate_house(style, seed, catalog, day=day)
+        else:
+            layout = generate_room(style, seed, catalog, day=day)
+        _layouts[key] = layout
+        if len(_layouts) > LAYOUTS_KEPT:
+            _layouts.popitem(last=False)
+    _layouts.move_to_end(key)
+    return layout
+
+
+LAYOUTS_KEPT = 64
+_layouts: OrderedDict[tuple, RoomLayout] = OrderedDict()
+
+
+def forget_layouts() -> None:
+    """Empty this process's memory of layouts (``generate_layout``)."""
+    _layouts.clear()

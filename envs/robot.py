@@ -230,7 +230,7 @@ _SAME_BODY = ("body_mass", "body_inertia", "body_pos", "body_quat", "body_ipos",
               "body_gravcomp")  # fmt: skip
 
 
-def robot_dynamics(robot: Robot, model: mujoco.MjModel) -> mujoco.MjModel | None:
+def robot_dynamics(robot: Robot | str, model: mujoco.MjModel) -> mujoco.MjModel | None:
     """The robot alone as a MuJoCo model of its own, for stepping its motion in ``model`` (a
     world it is attached to at the origin): nothing in a world acts on the robot (no contacts,
     no constraints but its own joint limits; every other body is static), so its joints move
@@ -238,8 +238,8 @@ def robot_dynamics(robot: Robot, model: mujoco.MjModel) -> mujoco.MjModel | None
     a quarter of the cost of a house (about 2.5 against 10 us a physics step: MuJoCo poses
     every static body at every step). None where the two models differ in anything the motion
     depends on (the options, the joints, actuators and bodies): then the world's model is
-    stepped."""
-    xml = robot.mjcf_model.to_xml_string()
+    stepped. ``robot``: the entity attached to the world, or its XML as attached."""
+    xml = robot if isinstance(robot, str) else robot.mjcf_model.to_xml_string()
     xml = xml.replace("<worldbody>", '<worldbody><body name="attachment">', 1)
     xml = xml.replace("</worldbody>", "</body></worldbody>", 1)
     opts = tuple(np.asarray(getattr(model.opt, k)).tobytes() for k in _SAME_OPTIONS)

@@ -4,7 +4,8 @@
 objects; everything but the robot is static, so this is cheap) and ``initialize_episode`` puts the
 robot at its start pose. With a style, episode k uses seed ``seed + k``, so a task and a seed give
 the same sequence of rooms. The task works under ``composer.Environment`` (the action is the five
-position-servo targets x, y, yaw, pan, tilt) and is what ``envs.world.World`` drives directly.
+position-servo targets x, y, yaw, pan, tilt); ``envs.world.World`` runs on the compiled model
+of its XML (made once per world: ``envs.world_store``) and makes the task itself on demand.
 
 Its observables are the head camera's images, ``head_rgb`` (H, W, 3) uint8 and ``head_depth``
 (H, W, 1) float32 metres, at ``camera_size`` (width, height), rendered as the World's head camera

@@ -23,6 +23,8 @@ import json
 import os
 import re
 import stat
+import sys
+import tempfile
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
@@ -242,3 +244,34 @@ def read_json(
         raise InputFileError(path, "JSON nested too deeply") from None
     except ValueError as exc:
         raise InputFileError(path, f"not valid JSON ({' '.join(str(exc).split())})") from None
+
+
+def write_bytes(directory: Path, name: str, data: bytes, what: str) -> None:
+    """Store ``data`` as ``directory/name`` (the directory created if needed), atomically; a
+    directory that cannot keep it (read-only, full) is a warning on stderr naming ``what``: the
+    work is done, the cache costs only time."""
+    directory = Path(directory)
+    tmp = None
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, directory / name)
+    except OSError as e:
+        print(f"ctxsearch: warning: {directory}: {what} not kept: {e.strerror or e}",
+              file=sys.stderr)  # fmt: skip
+    finally:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+
+
+def cache_dir() -> Path | None:
+    """The user's ctxsearch cache directory, where work is kept between commands (the episode
+    oracle-prior's ground truth, the remembered map's tours, the worlds' models): ``$CTXSEARCH_CACHE_DIR`` if set (empty: None, no cache),
+    else ``$XDG_CACHE_HOME/ctxsearch`` (default ``~/.cache/ctxsearch``)."""
+    own = os.environ.get("CTXSEARCH_CACHE_DIR")
+    if own is not None:
+        return Path(own) if own.strip() else None
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "ctxsearch"

@@ -291,6 +291,29 @@ def test_episodes_are_deterministic_and_skip_excluded_rooms(catalog):
     assert all(e.target == "Pen" for e in c)
 
 
+def test_a_draw_checks_no_world_beyond_its_last_episode_unless_workers_share_it(catalog):
+    """One after the other, a draw checks the worlds up to the last episode it takes; with
+    several workers a round is at least two per worker. The same episodes and counts either way."""
+    from ctxsearch.agent.search.draw import draw_episodes, serial_worlds
+    from ctxsearch.envs.styles import load_style
+
+    spec = DrawSpec.make(load_style("office", catalog), 1, 7, catalog, 60.0)
+    checked: dict[int, list[int]] = {}
+
+    def counting(workers):
+        def run(check, indices, desc):
+            checked.setdefault(workers, []).extend(indices)
+            return serial_worlds(check, indices, desc)
+
+        return draw_episodes(spec, catalog, workers=workers, runner=run)
+
+    one, two = counting(1), counting(2)
+    assert one == two
+    last = S.held_out_seed(7, max(checked[1]))
+    assert last == one.episodes[-1].room_seed  # the last world checked is the one taken
+    assert len(checked[2]) % 4 == 0 and len(checked[2]) >= len(checked[1])  # rounds of 4
+
+
 def test_unknown_policy_and_rank_are_one_line_errors():
     with pytest.raises(CtxsearchError, match="unknown search policy 'psychic'"):
         resolve(("psychic",), MapMode.GIVEN)

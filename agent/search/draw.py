@@ -321,8 +321,9 @@ def _draw_worlds(
                 f"{where} of style '{spec.style.name}' holds {what} on day {spec.day} that can be "
                 f"searched for (tried {limit} draws){half}"
             )
-        # A round: as many worlds as episodes still needed (at least two per worker).
-        m = min(limit - i, max(n - len(draw.episodes), 2 * workers))
+        # A round: as many worlds as episodes still needed (with several workers, at least two
+        # per worker; with one, no world is checked beyond the last episode taken)
+        m = min(limit - i, max(n - len(draw.episodes), 2 * workers if workers > 1 else 1))
         rounds = runner(check, list(range(i, i + m)), f"episode draw {spec.style.name}")
         i += m
         for world in rounds:

@@ -25,9 +25,6 @@ import functools
 import hashlib
 import json
 import math
-import os
-import sys
-import tempfile
 from collections.abc import Hashable
 from pathlib import Path
 
@@ -36,7 +33,7 @@ import numpy as np
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, OracleView
 from ctxsearch.agent.viewplan import Gaze
 from ctxsearch.envs.robot_spec import RobotPose
-from ctxsearch.knowledge.files import InputFileError, read_json
+from ctxsearch.knowledge.files import InputFileError, read_json, write_bytes
 
 FORMAT = 1
 MAX_DRAW_BYTES = 256 * 2**20  # a draw of 10,000 house episodes is about 30 MB
@@ -179,23 +176,3 @@ def save(directory: Path, key: str, draw: EpisodeDraw) -> None:
 def write_json(directory: Path, key: str, doc: object, what: str) -> None:
     """Store ``doc`` as ``directory/key.json`` (``write_bytes``)."""
     write_bytes(directory, f"{key}.json", json.dumps(doc).encode("utf-8"), what)
-
-
-def write_bytes(directory: Path, name: str, data: bytes, what: str) -> None:
-    """Store ``data`` as ``directory/name`` (the directory created if needed), atomically; a
-    directory that cannot keep it (read-only, full) is a warning on stderr naming ``what``: the
-    work is done, the cache costs only time."""
-    directory = Path(directory)
-    tmp = None
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, directory / name)
-    except OSError as e:
-        print(f"ctxsearch: warning: {directory}: {what} not kept: {e.strerror or e}",
-              file=sys.stderr)  # fmt: skip
-    finally:
-        if tmp is not None:
-            Path(tmp).unlink(missing_ok=True)

@@ -45,10 +45,12 @@ class RenderingBody(Body, Protocol):
 
     sim_time: float
 
-    def ray_instances(self, origin: np.ndarray, points: np.ndarray) -> np.ndarray | None:
+    def ray_instances(
+        self, origin: np.ndarray, points: np.ndarray, reach: float = 1e3
+    ) -> np.ndarray | None:
         """The object instance each ray from ``origin`` (3,) through ``points`` (N, 3) meets
-        first among what the head camera shows (-1: none); None where nothing is rendered. No
-        time charged."""
+        first among what the head camera shows within ``reach`` m (-1: none); None where nothing
+        is rendered. No time charged."""
         ...
 
 
@@ -127,6 +129,7 @@ class OracleEye:
         self.layout = layout
         self._rooms_seen: dict[tuple[float, float], frozenset[int] | None] = {}
         self._ray_points: dict[tuple[int, ...], np.ndarray] = {}  # ``rays_meet``'s grids
+        self._corners: dict[int, np.ndarray] = {}  # the instances' box corners (8, 3)
 
     def rays_meet(self, camera: np.ndarray, o: ObjectInstance) -> bool:
         """False if no ray from ``camera`` (3,) through a grid of points filling ``o``'s
@@ -144,7 +147,16 @@ class OracleEye:
             axes = [(np.arange(k) + 0.5) / k - 0.5 for k in key[1:]]
             grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) * size
             points = self._ray_points[key] = o.box().world_points(grid)
-        hits = self.body.ray_instances(np.asarray(camera, float), points)
+        cam = np.asarray(camera, float)
+        corners = self._corners.get(o.id)
+        if corners is None:
+            unit = np.array(
+                [[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
+            )
+            corners = self._corners[o.id] = o.box().world_points(unit * size)
+        # o's geoms lie in its box: nothing beyond its farthest corner can hide it or be it
+        reach = float(np.sqrt(((corners - cam) ** 2).sum(axis=1).max())) + 0.01
+        hits = self.body.ray_instances(cam, points, reach)
         return hits is None or bool(np.any(hits == o.id))
 
     def may_see(self, xy: np.ndarray, o: ObjectInstance) -> bool:

@@ -23,7 +23,7 @@ image reported) and look-alikes (a Table kept as a Desk) stay in it, as they wou
 The search on the map it leaves is agent.search.remembered's.
 
 Tours are deterministic in (style, seed, day, detector, budget, code) and are kept in the user's
-cache directory (agent.search.truth_store.cache_dir, ``tours/``) under a key over all of them;
+cache directory (knowledge.files.cache_dir, ``tours/``) under a key over all of them;
 a file that does not read back as such a map is a miss (made again, replaced).
 """
 
@@ -43,15 +43,15 @@ from ctxsearch.agent.search import viewpoints as sx
 from ctxsearch.agent.search.config import MapConfig
 from ctxsearch.agent.search.context import SearchContext, SearchStopped
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS, sweep
-from ctxsearch.agent.search.draw_store import code_digest, write_bytes
+from ctxsearch.agent.search.draw_store import code_digest
 from ctxsearch.agent.search.episode import Episode
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.maps import WorldMaps
-from ctxsearch.agent.search.truth_store import cache_dir
 from ctxsearch.envs.detector import Detection, DetectorModel
 from ctxsearch.envs.layout import RoomLayout
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.knowledge.catalog import Catalog
+from ctxsearch.knowledge.files import cache_dir, write_bytes
 from ctxsearch.knowledge.home_map import HomeMap, HomeMapError, RememberedObject, check_types
 
 TOUR_FORMAT = 2  # 2: the map keeps the small objects seen

@@ -21,7 +21,6 @@ these files and may be deleted at any time.
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 from ctxsearch.agent.search.draw_store import code_digest, write_json
@@ -29,18 +28,9 @@ from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import WorldStyle
 from ctxsearch.envs.truth import RoomTruth, TruthError, ground_truth, load_truth, room_contents
 from ctxsearch.knowledge.catalog import Catalog
-from ctxsearch.knowledge.files import InputFileError, read_json
+from ctxsearch.knowledge.files import InputFileError, cache_dir, read_json
 
 FORMAT = 1
-
-
-def cache_dir() -> Path | None:
-    """The user's ctxsearch cache directory (module docstring); None: caching is off."""
-    own = os.environ.get("CTXSEARCH_CACHE_DIR")
-    if own is not None:
-        return Path(own) if own.strip() else None
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "ctxsearch"
 
 
 def truth_key(

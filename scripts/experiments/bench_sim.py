@@ -4,6 +4,12 @@
 - build + compile ms per room: a fresh ``RoomTask`` (arena, robot), the room's MJCF
   (``initialize_episode_mjcf``) and ``mjcf.Physics.from_mjcf_model``; also the per-episode part
   alone (room MJCF + compile, the robot and arena reused) and a whole ``World`` (no renderer);
+- a world's build (generate the layout, its MJCF, compile), four ways: through the composer task
+  as above (``world_build_composer_ms``), the way a World makes it with nothing kept
+  (``world_build_cold_ms``: ``envs.world_store``, memory emptied, no cache on disk), as a later
+  process does (``world_build_disk_ms``: memory emptied, the model's XML read from the cache
+  directory) and as the same process does again (``world_build_cached_ms``: the layout and the
+  compiled model kept in memory; a World copies the model);
 - gazes per second at the World's image size: ``move_head`` (servos stepped in MuJoCo),
   ``capture`` (segmentation + depth) and ``envs.detector.detect``;
 - the same images with a bare ``mujoco.Renderer`` on the same model and scene options: head
@@ -23,6 +29,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco/dm_control are first 
 import json
 import platform
 import statistics
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,10 +40,12 @@ import numpy as np
 from dm_control import mjcf
 from matplotlib.figure import Figure
 
+from ctxsearch.envs import world_store
 from ctxsearch.envs.detector import detect
-from ctxsearch.envs.floorplan import generate_layout
-from ctxsearch.envs.houses import resolve_style
+from ctxsearch.envs.floorplan import forget_layouts, generate_layout
+from ctxsearch.envs.houses import WorldStyle, resolve_style
 from ctxsearch.envs.layout import RoomLayout
+from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.task import RoomTask, start_pose
 from ctxsearch.envs.world import World, gl_renderer
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
@@ -97,6 +106,7 @@ class _Times:
     """Per-sample milliseconds and sizes, gathered over the rooms."""
 
     compile: list[float] = field(default_factory=list)
+    builds: dict[str, list[float]] = field(default_factory=dict)  # world_build_*_ms per room
     episode: list[float] = field(default_factory=list)
     world: list[float] = field(default_factory=list)
     renderer: list[float] = field(default_factory=list)
@@ -140,6 +150,9 @@ def run(
     times = _Times()
     episode_task = RoomTask(catalog, layout=layouts[0])
     rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory(prefix="ctxsearch-bench-sim-") as tmp:
+        for lay in layouts:
+            _time_world_builds(times, style_obj, lay.seed, catalog, Path(tmp))
     for lay in layouts:
         _time_builds(times, lay, catalog, episode_task)
         ms, world = _ms(lambda lay=lay: World(lay, catalog, width=width, height=height))
@@ -242,6 +255,39 @@ def _time_builds(times: _Times, lay: RoomLayout, catalog: Catalog, episode_task:
     )
 
 
+def _time_world_builds(
+    times: _Times, style: WorldStyle, seed: int, catalog: Catalog, cache: Path
+) -> None:
+    """World ``seed``'s build (layout, MJCF, compiled model) the four ways of the module
+    docstring; the process's memory of layouts and worlds is emptied first (and after)."""
+
+    def built(disk: bool, composer: bool = False) -> None:
+        lay = generate_layout(style, seed, catalog)
+        if composer:
+            _build_and_compile(lay, catalog)
+        else:
+            world_store.world_model(lay, catalog, RobotSpec(), disk=disk, directory=cache)
+
+    def forget() -> None:
+        forget_layouts()
+        world_store.forget()
+
+    steps = (
+        ("composer", lambda: built(False, composer=True)),
+        ("cold", lambda: built(False)),
+        ("disk", lambda: built(True)),  # a miss: built and written
+        ("disk", lambda: built(True)),  # read back from the file
+        ("cached", lambda: built(True)),  # kept in memory
+    )
+    for k, (name, step) in enumerate(steps):
+        if name != "cached":
+            forget()
+        ms = _ms(step)[0]
+        if k != 2:
+            times.builds.setdefault(name, []).append(ms)
+    forget()
+
+
 def _time_gazes(
     times: _Times, world: World, lay: RoomLayout, catalog: Catalog, targets: np.ndarray
 ) -> None:
@@ -272,6 +318,8 @@ def _results(times: _Times, gen_ms: list[float]) -> dict:
     return {
         "layouts_per_s": 1e3 / med(gen_ms),
         "compile_ms": med(times.compile),
+        **{f"world_build_{k}_ms": med(v) for k, v in times.builds.items()},
+        "world_build_speedup": med(times.builds["composer"]) / med(times.builds["cached"]),
         "gazes_per_s": 1e3 / med(times.gaze),
         "overhead_ratio": med(times.gaze) / med(times.bare),
         "episode_compile_ms": med(times.episode),
@@ -347,6 +395,15 @@ def format_table(r: dict) -> str:
     rows = [
         ("layouts per second (generate_room)", f"{r['layouts_per_s']:.1f}", ""),
         ("build + compile per room (ms)", f"{r['compile_ms']:.1f}", f"< {t['compile_ms']:.0f}"),
+        (
+            "world build: layout + MJCF + compile, composer task (ms)",
+            f"{r['world_build_composer_ms']:.1f}",
+            "",
+        ),
+        ("  cold: World's way, nothing kept (ms)", f"{r['world_build_cold_ms']:.1f}", ""),
+        ("  XML from the cache directory (ms)", f"{r['world_build_disk_ms']:.1f}", ""),
+        ("  cached: layout and model kept in memory (ms)", f"{r['world_build_cached_ms']:.1f}", ""),
+        ("  speed-up, composer / cached", f"{r['world_build_speedup']:.1f}x", ">= 5x"),
         ("  per episode, robot and arena reused (ms)", f"{r['episode_compile_ms']:.1f}", ""),
         ("  whole World, no renderer (ms)", f"{r['world_ms']:.1f}", ""),
         ("  renderer creation (ms)", f"{r['renderer_init_ms']:.1f}", ""),
