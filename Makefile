@@ -128,7 +128,9 @@ bench-b: $(STAMP)
 # the curve's after 30 houses: the same run as `ctxsearch learn --style apartment --rooms 30 --kb
 # build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice; the old
 # store's WAL files go too (SQLite would replay a stale log into the copy). Both scenarios search
-# the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache). The
+# the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache); the
+# built map's default policies include the ladder of bounds (bound-rooms, bound-target-room,
+# bound-plan: what exact knowledge of one kind would buy there; docs/results.md). The
 # remembered map: "find my phone" (one instance kept) with room context in 60 held-out houses on
 # the day after the robot toured each, and the given map on the same day-1 episodes.
 	rm -f build/kb_apartment.sqlite build/kb_apartment.sqlite-wal build/kb_apartment.sqlite-shm
