@@ -71,7 +71,13 @@ from ctxsearch.envs.layout import Door, RoomLayout
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.task import RoomTask
 from ctxsearch.knowledge.catalog import Catalog
-from ctxsearch.knowledge.files import InputFileError, cache_dir, read_json, write_bytes
+from ctxsearch.knowledge.files import (
+    InputFileError,
+    cache_dir,
+    read_json,
+    tree_hash,
+    write_bytes,
+)
 
 FORMAT = 1
 MEMO_WORLDS = 16  # compiled worlds kept in this process
@@ -101,12 +107,7 @@ class WorldModel:
 def source_digest() -> str:
     """SHA-256 over the source files of the packages that build a world (sorted by path) and
     the versions of MuJoCo and dm_control."""
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for pkg in _PACKAGES:
-        for p in sorted((root / pkg).rglob("*.py")):
-            h.update(str(p.relative_to(root)).encode())
-            h.update(p.read_bytes())
+    h = tree_hash(_PACKAGES)
     h.update(f"mujoco {mujoco.__version__}\ndm_control {metadata.version('dm_control')}".encode())
     return h.hexdigest()
 

@@ -19,6 +19,7 @@ Stdlib only.
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
 import re
@@ -26,7 +27,7 @@ import stat
 import sys
 import tempfile
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ctxsearch.knowledge.errors import CtxsearchError
@@ -275,3 +276,19 @@ def cache_dir() -> Path | None:
         return Path(own) if own.strip() else None
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "ctxsearch"
+
+
+_ROOT = Path(__file__).resolve().parents[1]  # the package's source tree
+
+
+def tree_hash(folders: Iterable[str], pattern: str = "*.py"):
+    """A SHA-256 (hashlib) object over the files matching ``pattern`` under each of ``folders``
+    (relative to the package's source tree), sorted by path, each its relative path and bytes:
+    what a cache key takes of the code or data a result depends on; the caller may add more."""
+    h = hashlib.sha256()
+    for folder in folders:
+        for p in sorted((_ROOT / folder).rglob(pattern)):
+            if p.is_file():
+                h.update(str(p.relative_to(_ROOT)).encode())
+                h.update(p.read_bytes())
+    return h

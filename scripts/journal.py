@@ -32,23 +32,17 @@ from pathlib import Path
 from typing import Any
 
 from ctxsearch.agent.search.draw_store import code_digest, write_bytes
-from ctxsearch.knowledge.files import InputFileError, read_json
+from ctxsearch.knowledge.files import InputFileError, read_json, tree_hash
 
 FORMAT = 1
 MAX_ENTRY_BYTES = 256 * 2**20  # a unit's result (a learned store's bytes in base64 included)
-_ROOT = Path(__file__).resolve().parents[1]
 
 
 @functools.cache
 def assets_digest() -> str:
     """SHA-256 over the files under ``assets/`` (types, styles, houses, detectors), sorted by
     path: the data every unit reads."""
-    h = hashlib.sha256()
-    for p in sorted((_ROOT / "assets").rglob("*")):
-        if p.is_file():
-            h.update(str(p.relative_to(_ROOT)).encode())
-            h.update(p.read_bytes())
-    return h.hexdigest()
+    return tree_hash(["assets"], "*").hexdigest()
 
 
 def file_digest(path: Path | str | None) -> str | None:

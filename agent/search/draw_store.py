@@ -33,7 +33,7 @@ import numpy as np
 from ctxsearch.agent.search.episode import Episode, EpisodeDraw, OracleView
 from ctxsearch.agent.viewplan import Gaze
 from ctxsearch.envs.robot_spec import RobotPose
-from ctxsearch.knowledge.files import InputFileError, read_json, write_bytes
+from ctxsearch.knowledge.files import InputFileError, read_json, tree_hash, write_bytes
 
 FORMAT = 1
 MAX_DRAW_BYTES = 256 * 2**20  # a draw of 10,000 house episodes is about 30 MB
@@ -43,13 +43,7 @@ _PACKAGES = ("agent", "envs", "knowledge")
 @functools.cache
 def code_digest() -> str:
     """SHA-256 over the source files of the packages an episode draw runs (sorted by path)."""
-    root = Path(__file__).resolve().parents[2]
-    h = hashlib.sha256()
-    for pkg in _PACKAGES:
-        for p in sorted((root / pkg).rglob("*.py")):
-            h.update(str(p.relative_to(root)).encode())
-            h.update(p.read_bytes())
-    return h.hexdigest()
+    return tree_hash(_PACKAGES).hexdigest()
 
 
 def draw_key(spec: Hashable) -> str:
