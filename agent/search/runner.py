@@ -25,7 +25,6 @@ from pathlib import Path
 from ctxsearch.agent.interfaces import Body
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.recording import Recorder, open_stream
-from ctxsearch.agent.room_segmentation import RoomLabels
 from ctxsearch.agent.rr_layout import SEARCH_APP, search_blueprint
 from ctxsearch.agent.search import measures
 from ctxsearch.agent.search import space as ss
@@ -269,11 +268,11 @@ class EpisodeWorld:
         handed = spec.info.handed
         if handed is Handed.NOTHING:
             return self.maps
+        if self.given is None:
+            raise CtxsearchError(f"policy '{spec.base}' runs on the built map only")
         if handed is not Handed.PLAN and not self.layout.is_house:
             return self.maps  # one room: knowing it tells nothing
         if handed is Handed.PLAN:
-            if self.given is None:
-                raise CtxsearchError(f"policy '{spec.base}' runs on the built map only")
             # the given map's furniture and its lattice (no point inside furniture, where
             # things can stand from the plan's surfaces); the robot maps the free space itself
             return replace(self.maps, furniture=self.given.furniture, seen=self.given.seen)
@@ -285,8 +284,7 @@ class EpisodeWorld:
         else:
             factors = {self.layout.room_of[o.id]: 1.0 for o in self.layout.objects
                        if o.type == target and o.id in self.layout.room_of}  # fmt: skip
-        labels = RoomLabels.of_plan(self.layout)
-        return replace(self.maps, handed=HandedRooms(labels, factors))
+        return replace(self.maps, handed=HandedRooms(self.given.plan_rooms, factors))
 
     def policy(self, spec: PolicySpec, ep: Episode, maps: WorldMaps) -> SearchPolicy:
         """Policy ``spec`` for episode ``ep``; the oracle gets its view of the truth: the world
