@@ -12,7 +12,6 @@ from scipy import ndimage
 
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.envs.floorplan import (
-    _shared_edge,
     generate_house,
     generate_layout,
     layout_dict,
@@ -30,6 +29,7 @@ from ctxsearch.envs.houses import (
 )
 from ctxsearch.envs.layout import Door
 from ctxsearch.envs.parts import world_parts
+from ctxsearch.envs.plans import _shared_edge
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.rooms import RoomShell, door_entry, generate_room
 from ctxsearch.envs.styles import Style, StyleError, available_styles, load_style
