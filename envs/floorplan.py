@@ -1,6 +1,8 @@
 """Floor plans: ``generate_house(house_style, seed) -> RoomLayout`` (pure data, no MuJoCo).
 
-Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(name)])``.
+Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(name)])``, the
+name being the house style's ``seed_name`` where it has one (a control style that draws another
+style's worlds).
 
 Order of work (steps 1 and 2 in ``envs.plans``):
 1. The rooms: a count per room style from the house style's ranges (redrawn until the total is in
@@ -85,7 +87,8 @@ def generate_house(
     stayed is identified by its type and exact pose (``envs.persistence.stayed``), not its id."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
+    stream = house_hash(house.seed_name or house.name)
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, stream])
     cells, raw, W, D = plan(house, rng)
     height = float(rng.uniform(*house.height))
     ox, oy = W / 2, D / 2  # plan -> house coordinates (origin at the centre)

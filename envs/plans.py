@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ctxsearch.envs.house_rules import LayoutRules, violations
 from ctxsearch.envs.houses import CORRIDOR, HouseError, HouseStyle
 from ctxsearch.envs.styles import Style
 
@@ -96,6 +97,12 @@ def _corridor_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generat
         area[k] += cell.area
     for band in bands:
         rng.shuffle(band)  # type: ignore[arg-type]
+    return _corridor_cells(house, bands, area, c, rng)
+
+
+def _corridor_cells(house: HouseStyle, bands: list[list[_Cell]], area: list[float], c: float, rng):
+    """The corridor plan of two bands of rooms in order (their areas summed in ``area``) beside
+    a corridor ``c`` wide: (cells, passages, W, D) as ``_corridor_plan`` returns them."""
     lengths = [math.sqrt(a * len(b)) for a, b in zip(area, bands, strict=True) if b]
     W = float(np.mean(lengths)) * float(rng.uniform(0.9, 1.15))
     total = sum(area) + c * W
@@ -186,37 +193,13 @@ def _shared_edge(a, b) -> tuple[str, float, float, float] | None:
 def _open_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
     """Recursive subdivision with a spanning tree of doors from the entrance room; None if the
     entrance room has no outside wall long enough or the rooms are not all joined."""
-    total = sum(r.area for r in rooms)
-    lo, hi = house.footprint
-    scale = min(max(total, lo), hi) / total
-    for r in rooms:
-        r.area *= scale
-    total *= scale
-    aspect = float(rng.uniform(1.0, 1.6))
-    W, D = math.sqrt(total * aspect), math.sqrt(total / aspect)
-    if rng.random() < 0.5:
-        W, D = D, W
+    W, D = _open_rect(house, rooms, rng)
     _split(rooms, (0.0, 0.0, W, D), rng)
-    names = [r.style.name if r.style else CORRIDOR for r in rooms]
-    if house.entrance in names:
-        hub = names.index(house.entrance)
-    else:
-        hub = int(np.argmax([r.area for r in rooms]))
-    width = float(rng.uniform(*house.door_width))
-    need = width + 2 * DOOR_MARGIN + WALL
-    passages: list[tuple[int, int, float, float, str, float]] = []
-    # The entrance: the hub's longest outside wall.
-    x0, y0, x1, y1 = rooms[hub].rect
-    outside = [
-        (x1 - x0, "x", y, x0, x1) for y in (0.0, D) if abs(y0 - y) < _E or abs(y1 - y) < _E
-    ] + [(y1 - y0, "y", x, y0, y1) for x in (0.0, W) if abs(x0 - x) < _E or abs(x1 - x) < _E]
-    outside = [o for o in outside if o[0] >= need]
-    if not outside:
+    hub = _hub(house, rooms)
+    entrance = _front_door(house, rooms, hub, W, D, rng)
+    if entrance is None:
         return None
-    _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
-    along = float(rng.uniform(a + need / 2, b - need / 2))
-    xy = (along, fixed) if axis == "x" else (fixed, along)
-    entrance = (hub, -1, xy[0], xy[1], axis, width)
+    passages: list[tuple[int, int, float, float, str, float]] = []
     # Doors: breadth-first from the hub over walls long enough for one.
     joined, queue = {hub}, [hub]
     while queue:
@@ -241,25 +224,248 @@ def _open_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
     return rooms, passages, W, D
 
 
+def _open_rect(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
+    """An open plan's (W, D): the rooms' areas scaled into the footprint, a random aspect."""
+    total = sum(r.area for r in rooms)
+    lo, hi = house.footprint
+    scale = min(max(total, lo), hi) / total
+    for r in rooms:
+        r.area *= scale
+    total *= scale
+    aspect = float(rng.uniform(1.0, 1.6))
+    W, D = math.sqrt(total * aspect), math.sqrt(total / aspect)
+    if rng.random() < 0.5:
+        W, D = D, W
+    return W, D
+
+
+def _hub(house: HouseStyle, rooms: list[_Cell]) -> int:
+    """The entrance room of an open plan: ``house.entrance``'s, else the largest."""
+    names = [r.style.name if r.style else CORRIDOR for r in rooms]
+    if house.entrance in names:
+        return names.index(house.entrance)
+    return int(np.argmax([r.area for r in rooms]))
+
+
+def _front_door(house: HouseStyle, rooms: list[_Cell], hub: int, W: float, D: float, rng):
+    """The entrance passage on the hub's longest outside wall, or None if none is long enough."""
+    width = float(rng.uniform(*house.door_width))
+    need = width + 2 * DOOR_MARGIN + WALL
+    x0, y0, x1, y1 = rooms[hub].rect
+    outside = [
+        (x1 - x0, "x", y, x0, x1) for y in (0.0, D) if abs(y0 - y) < _E or abs(y1 - y) < _E
+    ] + [(y1 - y0, "y", x, y0, y1) for x in (0.0, W) if abs(x0 - x) < _E or abs(x1 - x) < _E]
+    outside = [o for o in outside if o[0] >= need]
+    if not outside:
+        return None
+    _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
+    along = float(rng.uniform(a + need / 2, b - need / 2))
+    xy = (along, fixed) if axis == "x" else (fixed, along)
+    return (hub, -1, xy[0], xy[1], axis, width)
+
+
+# -- 2'. a plan by the house's layout rules --------------------------------------------------------
+RULED_PLAN_TRIES = 300  # candidate plans of a house style with [layout] rules
+Passages = list[tuple[int, int, float, float, str, float]]
+
+
+def _kinds(cells: list[_Cell]) -> list[str]:
+    return [c.style.name if c.style else CORRIDOR for c in cells]
+
+
+def broken(rules: LayoutRules, cells: list[_Cell], passages) -> list[str]:
+    """The rules a plan breaks (``envs.house_rules.violations`` on its cells and passages)."""
+    return violations(rules, _kinds(cells), [(a, b, (x, y)) for a, b, x, y, _, _ in passages])
+
+
+def _chains(rules: LayoutRules, rooms: list[_Cell], rng: np.random.Generator):
+    """Rooms that must stand side by side in a band: chains joined by ``next_to`` pairs (a room
+    has at most two sides in a band; the room by the entrance keeps one free, for the band's end).
+    Returns (chains, pairs), pairs as (i, j) room indices."""
+    kinds = _kinds(rooms)
+    n = len(rooms)
+    chain = {i: [i] for i in range(n)}
+    deg = [0] * n
+    cap = [1 if k == rules.by_entrance else 2 for k in kinds]
+    pairs: list[tuple[int, int]] = []
+    for i in (int(x) for x in rng.permutation(n)):
+        must = rules.must(kinds[i])
+        if not must or CORRIDOR in must or deg[i] >= cap[i]:
+            continue
+        if any(kinds[b if a == i else a] in must for a, b in pairs if i in (a, b)):
+            continue
+        cands = [j for j in range(n) if j != i and kinds[j] in must and deg[j] < cap[j]
+                 and chain[j] is not chain[i] and rules.allowed(kinds[i], kinds[j])]  # fmt: skip
+        if not cands:
+            continue
+        j = cands[int(rng.integers(len(cands)))]
+        a, b = chain[i], chain[j]
+        if a[-1] != i:
+            a.reverse()
+        if b[0] != j:
+            b.reverse()
+        merged = a + b
+        for k in merged:
+            chain[k] = merged
+        deg[i] += 1
+        deg[j] += 1
+        pairs.append((i, j))
+    seen: dict[int, list[int]] = {}
+    for i in range(n):
+        seen.setdefault(id(chain[i]), chain[i])
+    return list(seen.values()), pairs
+
+
+def _ruled_corridor_plan(house: HouseStyle, rules: LayoutRules, rooms: list[_Cell], rng):
+    """A corridor plan whose bands hold each ``next_to`` pair side by side with a door between
+    them, and the room by the entrance first in its band at the front door's end with its door
+    at the band's end."""
+    c = float(rng.uniform(*house.corridor_width))
+    chains, pairs = _chains(rules, rooms, rng)
+    kinds = _kinds(rooms)
+    first = next((i for i in (int(x) for x in rng.permutation(len(rooms)))
+                  if kinds[i] == rules.by_entrance), None)  # fmt: skip
+    bands: list[list[list[int]]] = [[], []]
+    area = [0.0, 0.0]
+    for ch in sorted(chains, key=lambda ch: -sum(rooms[i].area for i in ch)):
+        k = int(np.argmin(area)) if area[0] != area[1] else int(rng.integers(2))
+        bands[k].append(ch)
+        area[k] += sum(rooms[i].area for i in ch)
+    for band in bands:
+        rng.shuffle(band)  # type: ignore[arg-type]
+        for ch in band:
+            if rng.random() < 0.5:
+                ch.reverse()
+        for ch in band:
+            if first in ch:
+                band.remove(ch)
+                band.insert(0, ch if ch[0] == first else ch[::-1])
+                break
+    order = [[rooms[i] for ch in band for i in ch] for band in bands]
+    cells, passages, W, D = _corridor_cells(house, order, area, c, rng)
+    index = {id(cell): k for k, cell in enumerate(cells)}
+    if first is not None:  # its door at the end of its span nearest the front door (x = 0)
+        k = index[id(rooms[first])]
+        a, b, x, y, axis, width = passages[k]
+        x0 = cells[k].rect[0]
+        passages[k] = (a, b, min(x, x0 + WALL / 2 + width / 2 + DOOR_MARGIN), y, axis, width)
+    front = passages.pop()
+    passages.append((front[0], front[1], 0.0, *front[3:]))
+    for i, j in pairs:
+        door = _wall_door(house, cells, index[id(rooms[i])], index[id(rooms[j])], rng)
+        if door is not None:
+            passages.insert(-1, door)
+    if rng.random() < 0.5:  # the front door at either end
+        for cell in cells:
+            x0, y0, x1, y1 = cell.rect
+            cell.rect = (W - x1, y0, W - x0, y1)
+        passages = [(a, b, W - x, y, axis, w) for a, b, x, y, axis, w in passages]
+    return cells, passages, W, D
+
+
+def _wall_door(house: HouseStyle, cells: list[_Cell], i: int, j: int, rng, near=None):
+    """A door between cells i and j on the wall they share (at ``near`` along it, as far as the
+    wall allows, else anywhere), or None if the wall is too short."""
+    edge = _shared_edge(cells[i].rect, cells[j].rect)
+    width = float(rng.uniform(*house.door_width))
+    need = width + 2 * DOOR_MARGIN + WALL
+    if edge is None or edge[3] - edge[2] < need:
+        return None
+    axis, fixed, a, b = edge
+    lo, hi = a + need / 2, b - need / 2
+    along = float(rng.uniform(lo, hi)) if near is None else min(max(near, lo), hi)
+    xy = (along, fixed) if axis == "x" else (fixed, along)
+    return (i, j, xy[0], xy[1], axis, width)
+
+
+def _ruled_open_plan(house: HouseStyle, rules: LayoutRules, rooms: list[_Cell], rng):
+    """An open plan whose doors follow the rules: the room by the entrance opens into the
+    entrance room as near the front door as their wall allows, every ``next_to`` is a door where
+    the rooms share a wall, and the rest join the entrance room's breadth-first over allowed
+    pairs only. None if some room cannot be joined."""
+    W, D = _open_rect(house, rooms, rng)
+    _split(rooms, (0.0, 0.0, W, D), rng)
+    hub = _hub(house, rooms)
+    entrance = _front_door(house, rooms, hub, W, D, rng)
+    if entrance is None:
+        return None
+    kinds = _kinds(rooms)
+    n = len(rooms)
+    passages: Passages = []
+    links: dict[int, set[int]] = {i: set() for i in range(n)}
+
+    def add(i: int, j: int, near=None) -> bool:
+        door = _wall_door(house, rooms, i, j, rng, near)
+        if door is not None:
+            passages.append(door)
+            links[i].add(j)
+            links[j].add(i)
+        return door is not None
+
+    if rules.by_entrance is not None and rules.allowed(rules.by_entrance, kinds[hub]):
+        fx, fy = entrance[2], entrance[3]
+        for i in (int(x) for x in rng.permutation(n)):
+            edge = _shared_edge(rooms[i].rect, rooms[hub].rect)
+            if i != hub and kinds[i] == rules.by_entrance and edge is not None:
+                near = fx if edge[0] == "x" else fy
+                if add(i, hub, near):
+                    break
+    for i in (int(x) for x in rng.permutation(n)):
+        must = rules.must(kinds[i])
+        if not must or any(kinds[j] in must for j in links[i]):
+            continue
+        for j in (int(x) for x in rng.permutation(n)):
+            if j != i and kinds[j] in must and rules.allowed(kinds[i], kinds[j]) and add(i, j):
+                break
+    joined, queue = {hub}, [hub]
+    while queue:
+        i = queue.pop(0)
+        for j in (int(x) for x in rng.permutation(n)):
+            if j in joined:
+                continue
+            if j not in links[i] and not (rules.allowed(kinds[i], kinds[j]) and add(i, j)):
+                continue
+            todo = [j]  # j and every room its doors already join
+            while todo:
+                k = todo.pop()
+                if k not in joined:
+                    joined.add(k)
+                    queue.append(k)
+                    todo.extend(links[k])
+    if len(joined) < n:
+        return None
+    passages.append(entrance)
+    return rooms, passages, W, D
+
+
 def plan(house: HouseStyle, rng: np.random.Generator):
-    best, best_bad = None, math.inf
-    for _ in range(PLAN_TRIES):
+    """The house's plan: candidates drawn in turn until one meets every layout rule and fits
+    every room's style; else the best one found, fewest broken rules first, then least misfit.
+    Without rules it is the first that fits of ``PLAN_TRIES`` (else the one that misses least)."""
+    rules = house.layout_rules
+    tries = PLAN_TRIES if rules is None else RULED_PLAN_TRIES
+    best, best_bad = None, (math.inf, math.inf)
+    for _ in range(tries):
         rooms = _draw_rooms(house, rng)
-        if house.plan == "corridor":
+        if rules is not None and house.plan == "corridor":
+            plan = _ruled_corridor_plan(house, rules, rooms, rng)
+        elif rules is not None:
+            plan = _ruled_open_plan(house, rules, rooms, rng)
+        elif house.plan == "corridor":
             plan = _corridor_plan(house, rooms, rng)
         else:
             plan = _open_plan(house, rooms, rng)
         if plan is None:
             continue
-        bad = _misfit(plan[0])
+        bad = (0 if rules is None else len(broken(rules, plan[0], plan[1])), _misfit(plan[0]))
         if bad < best_bad:
             best, best_bad = plan, bad
-        if bad == 0.0:
+        if bad == (0, 0.0):
             break
     if best is None:
         raise HouseError(
             house.path,
-            f"no plan of {PLAN_TRIES} tried gives every room a door (rooms too small or "
+            f"no plan of {tries} tried gives every room a door (rooms too small or "
             "too many for the footprint?)",
             field="rooms",
         )
