@@ -54,8 +54,9 @@ def violations(
     kinds: Sequence[str],
     doors: Sequence[tuple[int, int, tuple[float, float]]],
 ) -> list[str]:
-    """The rules a plan breaks, one line each (empty: it meets every rule). ``kinds[i]`` is room
-    i's kind; ``doors`` are (room a, room b, door centre) with b = -1 for the front door."""
+    """The rules a plan breaks, one line each starting with the rule (``kitchen.next_to: ...``;
+    empty: it meets every rule). ``kinds[i]`` is room i's kind; ``doors`` are (room a, room b,
+    door centre) with b = -1 for the front door."""
     nbrs: dict[int, set[int]] = {i: set() for i in range(len(kinds))}
     for a, b, _ in doors:
         if b >= 0:
@@ -65,11 +66,12 @@ def violations(
     for kind, listed in rules.next_to:
         for i, k in enumerate(kinds):
             if k == kind and not any(kinds[j] in listed for j in nbrs[i]):
-                out.append(f"{kind} (room {i}) shares no door with {' or '.join(listed)}")
+                out.append(f"{kind}.next_to: room {i} shares no door with {' or '.join(listed)}")
+    only = dict(rules.only_to)
     for i, k in enumerate(kinds):
         for j in sorted(nbrs[i]):
-            if j > i and not rules.allowed(k, kinds[j]):
-                out.append(f"{k} (room {i}) and {kinds[j]} (room {j}) share a door")
+            if k in only and kinds[j] not in only[k]:
+                out.append(f"{k}.only_to: room {i} shares a door with {kinds[j]} (room {j})")
     if rules.by_entrance is not None and rules.by_entrance in kinds:
         out += _entrance_violation(rules.by_entrance, kinds, doors)
     return out
@@ -78,7 +80,7 @@ def violations(
 def _entrance_violation(kind: str, kinds: Sequence[str], doors) -> list[str]:
     front = [(a, c) for a, b, c in doors if b == -1]
     if len(front) != 1:
-        return [f"{kind}: the plan has {len(front)} front doors"]
+        return [f"{kind}.by_entrance: the plan has {len(front)} front doors"]
     hall, (fx, fy) = front[0]
     dist = {}  # room -> distance of its door into the hall from the front door
     for a, b, (x, y) in doors:
@@ -88,7 +90,7 @@ def _entrance_violation(kind: str, kinds: Sequence[str], doors) -> list[str]:
             dist[other] = min(d, dist.get(other, math.inf))
     if dist and kinds[min(dist, key=lambda r: (dist[r], r))] == kind:
         return []
-    return [f"{kind}: no room of it has the door nearest the front door"]
+    return [f"{kind}.by_entrance: no room of it has the door nearest the front door"]
 
 
 def layout_violations(rules: LayoutRules, layout) -> list[str]:

@@ -441,12 +441,19 @@ def _ruled_open_plan(house: HouseStyle, rules: LayoutRules, rooms: list[_Cell], 
 def plan(house: HouseStyle, rng: np.random.Generator):
     """The house's plan: candidates drawn in turn until one meets every layout rule and fits
     every room's style; else the best one found, fewest broken rules first, then least misfit.
-    Without rules it is the first that fits of ``PLAN_TRIES`` (else the one that misses least)."""
+    With rules, the rooms (kinds and areas) are drawn once and only their arrangement is drawn
+    again (the rules would otherwise favour houses without the rooms they constrain). Without
+    rules it is the first that fits of ``PLAN_TRIES`` (else the one that misses least), each
+    try with rooms drawn anew."""
     rules = house.layout_rules
     tries = PLAN_TRIES if rules is None else RULED_PLAN_TRIES
     best, best_bad = None, (math.inf, math.inf)
+    drawn = None if rules is None else _draw_rooms(house, rng)
     for _ in range(tries):
-        rooms = _draw_rooms(house, rng)
+        if drawn is None:
+            rooms = _draw_rooms(house, rng)
+        else:  # the same rooms in every try: the rules never choose which rooms a house has
+            rooms = [_Cell(c.style, c.area) for c in drawn]
         if rules is not None and house.plan == "corridor":
             plan = _ruled_corridor_plan(house, rules, rooms, rng)
         elif rules is not None:

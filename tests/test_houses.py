@@ -491,6 +491,7 @@ GOOD_HOUSE = {
         "entrance": "living_room",
     },
     "rooms": {"living_room": 1, "bedroom": [1, 2]},
+    "layout": {"bedroom": {"only_to": ["living_room"], "by_entrance": True}},
 }
 ODD_VALUES = [-1, 0, 1e9, float("nan"), float("inf"), "x", [], [1], [1, 2, 3], [2, 1], True, {}]
 
@@ -527,12 +528,17 @@ def test_any_house_file_gives_a_style_or_a_one_line_error(tmp_path):
     p.write_text(_toml(GOOD_HOUSE))
     assert isinstance(load_house(p, cat()), HouseStyle)
     cases = []
-    for section in ("house", "rooms"):
+    for section in ("house", "rooms", "layout"):
         for key in GOOD_HOUSE[section]:
             for v in ODD_VALUES:
                 doc = copy.deepcopy(GOOD_HOUSE)
                 doc[section][key] = v
                 cases.append(_toml(doc))
+    for rule in GOOD_HOUSE["layout"]["bedroom"]:  # the layout rules' own fields
+        for v in [*ODD_VALUES, ["sauna"], ["corridor"], ["bedroom", "bedroom"]]:
+            doc = copy.deepcopy(GOOD_HOUSE)
+            doc["layout"]["bedroom"][rule] = v
+            cases.append(_toml(doc))
     for _ in range(40):
         text = bytes(rng.integers(0, 256, int(rng.integers(0, 80))).tolist())
         cases.append(text)
