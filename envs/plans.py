@@ -247,8 +247,12 @@ def _hub(house: HouseStyle, rooms: list[_Cell]) -> int:
     return int(np.argmax([r.area for r in rooms]))
 
 
-def _front_door(house: HouseStyle, rooms: list[_Cell], hub: int, W: float, D: float, rng):
-    """The entrance passage on the hub's longest outside wall, or None if none is long enough."""
+def _front_door(
+    house: HouseStyle, rooms: list[_Cell], hub: int, W: float, D: float, rng, near=None
+):
+    """The entrance passage on the hub's longest outside wall (anywhere along it), or with
+    ``near`` (x, y) at the point of the hub's outside walls nearest it; None if no outside wall
+    is long enough."""
     width = float(rng.uniform(*house.door_width))
     need = width + 2 * DOOR_MARGIN + WALL
     x0, y0, x1, y1 = rooms[hub].rect
@@ -258,8 +262,20 @@ def _front_door(house: HouseStyle, rooms: list[_Cell], hub: int, W: float, D: fl
     outside = [o for o in outside if o[0] >= need]
     if not outside:
         return None
-    _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
-    along = float(rng.uniform(a + need / 2, b - need / 2))
+    if near is None:
+        _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
+        along = float(rng.uniform(a + need / 2, b - need / 2))
+    else:
+
+        def nearest(o) -> tuple[float, float]:  # (the point along the wall, its distance)
+            _, axis, fixed, a, b = o
+            u, v = (near[0], near[1]) if axis == "x" else (near[1], near[0])
+            t = min(max(u, a + need / 2), b - need / 2)
+            return t, math.hypot(t - u, fixed - v)
+
+        wall = min(outside, key=lambda o: (nearest(o)[1], o[1], o[2]))
+        _, axis, fixed, _, _ = wall
+        along = nearest(wall)[0]
     xy = (along, fixed) if axis == "x" else (fixed, along)
     return (hub, -1, xy[0], xy[1], axis, width)
 
@@ -378,17 +394,44 @@ def _wall_door(house: HouseStyle, cells: list[_Cell], i: int, j: int, rng, near=
     return (i, j, xy[0], xy[1], axis, width)
 
 
+def _rows(rooms: list[_Cell], W: float, D: float, rng: np.random.Generator) -> None:
+    """Cut [0, W] x [0, D] into two rows along its longer side and each row across into its rooms
+    (which rooms in which row and their order drawn; areas in proportion): the plans where a room
+    in the middle of one row opens into several rooms of the other, which ``_split``'s first cut
+    across the longer side rarely makes."""
+    order = list(range(len(rooms)))
+    rng.shuffle(order)  # type: ignore[arg-type]
+    k = int(rng.integers(1, len(order))) if len(order) > 1 else 1
+    along = W >= D
+    L, H = (W, D) if along else (D, W)
+    total = sum(r.area for r in rooms)
+    y = 0.0
+    for n, row in enumerate((order[:k], order[k:])):
+        if not row:
+            continue
+        area = sum(rooms[i].area for i in row)
+        y1 = H if n == 1 or k == len(order) else y + H * area / total
+        x = 0.0
+        for j, i in enumerate(row):
+            x1 = L if j == len(row) - 1 else x + L * rooms[i].area / area
+            rooms[i].rect = (x, y, x1, y1) if along else (y, x, y1, x1)
+            x = x1
+        y = y1
+
+
 def _ruled_open_plan(house: HouseStyle, rules: LayoutRules, rooms: list[_Cell], rng):
     """An open plan whose doors follow the rules: the room by the entrance opens into the
-    entrance room as near the front door as their wall allows, every ``next_to`` is a door where
-    the rooms share a wall, and the rest join the entrance room's breadth-first over allowed
-    pairs only. None if some room cannot be joined."""
+    entrance room at the end of their wall nearer the plan's edge and the front door is placed
+    on the entrance room's outside wall nearest that door, every ``next_to`` is a door where the
+    rooms share a wall, and the rest join the entrance room's breadth-first over allowed pairs
+    only. Half the candidates are cut as ``_rows``, half as ``_split``. None if the entrance room
+    has no outside wall long enough or some room cannot be joined."""
     W, D = _open_rect(house, rooms, rng)
-    _split(rooms, (0.0, 0.0, W, D), rng)
+    if rng.random() < 0.5:
+        _rows(rooms, W, D, rng)
+    else:
+        _split(rooms, (0.0, 0.0, W, D), rng)
     hub = _hub(house, rooms)
-    entrance = _front_door(house, rooms, hub, W, D, rng)
-    if entrance is None:
-        return None
     kinds = _kinds(rooms)
     n = len(rooms)
     passages: Passages = []
@@ -402,14 +445,20 @@ def _ruled_open_plan(house: HouseStyle, rules: LayoutRules, rooms: list[_Cell], 
             links[j].add(i)
         return door is not None
 
+    near = None  # the front door goes next to the door of the room by the entrance
     if rules.by_entrance is not None and rules.allowed(rules.by_entrance, kinds[hub]):
-        fx, fy = entrance[2], entrance[3]
         for i in (int(x) for x in rng.permutation(n)):
             edge = _shared_edge(rooms[i].rect, rooms[hub].rect)
-            if i != hub and kinds[i] == rules.by_entrance and edge is not None:
-                near = fx if edge[0] == "x" else fy
-                if add(i, hub, near):
-                    break
+            if i == hub or kinds[i] != rules.by_entrance or edge is None:
+                continue
+            axis, _, a, b = edge  # its door at the end of the wall nearer the plan's edge
+            size = W if axis == "x" else D
+            if add(i, hub, a if min(a, size - a) <= min(b, size - b) else b):
+                near = passages[-1][2:4]
+                break
+    entrance = _front_door(house, rooms, hub, W, D, rng, near)
+    if entrance is None:
+        return None
     for i in (int(x) for x in rng.permutation(n)):
         must = rules.must(kinds[i])
         if not must or any(kinds[j] in must for j in links[i]):

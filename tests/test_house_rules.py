@@ -63,9 +63,8 @@ def test_the_control_is_the_apartment_less_its_rules():
 def test_stock_rules():
     apt = load_house("apartment", cat()).layout_rules
     assert apt == LayoutRules(
-        next_to=(("kitchen", ("living_room",)),),
+        next_to=(("kitchen", ("living_room",)), ("office", ("living_room",))),
         only_to=(("bedroom", ("living_room",)),),
-        by_entrance="office",
     )
     fam = load_house("family_house", cat()).layout_rules
     assert fam.must("kitchen") == ("living_room",) and fam.by_entrance == "office"
@@ -84,14 +83,14 @@ def test_generated_plans_meet_every_rule(name):
     for lay in houses:
         assert layout_violations(st.layout_rules, lay) == [], lay.seed
     kinds = [{r.style for r in lay.rooms} for lay in houses]
-    assert sum("office" in k for k in kinds) >= 5  # the by_entrance rule was put to the test
+    assert sum("office" in k for k in kinds) >= 5  # the office's rule was put to the test
 
 
 def test_the_control_breaks_the_rules_that_the_ruled_style_meets():
     rules = load_house("apartment", cat()).layout_rules
     control = load_house("apartment_shuffled", cat())
     broken = [bool(layout_violations(rules, generate_house(control, s, cat()))) for s in range(30)]
-    assert sum(broken) >= 10  # measured: 76% of 200 control apartments break one
+    assert sum(broken) >= 10  # measured: most of 200 control apartments break one
 
 
 def test_a_broken_rule_is_seen():
