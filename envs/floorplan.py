@@ -17,7 +17,8 @@ Order of work (steps 1 and 2 in ``envs.plans``):
      room (``house.entrance``, else the largest), so the entrance room is the hub.
    Many candidate plans are drawn; the first whose rooms all fit their style (each side at least
    ``MIN_SIDE_FRACTION`` of the style's smallest side, aspect at most ``MAX_ASPECT``) is kept,
-   else the one that misses least.
+   else the one that misses least. A house style's ``[layout]`` rules (which room kinds must or
+   may share a door) change both plans and come first (``envs.plans``, ``envs.house_rules``).
 3. Every room is furnished by its room style's rules with ``envs.rooms.generate_room`` on a
    ``RoomShell`` (the plan's size, all its doors: their fronts are kept clear and lie in one free
    region), then moved into house coordinates; ids are renumbered so they are unique in the house.

@@ -3,7 +3,10 @@ the doors between rooms (pure data; ``envs.floorplan`` furnishes the plan).
 
 ``plan(house, rng)`` draws candidate plans from the house's random stream (steps 1 and 2 of
 ``envs.floorplan``'s order of work) and keeps the first whose rooms all fit their styles, else
-the one that misses least. A plan is (cells, passages, W, D): the cells' rectangles in plan
+the one that misses least. A house style with layout rules (``envs.house_rules``) has its own
+candidates (``_ruled_corridor_plan``, ``_ruled_open_plan``), and the first that meets every
+rule and fits is kept, else the one that breaks fewest rules, then misses least; a style
+without rules draws exactly the plans it drew before rules existed. A plan is (cells, passages, W, D): the cells' rectangles in plan
 coordinates [0, W] x [0, D] (a corridor is a cell of style None) and the passages as
 (room a, room b or -1 for the entrance, x, y, axis, width).
 """
@@ -504,18 +507,18 @@ def plan(house: HouseStyle, rng: np.random.Generator):
         else:  # the same rooms in every try: the rules never choose which rooms a house has
             rooms = [_Cell(c.style, c.area) for c in drawn]
         if rules is not None and house.plan == "corridor":
-            plan = _ruled_corridor_plan(house, rules, rooms, rng)
+            candidate = _ruled_corridor_plan(house, rules, rooms, rng)
         elif rules is not None:
-            plan = _ruled_open_plan(house, rules, rooms, rng)
+            candidate = _ruled_open_plan(house, rules, rooms, rng)
         elif house.plan == "corridor":
-            plan = _corridor_plan(house, rooms, rng)
+            candidate = _corridor_plan(house, rooms, rng)
         else:
-            plan = _open_plan(house, rooms, rng)
-        if plan is None:
+            candidate = _open_plan(house, rooms, rng)
+        if candidate is None:
             continue
-        bad = (0 if rules is None else len(broken(rules, plan[0], plan[1])), _misfit(plan[0]))
+        bad = (0 if rules is None else len(broken(rules, *candidate[:2])), _misfit(candidate[0]))
         if bad < best_bad:
-            best, best_bad = plan, bad
+            best, best_bad = candidate, bad
         if bad == (0, 0.0):
             break
     if best is None:
