@@ -195,7 +195,9 @@ def _check_rules(house: _House, rules: LayoutRules) -> None:
         field = f"layout.{kind}.next_to"
         if not any(_guaranteed(house, kind, t) for t in listed):
             raise house.fail(
-                f"needs one of {list(listed)} in every house (their rooms' min count is 0)", field
+                f"needs one of {list(listed)} in every house (their min counts allow a house "
+                "without one)",
+                field,
             )
         for t in listed:
             if not rules.allowed(kind, t):
