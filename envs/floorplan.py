@@ -1,8 +1,10 @@
 """Floor plans: ``generate_house(house_style, seed) -> RoomLayout`` (pure data, no MuJoCo).
 
-Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(name)])``.
+Deterministic by seed: the random stream is ``np.random.default_rng([seed, crc32(name)])``, the
+name being the house style's ``seed_name`` where it has one (a control style that draws another
+style's worlds).
 
-Order of work:
+Order of work (steps 1 and 2 in ``envs.plans``):
 1. The rooms: a count per room style from the house style's ranges (redrawn until the total is in
    ``house.rooms``), each with a target floor area drawn from its room style's size ranges; the
    areas are scaled so the whole plan (corridor included) is within ``house.footprint``.
@@ -15,7 +17,8 @@ Order of work:
      room (``house.entrance``, else the largest), so the entrance room is the hub.
    Many candidate plans are drawn; the first whose rooms all fit their style (each side at least
    ``MIN_SIDE_FRACTION`` of the style's smallest side, aspect at most ``MAX_ASPECT``) is kept,
-   else the one that misses least.
+   else the one that misses least. A house style's ``[layout]`` rules (which room kinds must or
+   may share a door) change both plans and come first (``envs.plans``, ``envs.house_rules``).
 3. Every room is furnished by its room style's rules with ``envs.rooms.generate_room`` on a
    ``RoomShell`` (the plan's size, all its doors: their fronts are kept clear and lie in one free
    region), then moved into house coordinates; ids are renumbered so they are unique in the house.
@@ -29,265 +32,17 @@ footprint, as a single room's do. ``wall_boxes`` gives them with the door gaps (
 from __future__ import annotations
 
 import math
-import zlib
 from collections import OrderedDict
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ctxsearch.envs.houses import CORRIDOR, HouseError, HouseStyle, WorldStyle
+from ctxsearch.envs.houses import CORRIDOR, HouseStyle, WorldStyle
 from ctxsearch.envs.layout import Door, Passage, Room, RoomLayout
+from ctxsearch.envs.plans import _E, WALL, house_hash, plan
 from ctxsearch.envs.robot_spec import RobotSpec, wrap_angle
 from ctxsearch.envs.rooms import RoomShell, generate_room
-from ctxsearch.envs.styles import Style
 from ctxsearch.knowledge.catalog import Catalog, load_catalog
 from ctxsearch.knowledge.geometry import Box, ObjectInstance
-
-WALL = 0.1  # m, wall thickness (the arena's WALL_THICKNESS)
-DOOR_MARGIN = 0.35  # m kept between a door's edge and the corner of either room it joins
-MIN_SIDE_FRACTION = 0.8  # a room's sides: at least this much of its style's smallest side
-MAX_ASPECT = 2.2
-PLAN_TRIES = 60
-COUNT_TRIES = 100
-_E = 1e-6
-
-
-@dataclass
-class _Cell:
-    """A room of the plan before furnishing: its style (None: the corridor) and cell rectangle."""
-
-    style: Style | None
-    area: float
-    rect: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-    doors: list[int] = field(default_factory=list)  # indices into the plan's passages
-
-
-def house_hash(name: str) -> int:
-    """A stable (cross-process, cross-platform) hash of a house style name for seeding."""
-    return zlib.crc32(("house:" + name).encode("utf-8"))
-
-
-# -- 1. which rooms -------------------------------------------------------------------------------
-def _draw_rooms(house: HouseStyle, rng: np.random.Generator) -> list[_Cell]:
-    counts: list[int] = []
-    for _ in range(COUNT_TRIES):
-        counts = [int(rng.integers(lo, hi + 1)) for _, (lo, hi) in house.rooms]
-        if house.total[0] <= sum(counts) <= house.total[1]:
-            break
-    else:  # clip: drop optional rooms from the end, or add required ones
-        while sum(counts) > house.total[1]:
-            i = max(i for i, c in enumerate(counts) if c > house.rooms[i][1][0])
-            counts[i] -= 1
-        while sum(counts) < house.total[0]:
-            i = min(i for i, c in enumerate(counts) if c < house.rooms[i][1][1])
-            counts[i] += 1
-    cells = []
-    for (style, _), k in zip(house.rooms, counts, strict=True):
-        for _ in range(k):
-            w, d = rng.uniform(*style.width), rng.uniform(*style.depth)
-            cells.append(_Cell(style, float(w * d)))
-    return cells
-
-
-def _min_side(style: Style) -> float:
-    return MIN_SIDE_FRACTION * min(style.width[0], style.depth[0])
-
-
-def _misfit(cells: list[_Cell]) -> float:
-    """How far the plan's rooms are from fitting their styles (0: all fit)."""
-    bad = 0.0
-    for c in cells:
-        x0, y0, x1, y1 = c.rect
-        w, d = x1 - x0 - WALL, y1 - y0 - WALL
-        if c.style is None:
-            continue
-        lim = _min_side(c.style)
-        bad += max(0.0, lim - w) + max(0.0, lim - d)
-        bad += max(0.0, max(w, d) / max(min(w, d), 1e-3) - MAX_ASPECT)
-    return bad
-
-
-# -- 2. the plan ------------------------------------------------------------------------------------
-def _corridor_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
-    """Cells (corridor last) and passages (room, corridor) + the entrance, in plan coordinates
-    [0, W] x [0, D]. Returns (cells, passages, W, D)."""
-    c = float(rng.uniform(*house.corridor_width))
-    bands: list[list[_Cell]] = [[], []]
-    area = [0.0, 0.0]
-    for cell in sorted(rooms, key=lambda r: -r.area):
-        k = int(np.argmin(area)) if area[0] != area[1] else int(rng.integers(2))
-        bands[k].append(cell)
-        area[k] += cell.area
-    for band in bands:
-        rng.shuffle(band)  # type: ignore[arg-type]
-    lengths = [math.sqrt(a * len(b)) for a, b in zip(area, bands, strict=True) if b]
-    W = float(np.mean(lengths)) * float(rng.uniform(0.9, 1.15))
-    total = sum(area) + c * W
-    lo, hi = house.footprint
-    scale = 1.0
-    if total > hi:
-        scale = (hi - c * W) / sum(area)
-    elif total < lo:
-        scale = (lo - c * W) / sum(area)
-    scale = max(scale, 0.3)
-    W *= math.sqrt(scale)
-    depths = [a * scale / W for a in area]
-    D = depths[0] + c + depths[1]
-    y_band = [(0.0, depths[0]), (depths[0] + c, D)]
-    corridor = _Cell(None, c * W, (0.0, depths[0], W, depths[0] + c))
-    cells: list[_Cell] = []
-    for k, band in enumerate(bands):
-        x = 0.0
-        for cell in band:
-            w = cell.area * scale / depths[k]
-            cell.rect = (x, y_band[k][0], x + w, y_band[k][1])
-            x += w
-        if band:  # round-off: the last room ends exactly at W
-            r = band[-1].rect
-            band[-1].rect = (r[0], r[1], W, r[3])
-        cells.extend(band)
-    cells.append(corridor)
-    ci = len(cells) - 1
-    passages: list[tuple[int, int, float, float, str, float]] = []  # (a, b, x, y, axis, width)
-    for i, cell in enumerate(cells[:-1]):
-        x0, _, x1, _ = cell.rect
-        y_wall = depths[0] if cell.rect[1] < depths[0] else depths[0] + c
-        width = float(rng.uniform(*house.door_width))
-        span = (x0 + WALL / 2 + width / 2 + DOOR_MARGIN, x1 - WALL / 2 - width / 2 - DOOR_MARGIN)
-        if span[0] > span[1]:
-            x = (x0 + x1) / 2
-        else:
-            x = float(rng.uniform(*span))
-        passages.append((i, ci, x, y_wall, "x", width))
-    width = float(rng.uniform(*house.door_width))
-    x_end = 0.0 if rng.random() < 0.5 else W
-    passages.append((ci, -1, x_end, depths[0] + c / 2, "y", min(width, c - 0.3)))
-    return cells, passages, W, D
-
-
-def _split(cells: list[_Cell], rect, rng: np.random.Generator) -> None:
-    """Cut ``rect`` into the cells' rectangles (areas in proportion), recursively."""
-    if len(cells) == 1:
-        cells[0].rect = rect
-        return
-    order = list(cells)
-    rng.shuffle(order)  # type: ignore[arg-type]
-    areas = np.array([c.area for c in order])
-    cum = np.cumsum(areas)[:-1]
-    k = int(np.argmin(np.abs(cum - areas.sum() / 2))) + 1
-    if len(order) > 2 and rng.random() < 0.3:
-        k = int(rng.integers(1, len(order)))
-    a, b = order[:k], order[k:]
-    frac = sum(c.area for c in a) / areas.sum()
-    x0, y0, x1, y1 = rect
-    if (x1 - x0) >= (y1 - y0):
-        xm = x0 + frac * (x1 - x0)
-        _split(a, (x0, y0, xm, y1), rng)
-        _split(b, (xm, y0, x1, y1), rng)
-    else:
-        ym = y0 + frac * (y1 - y0)
-        _split(a, (x0, y0, x1, ym), rng)
-        _split(b, (x0, ym, x1, y1), rng)
-
-
-def _shared_edge(a, b) -> tuple[str, float, float, float] | None:
-    """The wall two cells share: (axis it runs along, its fixed coordinate, lo, hi), or None."""
-    ax0, ay0, ax1, ay1 = a
-    bx0, by0, bx1, by1 = b
-    for xa, xb in ((ax1, bx0), (bx1, ax0)):
-        if abs(xa - xb) < _E:
-            lo, hi = max(ay0, by0), min(ay1, by1)
-            if hi > lo:
-                return "y", xa, lo, hi
-    for ya, yb in ((ay1, by0), (by1, ay0)):
-        if abs(ya - yb) < _E:
-            lo, hi = max(ax0, bx0), min(ax1, bx1)
-            if hi > lo:
-                return "x", ya, lo, hi
-    return None
-
-
-def _open_plan(house: HouseStyle, rooms: list[_Cell], rng: np.random.Generator):
-    """Recursive subdivision with a spanning tree of doors from the entrance room; None if the
-    entrance room has no outside wall long enough or the rooms are not all joined."""
-    total = sum(r.area for r in rooms)
-    lo, hi = house.footprint
-    scale = min(max(total, lo), hi) / total
-    for r in rooms:
-        r.area *= scale
-    total *= scale
-    aspect = float(rng.uniform(1.0, 1.6))
-    W, D = math.sqrt(total * aspect), math.sqrt(total / aspect)
-    if rng.random() < 0.5:
-        W, D = D, W
-    _split(rooms, (0.0, 0.0, W, D), rng)
-    names = [r.style.name if r.style else CORRIDOR for r in rooms]
-    if house.entrance in names:
-        hub = names.index(house.entrance)
-    else:
-        hub = int(np.argmax([r.area for r in rooms]))
-    width = float(rng.uniform(*house.door_width))
-    need = width + 2 * DOOR_MARGIN + WALL
-    passages: list[tuple[int, int, float, float, str, float]] = []
-    # The entrance: the hub's longest outside wall.
-    x0, y0, x1, y1 = rooms[hub].rect
-    outside = [
-        (x1 - x0, "x", y, x0, x1) for y in (0.0, D) if abs(y0 - y) < _E or abs(y1 - y) < _E
-    ] + [(y1 - y0, "y", x, y0, y1) for x in (0.0, W) if abs(x0 - x) < _E or abs(x1 - x) < _E]
-    outside = [o for o in outside if o[0] >= need]
-    if not outside:
-        return None
-    _, axis, fixed, a, b = max(outside, key=lambda o: (o[0], o[1]))
-    along = float(rng.uniform(a + need / 2, b - need / 2))
-    xy = (along, fixed) if axis == "x" else (fixed, along)
-    entrance = (hub, -1, xy[0], xy[1], axis, width)
-    # Doors: breadth-first from the hub over walls long enough for one.
-    joined, queue = {hub}, [hub]
-    while queue:
-        i = queue.pop(0)
-        nbrs = [j for j in range(len(rooms)) if j not in joined]
-        rng.shuffle(nbrs)  # type: ignore[arg-type]
-        for j in nbrs:
-            edge = _shared_edge(rooms[i].rect, rooms[j].rect)
-            width = float(rng.uniform(*house.door_width))
-            need = width + 2 * DOOR_MARGIN + WALL
-            if edge is None or edge[3] - edge[2] < need:
-                continue
-            axis, fixed, a, b = edge
-            along = float(rng.uniform(a + need / 2, b - need / 2))
-            xy = (along, fixed) if axis == "x" else (fixed, along)
-            passages.append((i, j, xy[0], xy[1], axis, width))
-            joined.add(j)
-            queue.append(j)
-    if len(joined) < len(rooms):
-        return None
-    passages.append(entrance)
-    return rooms, passages, W, D
-
-
-def _plan(house: HouseStyle, rng: np.random.Generator):
-    best, best_bad = None, math.inf
-    for _ in range(PLAN_TRIES):
-        rooms = _draw_rooms(house, rng)
-        if house.plan == "corridor":
-            plan = _corridor_plan(house, rooms, rng)
-        else:
-            plan = _open_plan(house, rooms, rng)
-        if plan is None:
-            continue
-        bad = _misfit(plan[0])
-        if bad < best_bad:
-            best, best_bad = plan, bad
-        if bad == 0.0:
-            break
-    if best is None:
-        raise HouseError(
-            house.path,
-            f"no plan of {PLAN_TRIES} tried gives every room a door (rooms too small or "
-            "too many for the footprint?)",
-            field="rooms",
-        )
-    return best
 
 
 # -- 3. furnishing ----------------------------------------------------------------------------------
@@ -334,8 +89,9 @@ def generate_house(
     stayed is identified by its type and exact pose (``envs.persistence.stayed``), not its id."""
     catalog = catalog or load_catalog()
     robot = robot or RobotSpec()
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, house_hash(house.name)])
-    cells, raw, W, D = _plan(house, rng)
+    stream = house_hash(house.seed_name or house.name)
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFFFFFFFFFF, stream])
+    cells, raw, W, D = plan(house, rng)
     height = float(rng.uniform(*house.height))
     ox, oy = W / 2, D / 2  # plan -> house coordinates (origin at the centre)
     passages = tuple(

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ctxsearch.envs.house_rules import CORRIDOR as CORRIDOR  # re-exported: the hall's style name
+from ctxsearch.envs.house_rules import LayoutRules, parse_layout
 from ctxsearch.envs.styles import (
     STYLES_DIR,
     Style,
@@ -24,12 +26,20 @@ from ctxsearch.knowledge.catalog import ASSETS_DIR, Catalog, asset_file, load_ca
 from ctxsearch.knowledge.files import InputFileError, read_toml
 
 HOUSES_DIR = ASSETS_DIR / "houses"
-TOP_FIELDS = {"name", "description", "house", "rooms"}
-HOUSE_FIELDS = {"rooms", "footprint", "height", "plan", "corridor_width", "door_width", "entrance"}
+TOP_FIELDS = {"name", "description", "house", "rooms", "layout"}
+HOUSE_FIELDS = {
+    "rooms",
+    "footprint",
+    "height",
+    "plan",
+    "corridor_width",
+    "door_width",
+    "entrance",
+    "seed_name",
+}
 PLANS = ("corridor", "open")
 FOOTPRINT_LIMITS = (20.0, 400.0)  # m^2: what the plan generator is built for
 MAX_ROOMS = 12
-CORRIDOR = "corridor"  # the style name of a plan's corridor (a room with no furniture)
 
 
 class HouseError(StyleError):
@@ -51,6 +61,8 @@ class HouseStyle:
     corridor_width: tuple[float, float]
     door_width: tuple[float, float]
     entrance: str | None  # the room style whose room has the entrance ('open' plans)
+    layout_rules: LayoutRules | None = None  # which room kinds must or may share doors (None: none)
+    seed_name: str = ""  # the name the random stream is keyed by ('': the style's own name)
 
     @property
     def types(self) -> tuple[str, ...]:
@@ -152,7 +164,10 @@ def _house_table(doc: dict, path) -> dict:
         "corridor_width": num("corridor_width", [1.3, 1.6], 1.2, 4.0),
         "door_width": num("door_width", [0.85, 1.0], 0.75, 1.6),
         "entrance": house.get("entrance"),
+        "seed_name": house.get("seed_name", ""),
     }
+    if not isinstance(out["seed_name"], str):
+        raise HouseError(path, "must be a house style's name", field="house.seed_name")
     if out["plan"] not in PLANS:
         raise HouseError(path, f"must be one of {PLANS}, got {out['plan']!r}", field="house.plan")
     door, corridor = out["door_width"], out["corridor_width"]
@@ -218,7 +233,18 @@ def parse_house(doc: dict, path: str | Path, catalog: Catalog) -> HouseStyle:
     house = _house_table(doc, path)
     rooms = _rooms(doc, path, catalog)
     _check_consistent(path, house, rooms)
-    return HouseStyle(name=name, path=str(path), description=desc, rooms=tuple(rooms), **house)
+    rules = None
+    if "layout" in doc:
+        counts: dict[str, tuple[int, int]] = {}
+        for s, (lo, hi) in rooms:  # a room style listed twice (by name and path) adds up
+            c = counts.get(s.name, (0, 0))
+            counts[s.name] = (c[0] + lo, c[1] + hi)
+        rules = parse_layout(
+            doc["layout"], path, counts, house["plan"], house["entrance"], HouseError
+        )
+    return HouseStyle(
+        name=name, path=str(path), description=desc, rooms=tuple(rooms), layout_rules=rules, **house
+    )
 
 
 def _read(path: Path, cls: type[StyleError]) -> dict:

@@ -210,3 +210,14 @@ def test_no_duck_typed_probes_in_the_loop_and_the_search():
         for node in ast.walk(mods[rel]):
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
                 assert node.func.id not in ("getattr", "hasattr"), f"{rel}:{node.lineno}"
+
+
+def test_the_robot_never_reads_the_layout_rules():
+    """A house style's [layout] rules are world-generation data (envs.plans): nothing in agent/
+    imports them or reads ``HouseStyle.layout_rules``; the robot learns adjacency by looking."""
+    rules = {"ctxsearch.envs.house_rules", "ctxsearch.envs.plans"}
+    for rel, tree in _files(("agent",)).items():
+        assert not {m for m in _imports(tree) if m in rules or m.rsplit(".", 1)[0] in rules}, rel
+        attrs = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+        assert not {"layout_rules", "LayoutRules"} & (attrs | names), rel

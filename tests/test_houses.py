@@ -12,7 +12,6 @@ from scipy import ndimage
 
 from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.envs.floorplan import (
-    _shared_edge,
     generate_house,
     generate_layout,
     layout_dict,
@@ -30,6 +29,7 @@ from ctxsearch.envs.houses import (
 )
 from ctxsearch.envs.layout import Door
 from ctxsearch.envs.parts import world_parts
+from ctxsearch.envs.plans import _shared_edge
 from ctxsearch.envs.robot_spec import RobotSpec
 from ctxsearch.envs.rooms import RoomShell, door_entry, generate_room
 from ctxsearch.envs.styles import Style, StyleError, available_styles, load_style
@@ -215,10 +215,9 @@ def test_reachability_check_sees_a_closed_door():
     lay = houses("family_house")[0]
     import dataclasses
 
-    shut = dataclasses.replace(
-        lay, doors=tuple(p for p in lay.doors if p.rooms != lay.doors[0].rooms)
-    )
-    assert reachable_rooms(shut) == set(range(len(lay.rooms))) - {lay.doors[0].rooms[0]}
+    room = lay.doors[0].rooms[0]  # every door of it shut (the corridor's, a neighbour's)
+    shut = dataclasses.replace(lay, doors=tuple(p for p in lay.doors if room not in p.rooms))
+    assert reachable_rooms(shut) == set(range(len(lay.rooms))) - {room}
 
 
 @pytest.mark.parametrize("name", HOUSES)
@@ -492,6 +491,7 @@ GOOD_HOUSE = {
         "entrance": "living_room",
     },
     "rooms": {"living_room": 1, "bedroom": [1, 2]},
+    "layout": {"bedroom": {"only_to": ["living_room"], "by_entrance": True}},
 }
 ODD_VALUES = [-1, 0, 1e9, float("nan"), float("inf"), "x", [], [1], [1, 2, 3], [2, 1], True, {}]
 
@@ -528,12 +528,17 @@ def test_any_house_file_gives_a_style_or_a_one_line_error(tmp_path):
     p.write_text(_toml(GOOD_HOUSE))
     assert isinstance(load_house(p, cat()), HouseStyle)
     cases = []
-    for section in ("house", "rooms"):
+    for section in ("house", "rooms", "layout"):
         for key in GOOD_HOUSE[section]:
             for v in ODD_VALUES:
                 doc = copy.deepcopy(GOOD_HOUSE)
                 doc[section][key] = v
                 cases.append(_toml(doc))
+    for rule in GOOD_HOUSE["layout"]["bedroom"]:  # the layout rules' own fields
+        for v in [*ODD_VALUES, ["sauna"], ["corridor"], ["bedroom", "bedroom"]]:
+            doc = copy.deepcopy(GOOD_HOUSE)
+            doc["layout"]["bedroom"][rule] = v
+            cases.append(_toml(doc))
     for _ in range(40):
         text = bytes(rng.integers(0, 256, int(rng.integers(0, 80))).tolist())
         cases.append(text)
