@@ -302,7 +302,9 @@ def test_target_density_spreads_each_volume_and_does_not_count_overlaps_twice():
     w = ss.target_density([a, b], surveyed)
     assert np.allclose(w[:3], 0.2)  # 0.6 / 3 beats 0.2 / 2 at the shared point 2
     assert np.isclose(w[3], 0.1)
-    assert np.allclose(w[4:], 0.8 / 8)  # (0.6 + 0.2) over the 8 surveyed points
+    # The mass the volumes give the surveyed part, the shared point once: 3 * 0.2 + 0.1 = 0.7
+    # (not 0.6 + 0.2), over its 8 points.
+    assert np.allclose(w[4:], 0.7 / 8)
     assert ss.target_density([], surveyed) is None
     assert ss.target_density([ss.Region(None, 0.0, [("NEAR-DESK", 1)], np.array([1]))],
                              surveyed) is None  # fmt: skip

@@ -509,8 +509,9 @@ def target_density(
     A point inside relation volumes gets the largest of their densities p_r / |r| (a volume's
     probability spread over its points; overlapping volumes, NEAR-DESK and NEAR-CHAIR around
     one desk, are not evidence twice). Every other point gets the mean density of the surveyed
-    part, sum p_r / |surveyed|: the part not explored yet is expected to hold furniture, and
-    with it the target, as the part explored so far did, and the floor between the known
+    part (the mass the volumes give its points, each point once, over its points): the part not
+    explored yet is expected to hold furniture, and with it the target, as the part explored so
+    far did, and the floor between the known
     volumes (where clutter may lie) is not assumed empty. The search policies normalise it over
     what is left to see, so the share of it an image or a volume shows is the probability that
     the target is there given that it was not found yet (``SearchContext.online_search``). The
@@ -529,7 +530,7 @@ def target_density(
     for r in regions:
         w[r.points] = np.maximum(w[r.points], r.p / float(stand[r.points].sum()))
         covered[r.points] = True
-    mass = float(sum(r.p for r in regions))
+    mass = float((w * stand)[covered].sum())
     base = mass / max(float(stand[surveyed | covered].sum()), 1.0)
     w[~covered] = base
     return w * stand
