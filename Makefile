@@ -77,6 +77,13 @@ bench-a: $(STAMP)
 # Detector x interval against the truth, camera mode, apartment after 3 and 10 houses (14 runs: 7
 # detector settings x 2 seeds).
 	$(T) $(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 400 --out results/intervals_apartment --workers $(WORKERS)
+# HIF against other strategies (office), and detector x interval against the truth, camera mode:
+# office after 10 and 30 rooms (14 runs: 7 detector settings x 2 seeds). In lane A with the
+# apartment's: lane B's searches are the longer lane (on 2026-12-05 make bench took 61 minutes,
+# lane B 60 of them with these 11 minutes in it, lane A 37).
+	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
+	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
+	$(T) $(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
 # The robot's rooms against the plans: 10 houses of every stock house style, explored and segmented.
 	$(T) $(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
 	$(T) $(CTX) room --style family_house --seed 1 --views 0 --out results/rooms/family_house_1
@@ -137,14 +144,9 @@ bench-b: $(STAMP)
 	mkdir -p build && cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --episodes 200 --quiet --out results/search_apartment_given --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --set map.home=tour --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --set map.days_after=1 --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_given_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench transfer --styles office,biology_lab --rooms 10 --episodes 30 --quiet --out results/transfer --workers $(WORKERS)
-	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --out results/learning --workers $(WORKERS)
-	$(T) $(CTX) bench learning --style office --rooms 20 --seeds 5 --strategies $(STRATEGIES) --room-budget 60 --out results/learning_budget --workers $(WORKERS)
-# Detector x interval against the truth, camera mode: office after 10 and 30 rooms (14 runs: 7
-# detector settings x 2 seeds; the apartment's are in lane A).
-	$(T) $(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
