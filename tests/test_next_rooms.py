@@ -189,3 +189,25 @@ def test_next_rooms_is_part_of_room_context():
         SearchConfig(knowledge=KnowledgeConfig(next_rooms=True))
     cfg = SearchConfig(knowledge=KnowledgeConfig(next_rooms=True, room_context=True))
     assert cfg.knowledge.glimpse_m == 2.0
+
+
+def test_a_built_map_search_records_the_mass_beyond_each_mapped_room(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from tests.rrd_files import _columns
+
+    rrd = tmp_path / "s.rrd"
+    cmd = [sys.executable, "-m", "ctxsearch.scripts.cli", "search", "--style", "apartment",
+           "--map", "built", "--target", "Cup", "--policy", "oracle-prior-indirect",
+           "--room-context", "--set", "knowledge.next_rooms=true", "--truth-samples", "3",
+           "--budget-seconds", "30", "--record", str(rrd)]  # fmt: skip
+    subprocess.run(cmd, capture_output=True, text=True, check=True)
+    labels, masses = [], []
+    for c in RrdReader(rrd).stream():
+        cols = _columns(c)
+        if c.entity_path == "/world/search/beyond":
+            labels += [lab for row in cols.get("Points3D:labels", []) for lab in row]
+        if c.entity_path == "/search/beyond_mass/oracle-prior-indirect":
+            masses += [v[0] for v in cols["Scalars:scalars"]]
+    assert labels and all(lab.startswith("beyond room ") for lab in labels)
+    assert masses and all(0.0 < m <= 1.0 + 1e-9 for m in masses)
