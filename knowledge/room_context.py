@@ -37,16 +37,20 @@ Next-room relations: what lies through a door. From the same visits, with the se
 visit's remembered map keeps (``HomeMap.rooms``; the segments meet where a door joins two rooms:
 ``segment_neighbours``), in hindsight once the house is mapped:
 
-    m_F      = the pairs (segment holding furniture type F, a segment sharing a door with it)
+    m_F      = the pairs (segment holding furniture type F, a segment with furniture its doors
+               lead to)
     z_{F,T}  = those whose other segment holds a T
     P(NEXT-ROOM-OF-F(T)) in the Wilson interval of (z_{F,T}, m_F)
 
-the probability that a room through a door of a room holding an F holds a T: the mass the
-search gives the space beyond a mapped room's doors (agent.search.room_prior). The unit is the
-pair, not the room: the space beyond each door is a room of its own (a room with three doors
-counts three times, and its pairs share the room, so the interval is somewhat narrower than the
-trials are independent). A neighbour without recognized furniture (a hallway) counts, holding
-what it held. A visit without a remembered map (a given-map visit) counts for no pair.
+the probability that a room a door of a room holding an F leads to holds a T: the mass the
+search gives the space beyond a mapped room's doors (agent.search.room_prior). A door leads
+through segments without recognized furniture (a hall, a corridor: a way through, not a room
+the counts know) to the rooms with furniture beyond them: in a house whose rooms all open onto a
+hall, a bedroom's next rooms are the hall's other rooms, not the empty hall (counting the hall
+would say that nothing lies beyond a bedroom's door). The unit is the pair, not the room: the
+space beyond each door is a room of its own (a room with three doors counts three times, and its
+pairs share the room, so the interval is somewhat narrower than if the trials were
+independent). A visit without a remembered map (a given-map visit) counts for no pair.
 """
 
 from __future__ import annotations
@@ -69,6 +73,34 @@ def relation_name(ref_type: str) -> str:
 def next_relation_name(ref_type: str) -> str:
     """``NEXT-ROOM-OF-FRIDGE`` for ``Fridge``."""
     return f"NEXT-ROOM-OF-{ref_type.upper()}"
+
+
+def _furniture(catalog: Catalog, type_name: str) -> bool:
+    return catalog.type(type_name).is_furniture
+
+
+def _next_rooms(pairs: Iterable[tuple[int, int]], furnished: set[int]) -> list[tuple[int, int]]:
+    """The ordered pairs (a room with furniture, a room with furniture through its doors): the
+    rooms a door leads to, through any rooms without furniture (a hall is a way through, not a
+    room the counts know), sorted."""
+    links: dict[int, set[int]] = {}
+    for a, b in pairs:
+        links.setdefault(a, set()).add(b)
+        links.setdefault(b, set()).add(a)
+    out = []
+    for here in sorted(furnished):
+        seen, todo, found = {here}, [here], set()
+        while todo:
+            for nxt in links.get(todo.pop(), ()):
+                if nxt in seen:
+                    continue
+                seen.add(nxt)
+                if nxt in furnished:
+                    found.add(nxt)
+                else:
+                    todo.append(nxt)
+        out += [(here, there) for there in sorted(found)]
+    return out
 
 
 def segment_neighbours(labels: np.ndarray) -> frozenset[tuple[int, int]]:
@@ -120,14 +152,13 @@ class RoomContext:
         next_n: dict[str, int] = {}
         next_y: dict[tuple[str, str], int] = {}
         for visit, pairs in sorted((doors or {}).items()):
-            for a, b in sorted(pairs):
-                for here, there in ((a, b), (b, a)):
-                    held = segments.get((*visit, here), {})
-                    beyond = segments.get((*visit, there), {})
-                    for f in (t for t in held if catalog.type(t).is_furniture):
-                        next_n[f] = next_n.get(f, 0) + 1
-                        for t in beyond:
-                            next_y[(f, t)] = next_y.get((f, t), 0) + 1
+            held = {seg: segments.get((*visit, seg), {}) for pair in pairs for seg in pair}
+            furnished = {seg for seg, h in held.items() if any(_furniture(catalog, t) for t in h)}
+            for here, there in _next_rooms(pairs, furnished):
+                for f in (t for t in held[here] if _furniture(catalog, t)):
+                    next_n[f] = next_n.get(f, 0) + 1
+                    for t in held[there]:
+                        next_y[(f, t)] = next_y.get((f, t), 0) + 1
         n: dict[str, int] = {}
         y: dict[tuple[str, str], int] = {}
         holding: dict[str, int] = {}

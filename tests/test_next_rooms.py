@@ -15,7 +15,7 @@ from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.room_segmentation import RoomLabels, wall_mask
 from ctxsearch.agent.search.config import ConfigError, KnowledgeConfig, SearchConfig
 from ctxsearch.agent.search.maps import WorldMaps
-from ctxsearch.agent.search.room_prior import MAX_FACTOR, MIN_FACTOR, RoomPrior
+from ctxsearch.agent.search.room_prior import MAX_FACTOR, MIN_FACTOR, Beyond, RoomPrior
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import resolve_style
 from ctxsearch.envs.robot_spec import RobotPose, RobotSpec
@@ -50,20 +50,26 @@ BATH = [(2, "Plant", 1)]  # no furniture: counted as what lies beyond, never as 
 
 
 def test_next_room_counts_the_pairs_through_each_door_with_wilson_intervals(catalog):
-    rows = [("r", "apartment", 1, 0, *row) for row in (*KITCHEN, *LIVING, *BATH)]
-    doors = {("r", "apartment", 1, 0): [(0, 1), (1, 2), (1, 3)]}  # 3: an empty hall
+    bedroom = [(4, "Bed", 1), (4, "Cup", 1)]
+    rows = [("r", "apartment", 1, 0, *row) for row in (*KITCHEN, *LIVING, *BATH, *bedroom)]
+    # 2 (the bath) holds no furniture: a way through, not a room the counts know; 3 is an empty
+    # hall between the living room and the bedroom, and a dead end off the bath
+    doors = {("r", "apartment", 1, 0): [(0, 1), (1, 2), (1, 3), (3, 4), (2, 5)]}
     rc = RoomContext.from_rows(rows, catalog, 0.05, doors)
-    # the kitchen has one door (to the living room), the living room three
-    assert rc.next_n == {"Fridge": 1, "Sofa": 3}
+    # the kitchen's door leads to the living room; the living room's to the kitchen and,
+    # through the hall, to the bedroom; the bedroom's, through the hall, to the living room
+    assert rc.next_n == {"Fridge": 1, "Sofa": 2, "Bed": 1}
     assert rc.next_y[("Fridge", "Sofa")] == rc.next_y[("Fridge", "Remote")] == 1
-    assert rc.next_y[("Sofa", "Cup")] == rc.next_y[("Sofa", "Plant")] == 1
+    assert rc.next_y[("Sofa", "Cup")] == 2 and rc.next_y[("Sofa", "Bed")] == 1
+    assert ("Sofa", "Plant") not in rc.next_y  # the bath is passed through, never counted
     assert ("Sofa", "Remote") not in rc.next_y  # the living room's own remote is not beyond
-    lo, hi = intervals.interval(1, 3, 0.05)
-    assert rc.next_interval("Sofa", "Cup") == (pytest.approx(lo), pytest.approx(hi), 1, 3)
-    assert rc.next_room("Sofa", "Cup", Rank.LOW) == pytest.approx(lo)
-    assert rc.next_room("Sofa", "Cup", Rank.HIGH) == pytest.approx(hi)
-    assert rc.next_room("Sofa", "Cup", Rank.P0) == pytest.approx(intervals.p0(1, 3, 0.05))
-    assert rc.next_room("Bed", "Cup", Rank.LOW) is None
+    assert rc.next_y[("Bed", "Remote")] == 1 and ("Bed", "Fridge") not in rc.next_y
+    lo, hi = intervals.interval(1, 2, 0.05)
+    assert rc.next_interval("Sofa", "Bed") == (pytest.approx(lo), pytest.approx(hi), 1, 2)
+    assert rc.next_room("Sofa", "Bed", Rank.LOW) == pytest.approx(lo)
+    assert rc.next_room("Sofa", "Bed", Rank.HIGH) == pytest.approx(hi)
+    assert rc.next_room("Sofa", "Bed", Rank.P0) == pytest.approx(intervals.p0(1, 2, 0.05))
+    assert rc.next_room("Desk", "Cup", Rank.LOW) is None
     # no doors: the same-room counts, and no next-room ones
     plain = RoomContext.from_rows(rows, catalog, 0.05)
     assert plain.n == rc.n and plain.y == rc.y and plain.next_n == {}
@@ -117,12 +123,15 @@ def test_the_truth_counts_the_plans_doors(catalog):
     held: dict[int, set[str]] = {}
     for r, t, _ in room_contents(house):
         held.setdefault(r, set()).add(t)
+    furnished = {r for r, t, _ in room_contents(house) if catalog.type(t).is_furniture}
+    # an apartment's rooms all hold furniture: the next rooms are those sharing a door
+    assert all(a in furnished and b in furnished for a, b in doors)
     for f in rt.counts.next_n:
         pairs = [
             (here, there)
             for a, b in doors
             for here, there in ((a, b), (b, a))
-            if f in held.get(here, ())
+            if f in held.get(here, ()) and there in furnished
         ]
         assert rt.counts.next_n[f] == len(pairs)
         for t in catalog.type_names:
@@ -146,7 +155,7 @@ def test_the_space_beyond_the_mapped_rooms_takes_the_next_room_ratio(catalog):
     k = house.room_of[fridge.id]
     probs = _probs({("Fridge", "Cup"): 0.3}, {("Fridge", "Cup"): 0.9}, {"Cup": 0.3})
     off = RoomPrior(probs, "Cup", catalog, seen.points, None)  # next rooms off
-    on = RoomPrior(probs, "Cup", catalog, seen.points, None, glimpse_m=2.0)
+    on = RoomPrior(probs, "Cup", catalog, seen.points, None, beyond=Beyond(next_room_m=50.0))
     # only the kitchen is mapped
     plan = RoomLabels.of_plan(house, built.resolution)
     assert plan.labels.shape == built.floor.shape
@@ -160,11 +169,18 @@ def test_the_space_beyond_the_mapped_rooms_takes_the_next_room_ratio(catalog):
     assert np.allclose(f_off[mapped], 1.0) and np.allclose(f_off[~mapped], 1.0)  # 0.3 / 0.3
     assert np.allclose(f_on[mapped], 1.0)  # the kitchen's own: SAME-ROOM, as without
     assert np.allclose(f_on[~mapped], 3.0)  # beyond its doors: 0.9 / 0.3
+    # the next room reaches next_room_m behind the kitchen's edge; further on, the average
+    short = RoomPrior(probs, "Cup", catalog, seen.points, None, beyond=Beyond(next_room_m=1.5))
+    f = short.factor([fridge], built)
+    _, dist = short.nearest()
+    near, far = ~mapped & (dist <= 1.5), ~mapped & (dist > 1.5)
+    assert near.any() and far.any()
+    assert np.allclose(f[near], 3.0) and np.allclose(f[far], 1.0)
     # a sofa glimpsed beyond the mapped floor: the space near it is its room
     sofa = next(o for o in house.objects if o.type == "Sofa")
     probs = _probs({("Fridge", "Cup"): 0.3, ("Sofa", "Cup"): 0.03},
                    {("Fridge", "Cup"): 0.9}, {"Cup": 0.3})  # fmt: skip
-    on = RoomPrior(probs, "Cup", catalog, seen.points, None, glimpse_m=2.0)
+    on = RoomPrior(probs, "Cup", catalog, seen.points, None, beyond=Beyond(next_room_m=50.0))
     f = on.factor([fridge, sofa], built)
     near = np.hypot(seen.points[:, 0] - sofa.position[0], seen.points[:, 1] - sofa.position[1])
     assert np.allclose(f[~mapped & (near <= 2.0)], MIN_FACTOR)  # 0.03 / 0.3, clipped
@@ -176,19 +192,22 @@ def test_the_space_beyond_the_mapped_rooms_takes_the_next_room_ratio(catalog):
     assert group[2] == pytest.approx((~mapped).sum() / len(seen.points))
     # the ratio is clipped like the room's own
     big = _probs({}, {("Fridge", "Cup"): 1.0}, {"Cup": 0.01})
-    f = RoomPrior(big, "Cup", catalog, seen.points, None, glimpse_m=2.0).factor([fridge], built)
+    f = RoomPrior(big, "Cup", catalog, seen.points, None, beyond=Beyond(next_room_m=50.0)).factor(
+        [fridge], built
+    )
     assert np.allclose(f[~mapped], MAX_FACTOR)
     # the given map's rooms are the plan's: nothing lies beyond them
     maps = WorldMaps.given(house, catalog, spec)
-    given = RoomPrior.for_search(probs, "Cup", catalog, maps.seen.points, maps.plan_rooms, 2.0)
-    assert given.glimpse_m is None
+    given = RoomPrior.for_search(probs, "Cup", catalog, maps.seen.points, maps.plan_rooms, Beyond())
+    assert given.next is None
 
 
 def test_next_rooms_is_part_of_room_context():
     with pytest.raises(ConfigError, match="knowledge.next_rooms needs knowledge.room_context"):
         SearchConfig(knowledge=KnowledgeConfig(next_rooms=True))
     cfg = SearchConfig(knowledge=KnowledgeConfig(next_rooms=True, room_context=True))
-    assert cfg.knowledge.glimpse_m == 2.0
+    assert (cfg.knowledge.glimpse_m, cfg.knowledge.next_room_m) == (Beyond().glimpse_m,
+                                                                   Beyond().next_room_m)  # fmt: skip
 
 
 def test_a_built_map_search_records_the_mass_beyond_each_mapped_room(tmp_path):

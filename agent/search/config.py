@@ -88,6 +88,13 @@ class KnowledgeConfig:
         "mass P(NEXT-ROOM-OF-F(T)) of the nearest mapped room's furniture implies (the learned "
         "ones the store's, the oracle-prior ones the truth's)",
     )
+    next_room_m: float = setting(
+        4.0,
+        "m: with next_rooms, how far behind a mapped room's edge the room its doors lead to is "
+        "taken to reach (unmapped space further on keeps the house's average)",
+        0.0,
+        50.0,
+    )
     glimpse_m: float = setting(
         2.0,
         "m: with next_rooms, the unmapped space this close to furniture seen beyond the mapped "

@@ -39,7 +39,7 @@ from ctxsearch.agent.search.context import BELIEF_ENTITY, BEYOND_ENTITY, SearchC
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.memory import memory_prior
-from ctxsearch.agent.search.room_prior import RoomPrior
+from ctxsearch.agent.search.room_prior import Beyond, RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import MapMode
 
@@ -118,7 +118,7 @@ class OnlineSearch:
         know = ctx.config.knowledge
         self.rooms = RoomPrior.for_search(
             probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms,
-            know.glimpse_m if know.next_rooms else None,
+            Beyond(know.next_room_m, know.glimpse_m) if know.next_rooms else None,
         )  # fmt: skip
         # a bound's room knowledge, handed at the start (agent.search.room_prior.HandedRooms)
         handed = ctx.maps.handed

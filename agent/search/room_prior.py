@@ -35,23 +35,33 @@ so the rooms of furniture seen beyond the mapped floor are not known yet and the
 f = 1.
 
 Beyond the mapped rooms (``knowledge.next_rooms``, built map only): a point in no segment lies in
-space the robot has not mapped, most of it through a door of a mapped room. It takes
+space the robot has not mapped, most of it through a door of a mapped room. Within
+``knowledge.next_room_m`` of the nearest segment it takes
 
     g = clip(P_next / share(T)),  P_next = max over the known furniture F of the nearest segment
-        of P(NEXT-ROOM-OF-F(T)) (knowledge.room_context: the room through a door of a room
-        holding F holds a T),
+        of P(NEXT-ROOM-OF-F(T)) (knowledge.room_context: a room a door of a room holding F
+        leads to holds a T),
 
 and, within ``knowledge.glimpse_m`` of furniture seen beyond the mapped floor (glimpsed through a
 door: it stands in the room there), that furniture's room ratio P(SAME-ROOM-AS-F(T)) / share(T)
-instead (the largest where several are that close). The nearest segment is by straight-line
-distance on the map's grid (``scipy.ndimage.distance_transform_edt``), which puts the space
-beyond a door with the room the door opens from and, behind a wall, with the nearer room: a
-choice of this module, as is that the unmapped rest of a partly mapped room takes the next
-room's ratio (the robot's first look around maps most of the room it stands in). Without next-
-room knowledge of the nearest segment's furniture the point keeps f = 1.
+instead (the largest where several are that close). Choices of this module, each a setting:
+
+- The nearest segment is by straight-line distance on the map's grid
+  (``scipy.ndimage.distance_transform_edt``): the space beyond a door goes with the room the door
+  opens from and, behind a wall, with the nearer room.
+- The room a door leads to is taken to reach ``next_room_m`` (4 m, about a room's depth) behind
+  the mapped room's edge; unmapped space further on, rooms beyond the next, keeps f = 1 (the
+  house's average): the relation is about the next room, and a bedroom's door that opens onto
+  the living room says little of the study behind it.
+- The unmapped rest of a partly mapped room takes the next room's ratio too (the robot's first
+  look around maps most of the room it stands in).
+
+Without next-room knowledge of the nearest segment's furniture a point keeps f = 1.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
@@ -66,6 +76,15 @@ MIN_FACTOR = 0.1
 MAX_FACTOR = 10.0
 
 
+@dataclass(frozen=True)
+class Beyond:
+    """How the space beyond the built map's rooms takes the next-room relations (module
+    docstring; ``knowledge.next_room_m``, ``knowledge.glimpse_m``)."""
+
+    next_room_m: float = 4.0
+    glimpse_m: float = 2.0
+
+
 class RoomPrior:
     """The room factor of every seen-map point (``points`` (N, 3)) for target ``target`` under
     ``probs``'s room context, on the given map's rooms ``plan`` or else the built map's."""
@@ -77,18 +96,18 @@ class RoomPrior:
         catalog: Catalog,
         points: np.ndarray,
         plan: RoomLabels | None,
-        glimpse_m: float | None = None,
+        beyond: Beyond | None = None,
     ):
         self.probs, self.target, self.catalog = probs, target, catalog
         self.points = np.asarray(points, float)
         self.share = probs.room_share(target)
         self.plan = plan
-        # the space beyond the mapped rooms (module docstring): None: off
-        self.glimpse_m = glimpse_m
+        self.next = beyond  # the space beyond the mapped rooms (module docstring): None: off
         self._plan_rooms = plan.at(self.points) if plan is not None else None
         self._built_key: int | None = None
         self._built: tuple[RoomLabels, np.ndarray] | None = None
-        self._nearest: np.ndarray | None = None  # each point's nearest segment (built map)
+        # each point's nearest segment of the built map and its distance to it (m)
+        self._nearest: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def for_search(
@@ -98,16 +117,17 @@ class RoomPrior:
         catalog: Catalog,
         points: np.ndarray,
         plan: RoomLabels | None,
-        glimpse_m: float | None = None,
+        beyond: Beyond | None = None,
     ) -> RoomPrior | None:
         """The room prior if ``probs`` knows room context for ``target``, else None; with
-        ``glimpse_m`` (the built map only) also for the space beyond the mapped rooms."""
+        ``beyond`` (the built map only: without the plan's rooms) also for the space beyond the
+        mapped rooms."""
         if probs is None:
             return None
         share = probs.room_share(target)
         if share is None or share <= 0:
             return None
-        return cls(probs, target, catalog, points, plan, None if plan is not None else glimpse_m)
+        return cls(probs, target, catalog, points, plan, None if plan is not None else beyond)
 
     def rooms(self, built: BuiltMap | None) -> tuple[RoomLabels, np.ndarray] | None:
         """The rooms in use and each point's room: the plan's, or the built map's segmentation
@@ -123,23 +143,27 @@ class RoomPrior:
             self._nearest = None
         return self._built
 
-    def nearest(self) -> np.ndarray | None:
-        """(N,) the segment of the built map nearest to each point (-1: no segment yet), as the
-        rooms now stand (``rooms`` called first)."""
+    def nearest(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """((N,) the segment of the built map nearest to each point (-1: no segment yet), (N,)
+        the distance to it in m), as the rooms now stand (``rooms`` called first)."""
         if self._built is None:
             return None
         if self._nearest is None:
             labels, _ = self._built
             lab = labels.labels
+            n = len(self.points)
             if not (lab >= 0).any():
-                self._nearest = np.full(len(self.points), -1, np.int64)
+                self._nearest = (np.full(n, -1, np.int64), np.full(n, np.inf))
                 return self._nearest
-            _, (rows, cols) = distance_transform_edt(lab < 0, return_indices=True)
+            dist, (rows, cols) = distance_transform_edt(lab < 0, return_indices=True)
             h, w = lab.shape
             col = np.floor((self.points[:, 0] - labels.x0) / labels.resolution).astype(np.int64)
             row = np.floor((self.points[:, 1] - labels.y0) / labels.resolution).astype(np.int64)
             row, col = np.clip(row, 0, h - 1), np.clip(col, 0, w - 1)
-            self._nearest = lab[rows[row, col], cols[row, col]].astype(np.int64)
+            self._nearest = (
+                lab[rows[row, col], cols[row, col]].astype(np.int64),
+                dist[row, col] * labels.resolution,
+            )
         return self._nearest
 
     def room_ratios(self, known: list[ObjectInstance], labels: RoomLabels) -> dict[int, float]:
@@ -193,16 +217,17 @@ class RoomPrior:
             return None
         out = np.ones(len(self.points))
         outside = point_rooms < 0
-        nearest = self.nearest()
+        nearest, dist = self.nearest()
+        next_room = outside & (dist <= self.next.next_room_m)
         for r, g in ratios.items():
-            out[outside & (nearest == r)] = g
+            out[next_room & (nearest == r)] = g
         if glimpsed:
             idx = np.flatnonzero(outside)
             xy = self.points[idx, :2]
             best = np.zeros(len(idx))
             for o, ratio in glimpsed:
                 near = np.hypot(xy[:, 0] - o.position[0], xy[:, 1] - o.position[1])
-                close = near <= self.glimpse_m
+                close = near <= self.next.glimpse_m
                 best[close] = np.maximum(best[close], ratio)
             got = best > 0
             out[idx[got]] = best[got]
@@ -218,7 +243,7 @@ class RoomPrior:
         labels, point_rooms = got
         ratios = self.room_ratios(known, labels)
         beyond = None
-        if self.glimpse_m is not None and self.plan is None:
+        if self.next is not None and self.plan is None:
             beyond = self.beyond(known, labels, point_rooms)
         if not ratios and beyond is None:
             return None
@@ -232,10 +257,10 @@ class RoomPrior:
         lies beyond: (segment, the mass-weighted centre (3,), the mass) for each segment with
         mass there (for the recording: the mass expected behind each room's doors and
         frontiers); empty off the built map or before any segment."""
-        if weights is None or self._built is None or self.glimpse_m is None:
+        if weights is None or self._built is None or self.next is None:
             return []
         _, point_rooms = self._built
-        nearest = self.nearest()
+        nearest, _ = self.nearest()
         outside = point_rooms < 0
         out = []
         for r in np.unique(nearest[outside & (nearest >= 0)]):
