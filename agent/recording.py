@@ -439,9 +439,15 @@ class Recorder:
         self._rec.log(self.entity("log"), rr.TextLog(msg, level=level))
 
     def log_points(
-        self, entity: str, positions: np.ndarray, colors: np.ndarray, radii: np.ndarray
+        self,
+        entity: str,
+        positions: np.ndarray,
+        colors: np.ndarray,
+        radii: np.ndarray,
+        labels: Sequence[str] | None = None,
     ) -> None:
-        """3-D points at ``entity`` (colours as 0-1 RGB, radii in metres); none clears it."""
+        """3-D points at ``entity`` (colours as 0-1 RGB, radii in metres, an optional label
+        each); none clears it."""
         if self._rec is None:
             return
         import rerun as rr
@@ -452,8 +458,11 @@ class Recorder:
         cols = [rgb255(c) for c in np.asarray(colors, float)]
         self._rec.log(
             self.entity(entity),
-            rr.Points3D(np.asarray(positions, float), colors=cols, radii=np.asarray(radii, float)),
-        )
+            rr.Points3D(
+                np.asarray(positions, float), colors=cols, radii=np.asarray(radii, float),
+                labels=None if labels is None else list(labels),
+            ),
+        )  # fmt: skip
 
     def log_scalar(self, path: str, value: float) -> None:
         """One value of a time series at entity ``path``."""

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +49,7 @@ from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.files import InputFileError, read_json
 from ctxsearch.knowledge.geometry import ObjectInstance, related
 from ctxsearch.knowledge.persistence import near_place
-from ctxsearch.knowledge.room_context import RoomContext, relation_name
+from ctxsearch.knowledge.room_context import RoomContext, next_relation_name, relation_name
 
 
 def room_counts(
@@ -201,6 +201,12 @@ def room_contents(layout: RoomLayout) -> list[tuple[int, str, int]]:
     return sorted((r, t, k) for (r, t), k in counts.items())
 
 
+def room_doors(layout: RoomLayout) -> list[tuple[int, int]]:
+    """The pairs (a, b), a < b, of ``layout``'s plan rooms that share a door (the entrance to
+    the outside is none); empty for a single room."""
+    return sorted({(min(p.rooms), max(p.rooms)) for p in layout.doors if min(p.rooms) >= 0})
+
+
 def sample_counts_and_rooms(
     style: Style | HouseStyle, seeds: Iterable[int], catalog: Catalog
 ) -> tuple[list, list[list[tuple[int, str, int]]], dict[tuple[str, str], list[int]]]:
@@ -307,20 +313,30 @@ class RoomTruth:
     room_share: dict[str, float]
     houses: int
     counts: RoomContext
+    # P(NEXT-ROOM-OF-F(T)): of the pairs (a room holding F, a room sharing a door with it), the
+    # share whose second room holds a T (knowledge.room_context; empty without the doors)
+    next_room: dict[tuple[str, str], float] = field(default_factory=dict)
 
     @classmethod
     def of_contents(
-        cls, worlds: Sequence[Sequence[tuple[int, str, int]]], catalog: Catalog
+        cls,
+        worlds: Sequence[Sequence[tuple[int, str, int]]],
+        catalog: Catalog,
+        doors: Sequence[Iterable[tuple[int, int]]] | None = None,
     ) -> RoomTruth:
-        """From each world's ``room_contents``."""
+        """From each world's ``room_contents`` and, for the next-room relations, each world's
+        ``room_doors``."""
         rows = [(i, r, t, k) for i, rooms in enumerate(worlds) for r, t, k in rooms]
-        rc = RoomContext.from_rows(rows, catalog, alpha=0.05)  # alpha: no interval is read
+        pairs = None if doors is None else {(i,): d for i, d in enumerate(doors)}
+        rc = RoomContext.from_rows(rows, catalog, alpha=0.05, doors=pairs)  # no interval read
         same = {(f, t): y / rc.n[f] for (f, t), y in rc.y.items()}
         for f in rc.n:  # a pair never seen together is a measured 0, not unknown
             for t in catalog.type_names:
                 same.setdefault((f, t), 0.0)
         share = {t: rc.holding.get(t, 0) / max(rc.rooms, 1) for t in catalog.type_names}
-        return cls(same, share, len(worlds), rc)
+        nxt = {(f, t): rc.next_y.get((f, t), 0) / m for f, m in rc.next_n.items()
+               for t in catalog.type_names}  # fmt: skip
+        return cls(same, share, len(worlds), rc, nxt)
 
     def entries(self) -> list[dict]:
         """``same_room`` as ``ctxsearch truth`` writes it: one {ref, relation, type, p, se, n, y}
@@ -342,6 +358,25 @@ class RoomTruth:
             )
         return out
 
+    def next_entries(self) -> list[dict]:
+        """``next_room`` as ``entries`` gives ``same_room``: n the pairs of a room holding ref
+        and a room through one of its doors (relation ``NEXT-ROOM-OF-<REF>``)."""
+        out = []
+        for (f, t), p in sorted(self.next_room.items()):
+            m = self.counts.next_n[f]
+            out.append(
+                {
+                    "ref": f,
+                    "relation": next_relation_name(f),
+                    "type": t,
+                    "p": p,
+                    "se": math.sqrt(p * (1.0 - p) / m),
+                    "n": m,
+                    "y": self.counts.next_y.get((f, t), 0),
+                }
+            )
+        return out
+
 
 def room_truth(
     style: Style | HouseStyle | str, samples: int, catalog: Catalog, seed: int = 0
@@ -350,9 +385,11 @@ def room_truth(
     worlds ``ground_truth`` counts)."""
     if not isinstance(style, Style | HouseStyle):
         style = resolve_style(style, catalog)
-    seeds = range(int(seed), int(seed) + int(samples))
+    layouts = [
+        generate_layout(style, s, catalog) for s in range(int(seed), int(seed) + int(samples))
+    ]
     return RoomTruth.of_contents(
-        [room_contents(generate_layout(style, s, catalog)) for s in seeds], catalog
+        [room_contents(w) for w in layouts], catalog, [room_doors(w) for w in layouts]
     )
 
 

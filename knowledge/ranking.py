@@ -65,6 +65,12 @@ class ProbabilitySource:
         known about holds; None where this source knows no room context."""
         return None
 
+    def next_room(self, ref_type: str, type_name: str) -> float | None:
+        """P(NEXT-ROOM-OF-ref(T)): the probability that a room sharing a door with a room
+        holding furniture type ``ref_type`` holds an instance of ``type_name``
+        (knowledge.room_context); None where this source knows none."""
+        return None
+
 
 class UniformProbabilities(ProbabilitySource):
     """No probabilities: every relation counts the same (``map-only`` search, the value of the
@@ -103,6 +109,11 @@ class KBProbabilities(ProbabilitySource):
             return None
         return self.room_context.room_share(type_name)
 
+    def next_room(self, ref_type: str, type_name: str) -> float | None:
+        if self.room_context is None:
+            return None
+        return self.room_context.next_room(ref_type, type_name, Rank(self.rank))
+
     def instances(self, type_name: str) -> float | None:
         """n_T / rooms learned in: examined instances per room (None without a room count)."""
         if not self.rooms:
@@ -138,14 +149,20 @@ class TableProbabilities(ProbabilitySource):
         self.name = name
         self.per_room = dict(per_room) if per_room is not None else None
         self.rooms: tuple[dict[tuple[str, str], float], dict[str, float]] | None = None
+        self.next_rooms: dict[tuple[str, str], float] | None = None
 
     def with_rooms(
-        self, same_room: Mapping[tuple[str, str], float], room_share: Mapping[str, float]
+        self,
+        same_room: Mapping[tuple[str, str], float],
+        room_share: Mapping[str, float],
+        next_room: Mapping[tuple[str, str], float] | None = None,
     ) -> TableProbabilities:
-        """A copy that also knows room context: P(SAME-ROOM-AS-F(T)) per (F, T) and the share
-        of rooms holding each type (``same_room``, ``room_share``)."""
+        """A copy that also knows room context: P(SAME-ROOM-AS-F(T)) per (F, T), the share of
+        rooms holding each type and, if given, P(NEXT-ROOM-OF-F(T)) per (F, T) (``same_room``,
+        ``room_share``, ``next_room``)."""
         out = TableProbabilities(self.table, self.name, self.per_room)
         out.rooms = (dict(same_room), dict(room_share))
+        out.next_rooms = None if next_room is None else dict(next_room)
         return out
 
     @classmethod
@@ -183,6 +200,11 @@ class TableProbabilities(ProbabilitySource):
         if self.rooms is None:
             return None
         return self.rooms[1].get(type_name)
+
+    def next_room(self, ref_type: str, type_name: str) -> float | None:
+        if self.next_rooms is None:
+            return None
+        return self.next_rooms.get((ref_type, type_name))
 
 
 class BackoffProbabilities(KBProbabilities):

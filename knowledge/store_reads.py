@@ -24,7 +24,7 @@ from ctxsearch.knowledge.errors import CtxsearchError, StoreError
 from ctxsearch.knowledge.home_map import MAX_BYTES as MAX_MAP_BYTES
 from ctxsearch.knowledge.home_map import HomeMap, check_types
 from ctxsearch.knowledge.options import IntervalMethod
-from ctxsearch.knowledge.room_context import RoomContext
+from ctxsearch.knowledge.room_context import RoomContext, segment_neighbours
 from ctxsearch.knowledge.store_schema import (
     MAX_DAY,
     ROOM_STATUSES,
@@ -341,7 +341,18 @@ class EvidenceReads(HomeMapReads):
                     raise self._bad(f"room contents row {tuple(r)!r} is out of range")
                 rows.append((str(r[0]), str(r[1]), self._integer(r[2], "room seed"),
                              self._day_stamp(r[3], "room contents day"), seg, typ, k))  # fmt: skip
-        return RoomContext.from_rows(rows, self.catalog, self.alpha)
+        return RoomContext.from_rows(rows, self.catalog, self.alpha, self.segment_doors(run))
+
+    def segment_doors(self, run: str | None = None) -> dict[tuple, frozenset[tuple[int, int]]]:
+        """Per visit (run, style, seed, day) with a remembered map (of one run, or all): the
+        pairs of its map's segments that share a door (knowledge.room_context.segment_neighbours
+        of ``HomeMap.rooms``, the segmentation its room contents were counted on). Read-only."""
+        out = {}
+        for r, st, seed, day in self.home_maps(run):
+            m = self.home_map(st, seed, run=r, upto_day=day)
+            if m is not None and m.day == day:
+                out[(r, st, seed, day)] = segment_neighbours(m.rooms)
+        return out
 
     def exam_views(self, run: str | None = None, upto: int | None = None) -> dict[str, ExamViews]:
         """Per reference type, its examinations (of one run, or all; with ``upto``, those with id

@@ -18,7 +18,7 @@ from ctxsearch.knowledge.errors import CatalogError, CtxsearchError, StoreError
 from ctxsearch.knowledge.options import Forget, IntervalMethod, Rank
 from ctxsearch.knowledge.persistence import STILL, LearnedPersistence, listing, store_checks
 from ctxsearch.knowledge.pooling import PooledCounts, interval_rows
-from ctxsearch.knowledge.room_context import RoomContext, relation_name
+from ctxsearch.knowledge.room_context import RoomContext, next_relation_name, relation_name
 from ctxsearch.knowledge.store import EvidenceStore, merge_stores
 from ctxsearch.scripts import argtypes
 
@@ -385,6 +385,25 @@ def room_rows(rc: RoomContext, catalog, ref: str | None, related: str | None, ev
     return sorted(out, key=lambda r: (-r.low, r.relation, r.type))
 
 
+def next_room_rows(
+    rc: RoomContext, catalog, ref: str | None, related: str | None, everything: bool
+) -> list[RoomRow]:
+    """The learned NEXT-ROOM-OF-F intervals (what lies through a door of a room holding F; n the
+    pairs of rooms), as ``room_rows`` gives SAME-ROOM-AS-F's."""
+    refs = [ref] if ref is not None else sorted(rc.next_n)
+    types = [related] if related is not None else list(catalog.type_names)
+    out = []
+    for f in refs:
+        for t in types:
+            got = rc.next_interval(f, t)
+            if got is None or (got[2] == 0 and not everything):
+                continue
+            lo, hi, y, n = got
+            p0 = rc.next_room(f, t, Rank.P0)
+            out.append(RoomRow(f, next_relation_name(f), t, y, n, p0, lo, hi))
+    return sorted(out, key=lambda r: (-r.low, r.relation, r.type))
+
+
 def run_show(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch kb show``."""
     catalog = load_catalog(args.catalog)
@@ -428,9 +447,10 @@ def run_show(args: argparse.Namespace) -> int:
         if args.related is not None:
             rows = [r for r in rows if r.type == args.related]
     rc: RoomContext = info["room_context"]
-    rooms = []
+    rooms, beyond = [], []
     if not pooled and args.forget == Forget.NONE:
         rooms = room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
+        beyond = next_room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
     persist = []
     if not pooled and args.forget == Forget.NONE and args.related is None:
         learned: LearnedPersistence = info["persistence"]
@@ -438,7 +458,7 @@ def run_show(args: argparse.Namespace) -> int:
             persist += learned.of_type(t)
     if args.json:
         extra = [dataclasses.asdict(e) | {"relation": STILL} for e in persist]
-        _emit(json.dumps([_row_dict(r) for r in [*rows, *rooms]] + extra, indent=1))
+        _emit(json.dumps([_row_dict(r) for r in [*rows, *rooms, *beyond]] + extra, indent=1))
         return 0
     cat = kb.catalog
     class_names = tuple(c.name for c in classes.classes) if pooled else ()
@@ -470,6 +490,13 @@ def run_show(args: argparse.Namespace) -> int:
     if rooms:
         out.append(f"room context: {rc.rooms} rooms of the robot's maps held furniture")
         out.append(format_rows(rooms))
+    if beyond:
+        pairs = sum(rc.next_n.values())
+        out.append(
+            "next rooms: what the room through a door of a room holding the furniture held "
+            f"({pairs} pairs of rooms sharing a door, per furniture type, on the robot's maps)"
+        )
+        out.append(format_rows(beyond))
     if persist:
         out.append("persistence: the robot's checks of places where its maps saw small objects")
         out += listing(persist)

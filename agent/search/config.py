@@ -82,6 +82,26 @@ class KnowledgeConfig:
         "the context policies also use P(SAME-ROOM-AS-F(T)) on the rooms of the map: the "
         "learned ones the store's, the oracle-prior ones the truth's",
     )
+    next_rooms: bool = setting(
+        False,
+        "with room_context, on the built map: the space beyond the mapped rooms takes the target "
+        "mass P(NEXT-ROOM-OF-F(T)) of the nearest mapped room's furniture implies (the learned "
+        "ones the store's, the oracle-prior ones the truth's)",
+    )
+    next_room_m: float = setting(
+        4.0,
+        "m: with next_rooms, how far behind a mapped room's edge the room its doors lead to is "
+        "taken to reach (unmapped space further on keeps the house's average)",
+        0.0,
+        50.0,
+    )
+    glimpse_m: float = setting(
+        2.0,
+        "m: with next_rooms, the unmapped space this close to furniture seen beyond the mapped "
+        "floor takes that furniture's P(SAME-ROOM-AS-F(T))",
+        0.0,
+        50.0,
+    )
     truth: Path | None = setting(None, "ground truth of `ctxsearch truth` for oracle-prior")
     truth_samples: int = setting(
         200, "worlds sampled for the ground truth when truth is not given", 1, MAX_COUNT
@@ -185,6 +205,11 @@ class SearchConfig:
 
     def __post_init__(self) -> None:
         settings.check(self)
+        if self.knowledge.next_rooms and not self.knowledge.room_context:
+            raise ConfigError(
+                "knowledge.next_rooms needs knowledge.room_context (--room-context): the space "
+                "beyond the rooms is part of room context"
+            )
 
     # ------------------------------------------------------------------ derived
     @property

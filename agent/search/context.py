@@ -44,6 +44,8 @@ from ctxsearch.knowledge.persistence import Persistence
 # true instance is detected again with its recall.
 CONFIRM_RADIUS_M = 0.5
 BELIEF_ENTITY = "world/search/belief"  # the recording's floor heat map of the belief
+# the belief mass beyond each mapped room of the built map (knowledge.next_rooms), labelled
+BEYOND_ENTITY = "world/search/beyond"
 
 
 class SearchStopped(Exception):

@@ -35,11 +35,11 @@ from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import regions as rg
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
-from ctxsearch.agent.search.context import BELIEF_ENTITY, SearchContext
+from ctxsearch.agent.search.context import BELIEF_ENTITY, BEYOND_ENTITY, SearchContext
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.memory import memory_prior
-from ctxsearch.agent.search.room_prior import RoomPrior
+from ctxsearch.agent.search.room_prior import Beyond, RoomPrior
 from ctxsearch.knowledge.geometry import ObjectInstance
 from ctxsearch.knowledge.options import MapMode
 
@@ -115,9 +115,11 @@ class OnlineSearch:
         self.explorer = Explorer(ctx)
         self.builder = ss.RegionBuilder(ctx.catalog, probs, ctx.seen, ctx.target) if probs else None
         # room context, where the knowledge source has it (agent.search.room_prior)
+        know = ctx.config.knowledge
         self.rooms = RoomPrior.for_search(
-            probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms
-        )
+            probs, ctx.target, ctx.catalog, ctx.seen.points, ctx.maps.plan_rooms,
+            Beyond(know.next_room_m, know.glimpse_m) if know.next_rooms else None,
+        )  # fmt: skip
         # a bound's room knowledge, handed at the start (agent.search.room_prior.HandedRooms)
         handed = ctx.maps.handed
         self.handed = handed.factor(ctx.seen.points) if handed is not None else None
@@ -223,6 +225,18 @@ class OnlineSearch:
             rec.set_time(self.ctx.elapsed)
             belief.log_belief(rec, self.ctx.seen.points, b.weights, BELIEF_ENTITY)
             rec.log_scalar(f"search/mass_left/{self.ctx.policy}", b.left)
+            groups = self.rooms.beyond_groups(b.weights) if self.rooms else []
+            if groups:  # the mass expected beyond each mapped room (agent.search.room_prior)
+                rec.log_points(
+                    BEYOND_ENTITY,
+                    np.array([c for _, c, _ in groups]),
+                    np.tile([0.9, 0.4, 0.9], (len(groups), 1)),
+                    np.array([0.05 + 0.25 * np.sqrt(m) for _, _, m in groups]),
+                    labels=[f"beyond room {r}: {m:.2f}" for r, _, m in groups],
+                )
+                rec.log_scalar(
+                    f"search/beyond_mass/{self.ctx.policy}", sum(m for _, _, m in groups)
+                )
 
     def scale(self, kind: str) -> float:
         """The calibration of ``kind``'s expected seconds: measured over expected so far, starting

@@ -111,7 +111,7 @@ def truth_probabilities(
     table = ss.TableProbabilities.from_truth(doc)
     if rooms:
         rt = cached_room_truth(world, samples, seed, catalog)
-        table = table.with_rooms(rt.same_room, rt.room_share)
+        table = table.with_rooms(rt.same_room, rt.room_share, rt.next_room)
     return table
 
 

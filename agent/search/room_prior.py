@@ -33,11 +33,38 @@ Rooms: on the given map the plan's (``WorldMaps.plan_rooms``); on the built map 
 the robot's map as it stands (agent.room_segmentation, recomputed when the map has new images),
 so the rooms of furniture seen beyond the mapped floor are not known yet and their points keep
 f = 1.
+
+Beyond the mapped rooms (``knowledge.next_rooms``, built map only): a point in no segment lies in
+space the robot has not mapped, most of it through a door of a mapped room. Within
+``knowledge.next_room_m`` of the nearest segment it takes
+
+    g = clip(P_next / share(T)),  P_next = max over the known furniture F of the nearest segment
+        of P(NEXT-ROOM-OF-F(T)) (knowledge.room_context: a room a door of a room holding F
+        leads to holds a T),
+
+and, within ``knowledge.glimpse_m`` of furniture seen beyond the mapped floor (glimpsed through a
+door: it stands in the room there), that furniture's room ratio P(SAME-ROOM-AS-F(T)) / share(T)
+instead (the largest where several are that close). Choices of this module, each a setting:
+
+- The nearest segment is by straight-line distance on the map's grid
+  (``scipy.ndimage.distance_transform_edt``): the space beyond a door goes with the room the door
+  opens from and, behind a wall, with the nearer room.
+- The room a door leads to is taken to reach ``next_room_m`` (4 m, about a room's depth) behind
+  the mapped room's edge; unmapped space further on, rooms beyond the next, keeps f = 1 (the
+  house's average): the relation is about the next room, and a bedroom's door that opens onto
+  the living room says little of the study behind it.
+- The unmapped rest of a partly mapped room takes the next room's ratio too (the robot's first
+  look around maps most of the room it stands in).
+
+Without next-room knowledge of the nearest segment's furniture a point keeps f = 1.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.room_segmentation import RoomLabels
@@ -47,6 +74,15 @@ from ctxsearch.knowledge.ranking import ProbabilitySource
 
 MIN_FACTOR = 0.1
 MAX_FACTOR = 10.0
+
+
+@dataclass(frozen=True)
+class Beyond:
+    """How the space beyond the built map's rooms takes the next-room relations (module
+    docstring; ``knowledge.next_room_m``, ``knowledge.glimpse_m``)."""
+
+    next_room_m: float = 4.0
+    glimpse_m: float = 2.0
 
 
 class RoomPrior:
@@ -60,14 +96,18 @@ class RoomPrior:
         catalog: Catalog,
         points: np.ndarray,
         plan: RoomLabels | None,
+        beyond: Beyond | None = None,
     ):
         self.probs, self.target, self.catalog = probs, target, catalog
         self.points = np.asarray(points, float)
         self.share = probs.room_share(target)
         self.plan = plan
+        self.next = beyond  # the space beyond the mapped rooms (module docstring): None: off
         self._plan_rooms = plan.at(self.points) if plan is not None else None
         self._built_key: int | None = None
         self._built: tuple[RoomLabels, np.ndarray] | None = None
+        # each point's nearest segment of the built map and its distance to it (m)
+        self._nearest: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def for_search(
@@ -77,14 +117,17 @@ class RoomPrior:
         catalog: Catalog,
         points: np.ndarray,
         plan: RoomLabels | None,
+        beyond: Beyond | None = None,
     ) -> RoomPrior | None:
-        """The room prior if ``probs`` knows room context for ``target``, else None."""
+        """The room prior if ``probs`` knows room context for ``target``, else None; with
+        ``beyond`` (the built map only: without the plan's rooms) also for the space beyond the
+        mapped rooms."""
         if probs is None:
             return None
         share = probs.room_share(target)
         if share is None or share <= 0:
             return None
-        return cls(probs, target, catalog, points, plan)
+        return cls(probs, target, catalog, points, plan, None if plan is not None else beyond)
 
     def rooms(self, built: BuiltMap | None) -> tuple[RoomLabels, np.ndarray] | None:
         """The rooms in use and each point's room: the plan's, or the built map's segmentation
@@ -97,7 +140,31 @@ class RoomPrior:
             labels = RoomLabels.of_built(built)
             self._built = (labels, labels.at(self.points))
             self._built_key = built.images
+            self._nearest = None
         return self._built
+
+    def nearest(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """((N,) the segment of the built map nearest to each point (-1: no segment yet), (N,)
+        the distance to it in m), as the rooms now stand (``rooms`` called first)."""
+        if self._built is None:
+            return None
+        if self._nearest is None:
+            labels, _ = self._built
+            lab = labels.labels
+            n = len(self.points)
+            if not (lab >= 0).any():
+                self._nearest = (np.full(n, -1, np.int64), np.full(n, np.inf))
+                return self._nearest
+            dist, (rows, cols) = distance_transform_edt(lab < 0, return_indices=True)
+            h, w = lab.shape
+            col = np.floor((self.points[:, 0] - labels.x0) / labels.resolution).astype(np.int64)
+            row = np.floor((self.points[:, 1] - labels.y0) / labels.resolution).astype(np.int64)
+            row, col = np.clip(row, 0, h - 1), np.clip(col, 0, w - 1)
+            self._nearest = (
+                lab[rows[row, col], cols[row, col]].astype(np.int64),
+                dist[row, col] * labels.resolution,
+            )
+        return self._nearest
 
     def room_ratios(self, known: list[ObjectInstance], labels: RoomLabels) -> dict[int, float]:
         """The clipped ratio f_R of every room holding known furniture with a room probability
@@ -115,20 +182,94 @@ class RoomPrior:
             out[int(r)] = max(out.get(int(r), 0.0), f)
         return out
 
+    def next_ratios(
+        self, known: list[ObjectInstance], labels: RoomLabels
+    ) -> tuple[dict[int, float], list[tuple[ObjectInstance, float]]]:
+        """The space beyond the mapped rooms (module docstring): the clipped next-room ratio g of
+        every segment holding known furniture with a next-room probability for the target, and
+        the furniture seen beyond the mapped floor with its room ratio."""
+        out: dict[int, float] = {}
+        glimpsed: list[tuple[ObjectInstance, float]] = []
+        furniture = [o for o in known if self.catalog.type(o.type).is_furniture]
+        if not furniture:
+            return out, glimpsed
+        where = labels.of_objects(furniture)
+        for o, r in zip(furniture, where, strict=True):
+            if r < 0:
+                p = self.probs.same_room(o.type, self.target)
+                if p is not None:
+                    glimpsed.append((o, float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))))
+                continue
+            p = self.probs.next_room(o.type, self.target)
+            if p is None:
+                continue
+            g = float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))
+            out[int(r)] = max(out.get(int(r), 0.0), g)
+        return out, glimpsed
+
+    def beyond(
+        self, known: list[ObjectInstance], labels: RoomLabels, point_rooms: np.ndarray
+    ) -> np.ndarray | None:
+        """(N,) the factor of the points in no segment (module docstring; 1 elsewhere), None
+        where nothing is known of what lies beyond."""
+        ratios, glimpsed = self.next_ratios(known, labels)
+        if not ratios and not glimpsed:
+            return None
+        out = np.ones(len(self.points))
+        outside = point_rooms < 0
+        nearest, dist = self.nearest()
+        next_room = outside & (dist <= self.next.next_room_m)
+        for r, g in ratios.items():
+            out[next_room & (nearest == r)] = g
+        if glimpsed:
+            idx = np.flatnonzero(outside)
+            xy = self.points[idx, :2]
+            best = np.zeros(len(idx))
+            for o, ratio in glimpsed:
+                near = np.hypot(xy[:, 0] - o.position[0], xy[:, 1] - o.position[1])
+                close = near <= self.next.glimpse_m
+                best[close] = np.maximum(best[close], ratio)
+            got = best > 0
+            out[idx[got]] = best[got]
+        return out
+
     def factor(self, known: list[ObjectInstance], built: BuiltMap | None) -> np.ndarray | None:
         """(N,) the room factor of every point (module docstring); None where no room with
-        known furniture is known yet."""
+        known furniture is known yet (nor, with the space beyond the mapped rooms, anything of
+        what lies beyond them)."""
         got = self.rooms(built)
         if got is None:
             return None
         labels, point_rooms = got
         ratios = self.room_ratios(known, labels)
-        if not ratios:
+        beyond = None
+        if self.next is not None and self.plan is None:
+            beyond = self.beyond(known, labels, point_rooms)
+        if not ratios and beyond is None:
             return None
-        f = np.ones(len(self.points))
+        f = np.ones(len(self.points)) if beyond is None else beyond
         for r, ratio in ratios.items():
             f[point_rooms == r] = ratio
         return f
+
+    def beyond_groups(self, weights: np.ndarray | None) -> list[tuple[int, np.ndarray, float]]:
+        """The belief ``weights`` (N,) of the space beyond the mapped rooms, by the segment it
+        lies beyond: (segment, the mass-weighted centre (3,), the mass) for each segment with
+        mass there (for the recording: the mass expected behind each room's doors and
+        frontiers); empty off the built map or before any segment."""
+        if weights is None or self._built is None or self.next is None:
+            return []
+        _, point_rooms = self._built
+        nearest, _ = self.nearest()
+        outside = point_rooms < 0
+        out = []
+        for r in np.unique(nearest[outside & (nearest >= 0)]):
+            sel = outside & (nearest == r)
+            mass = float(weights[sel].sum())
+            if mass > 0:
+                centre = (weights[sel, None] * self.points[sel]).sum(axis=0) / mass
+                out.append((int(r), centre, mass))
+        return out
 
 
 # A handed bound's factor where its knowledge rules the target out (a room of a kind that never

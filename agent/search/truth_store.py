@@ -26,11 +26,18 @@ from pathlib import Path
 from ctxsearch.agent.search.draw_store import code_digest, write_json
 from ctxsearch.envs.floorplan import generate_layout
 from ctxsearch.envs.houses import WorldStyle
-from ctxsearch.envs.truth import RoomTruth, TruthError, ground_truth, load_truth, room_contents
+from ctxsearch.envs.truth import (
+    RoomTruth,
+    TruthError,
+    ground_truth,
+    load_truth,
+    room_contents,
+    room_doors,
+)
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.files import InputFileError, cache_dir, read_json
 
-FORMAT = 1
+FORMAT = 2  # 2: the room truth keeps each world's doors
 
 
 def truth_key(
@@ -69,16 +76,18 @@ def cached_ground_truth(
 
 def cached_room_truth(style: WorldStyle, samples: int, seed: int, catalog: Catalog) -> RoomTruth:
     """``envs.truth.room_truth(style, samples, catalog, seed)``: the same numbers, from each
-    sample world's true room contents (``envs.truth.room_contents``), kept in the cache; a file
-    that is not those contents for this catalog is a miss."""
+    sample world's true room contents and doors (``envs.truth.room_contents``, ``room_doors``),
+    kept in the cache; a file that is not those for this catalog is a miss."""
     path = _path(truth_key(style, samples, seed, catalog, "rooms"))
-    worlds = None if path is None else _read_contents(path, samples, catalog)
-    if worlds is None:
+    got = None if path is None else _read_contents(path, samples, catalog)
+    if got is None:
         seeds = range(int(seed), int(seed) + int(samples))
-        worlds = [room_contents(generate_layout(style, s, catalog)) for s in seeds]
+        layouts = [generate_layout(style, s, catalog) for s in seeds]
+        got = ([room_contents(w) for w in layouts], [room_doors(w) for w in layouts])
         if path is not None:
-            write_json(path.parent, path.stem, worlds, "ground-truth room contents")
-    return RoomTruth.of_contents(worlds, catalog)
+            doc = [{"rooms": r, "doors": d} for r, d in zip(*got, strict=True)]
+            write_json(path.parent, path.stem, doc, "ground-truth room contents")
+    return RoomTruth.of_contents(got[0], catalog, got[1])
 
 
 def _path(key: str) -> Path | None:
@@ -86,18 +95,21 @@ def _path(key: str) -> Path | None:
     return None if root is None else root / "truth" / f"{key}.json"
 
 
-def _read_contents(path: Path, samples: int, catalog: Catalog) -> list | None:
-    """The room contents kept at ``path`` (one list of (room, type, instances) per world), or
-    None if the file is missing or is not that."""
+def _read_contents(path: Path, samples: int, catalog: Catalog) -> tuple[list, list] | None:
+    """The room contents and doors kept at ``path`` (per world {"rooms": [(room, type,
+    instances)], "doors": [(a, b)]}), or None if the file is missing or is not that."""
     try:
         doc = read_json(path)
     except InputFileError:
         return None
     if not isinstance(doc, list) or len(doc) != samples:
         return None
-    worlds = []
-    for rooms in doc:
-        if not isinstance(rooms, list):
+    worlds, doors = [], []
+    for world in doc:
+        if not isinstance(world, dict) or set(world) != {"rooms", "doors"}:
+            return None
+        rooms, pairs = world["rooms"], world["doors"]
+        if not isinstance(rooms, list) or not isinstance(pairs, list):
             return None
         rows = []
         for row in rooms:
@@ -109,5 +121,11 @@ def _read_contents(path: Path, samples: int, catalog: Catalog) -> list | None:
             ):  # fmt: skip
                 return None
             rows.append((room, name, k))
+        if not all(
+            isinstance(p, list) and len(p) == 2 and all(type(v) is int and v >= 0 for v in p)
+            for p in pairs
+        ):
+            return None
         worlds.append(rows)
-    return worlds
+        doors.append([(p[0], p[1]) for p in pairs])
+    return worlds, doors
