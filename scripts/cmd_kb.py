@@ -494,7 +494,8 @@ def run_show(args: argparse.Namespace) -> int:
         pairs = sum(rc.next_n.values())
         out.append(
             "next rooms: what the room through a door of a room holding the furniture held "
-            f"({pairs} pairs of rooms sharing a door, per furniture type, on the robot's maps)"
+            f"({pairs} pairs of a room and a room its doors lead to, a hall without furniture "
+            "passed through, per furniture type, on the robot's maps)"
         )
         out.append(format_rows(beyond))
     if persist:
