@@ -342,40 +342,24 @@ class RoomTruth:
         """``same_room`` as ``ctxsearch truth`` writes it: one {ref, relation, type, p, se, n, y}
         per pair, n the rooms holding ref (relation ``SAME-ROOM-AS-<REF>``; se: binomial over
         the rooms)."""
-        out = []
-        for (f, t), p in sorted(self.same_room.items()):
-            n = self.counts.n[f]
-            out.append(
-                {
-                    "ref": f,
-                    "relation": relation_name(f),
-                    "type": t,
-                    "p": p,
-                    "se": math.sqrt(p * (1.0 - p) / n),
-                    "n": n,
-                    "y": self.counts.y.get((f, t), 0),
-                }
-            )
-        return out
+        c = self.counts
+        return _entries(self.same_room, c.n, c.y, relation_name)
 
     def next_entries(self) -> list[dict]:
         """``next_room`` as ``entries`` gives ``same_room``: n the pairs of a room holding ref
-        and a room through one of its doors (relation ``NEXT-ROOM-OF-<REF>``)."""
-        out = []
-        for (f, t), p in sorted(self.next_room.items()):
-            m = self.counts.next_n[f]
-            out.append(
-                {
-                    "ref": f,
-                    "relation": next_relation_name(f),
-                    "type": t,
-                    "p": p,
-                    "se": math.sqrt(p * (1.0 - p) / m),
-                    "n": m,
-                    "y": self.counts.next_y.get((f, t), 0),
-                }
-            )
-        return out
+        and a room its doors lead to (relation ``NEXT-ROOM-OF-<REF>``)."""
+        c = self.counts
+        return _entries(self.next_room, c.next_n, c.next_y, next_relation_name)
+
+
+def _entries(probs: dict, n: dict, y: dict, name) -> list[dict]:
+    """One {ref, relation, type, p, se, n, y} per (ref, type) of ``probs``, its trials ``n[ref]``
+    and successes ``y[(ref, type)]``, the relation named by ``name(ref)``."""
+    return [
+        {"ref": f, "relation": name(f), "type": t, "p": p,
+         "se": math.sqrt(p * (1.0 - p) / n[f]), "n": n[f], "y": y.get((f, t), 0)}
+        for (f, t), p in sorted(probs.items())
+    ]  # fmt: skip
 
 
 def room_truth(

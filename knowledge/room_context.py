@@ -179,17 +179,32 @@ class RoomContext:
 
     def interval(self, ref_type: str, type_name: str) -> tuple[float, float, int, int] | None:
         """(low, high, y, n) of P(SAME-ROOM-AS-ref(T)); None if no ``ref_type`` was counted."""
-        n = self.n.get(ref_type, 0)
-        if n == 0:
-            return None
-        y = self.y.get((ref_type, type_name), 0)
-        lo, hi = intervals.interval(y, n, self.alpha)
-        return float(lo), float(hi), y, n
+        return self._interval(self.n, self.y, ref_type, type_name)
 
     def same_room(self, ref_type: str, type_name: str, rank: Rank) -> float | None:
         """P(SAME-ROOM-AS-ref(T)) read by ``rank``: the interval's lower bound, its Wilson
         centre p0 or its upper bound; None if no ``ref_type`` was counted."""
-        got = self.interval(ref_type, type_name)
+        return self._read(self.interval(ref_type, type_name), rank)
+
+    def next_interval(self, ref_type: str, type_name: str) -> tuple[float, float, int, int] | None:
+        """(low, high, z, m) of P(NEXT-ROOM-OF-ref(T)); None if no pair with ``ref_type``."""
+        return self._interval(self.next_n, self.next_y, ref_type, type_name)
+
+    def next_room(self, ref_type: str, type_name: str, rank: Rank) -> float | None:
+        """P(NEXT-ROOM-OF-ref(T)) read by ``rank`` (as ``same_room``); None without a pair."""
+        return self._read(self.next_interval(ref_type, type_name), rank)
+
+    def _interval(self, trials: dict, successes: dict, ref_type: str, type_name: str):
+        """(low, high, y, n) of the counts ``successes[(ref, T)]`` of ``trials[ref]``."""
+        n = trials.get(ref_type, 0)
+        if n == 0:
+            return None
+        y = successes.get((ref_type, type_name), 0)
+        lo, hi = intervals.interval(y, n, self.alpha)
+        return float(lo), float(hi), y, n
+
+    def _read(self, got: tuple[float, float, int, int] | None, rank: Rank) -> float | None:
+        """An interval (``_interval``) read by ``rank``: low, Wilson centre p0 or high."""
         if got is None:
             return None
         lo, hi, y, n = got
@@ -198,27 +213,6 @@ class RoomContext:
         if rank == Rank.HIGH:
             return hi
         return float(intervals.p0(y, n, self.alpha))
-
-    def next_interval(self, ref_type: str, type_name: str) -> tuple[float, float, int, int] | None:
-        """(low, high, z, m) of P(NEXT-ROOM-OF-ref(T)); None if no pair with ``ref_type``."""
-        m = self.next_n.get(ref_type, 0)
-        if m == 0:
-            return None
-        z = self.next_y.get((ref_type, type_name), 0)
-        lo, hi = intervals.interval(z, m, self.alpha)
-        return float(lo), float(hi), z, m
-
-    def next_room(self, ref_type: str, type_name: str, rank: Rank) -> float | None:
-        """P(NEXT-ROOM-OF-ref(T)) read by ``rank`` (as ``same_room``); None without a pair."""
-        got = self.next_interval(ref_type, type_name)
-        if got is None:
-            return None
-        lo, hi, z, m = got
-        if rank == Rank.LOW:
-            return lo
-        if rank == Rank.HIGH:
-            return hi
-        return float(intervals.p0(z, m, self.alpha))
 
     def room_share(self, type_name: str) -> float | None:
         """The share of segments with furniture holding a ``type_name``; None without any."""

@@ -367,40 +367,32 @@ class RoomRow:
     high: float
 
 
-def room_rows(rc: RoomContext, catalog, ref: str | None, related: str | None, everything: bool):
-    """The learned SAME-ROOM-AS-F intervals of furniture type ``ref`` (or every one counted),
-    for type ``related`` (or every type; y = 0 only with ``everything``), largest lower bound
-    first."""
-    refs = [ref] if ref is not None else sorted(rc.n)
-    types = [related] if related is not None else list(catalog.type_names)
-    out = []
-    for f in refs:
-        for t in types:
-            got = rc.interval(f, t)
-            if got is None or (got[2] == 0 and not everything):
-                continue
-            lo, hi, y, n = got
-            p0 = rc.same_room(f, t, Rank.P0)
-            out.append(RoomRow(f, relation_name(f), t, y, n, p0, lo, hi))
-    return sorted(out, key=lambda r: (-r.low, r.relation, r.type))
-
-
-def next_room_rows(
-    rc: RoomContext, catalog, ref: str | None, related: str | None, everything: bool
+def room_rows(
+    rc: RoomContext,
+    catalog,
+    ref: str | None,
+    related: str | None,
+    everything: bool,
+    next_rooms: bool = False,
 ) -> list[RoomRow]:
-    """The learned NEXT-ROOM-OF-F intervals (what lies through a door of a room holding F; n the
-    pairs of rooms), as ``room_rows`` gives SAME-ROOM-AS-F's."""
-    refs = [ref] if ref is not None else sorted(rc.next_n)
+    """The learned SAME-ROOM-AS-F intervals (with ``next_rooms``: NEXT-ROOM-OF-F, what lies
+    through a door of a room holding F, n the pairs of rooms) of furniture type ``ref`` (or
+    every one counted), for type ``related`` (or every type; y = 0 only with ``everything``),
+    largest lower bound first."""
+    counted = rc.next_n if next_rooms else rc.n
+    interval = rc.next_interval if next_rooms else rc.interval
+    read = rc.next_room if next_rooms else rc.same_room
+    name = next_relation_name if next_rooms else relation_name
+    refs = [ref] if ref is not None else sorted(counted)
     types = [related] if related is not None else list(catalog.type_names)
     out = []
     for f in refs:
         for t in types:
-            got = rc.next_interval(f, t)
+            got = interval(f, t)
             if got is None or (got[2] == 0 and not everything):
                 continue
             lo, hi, y, n = got
-            p0 = rc.next_room(f, t, Rank.P0)
-            out.append(RoomRow(f, next_relation_name(f), t, y, n, p0, lo, hi))
+            out.append(RoomRow(f, name(f), t, y, n, read(f, t, Rank.P0), lo, hi))
     return sorted(out, key=lambda r: (-r.low, r.relation, r.type))
 
 
@@ -450,7 +442,7 @@ def run_show(args: argparse.Namespace) -> int:
     rooms, beyond = [], []
     if not pooled and args.forget == Forget.NONE:
         rooms = room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
-        beyond = next_room_rows(rc, kb.catalog, args.ref_type, args.related, args.all)
+        beyond = room_rows(rc, kb.catalog, args.ref_type, args.related, args.all, next_rooms=True)
     persist = []
     if not pooled and args.forget == Forget.NONE and args.related is None:
         learned: LearnedPersistence = info["persistence"]
