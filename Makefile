@@ -8,7 +8,7 @@ STAMP := $(VENV)/.ctxsearch-installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test bench bench-timing bench-a bench-b bench-home-full bench-full kb-home lint syscheck clean help
+.PHONY: demo test bench bench-timing bench-a bench-b bench-home-full bench-unknown-home bench-full kb-home lint syscheck clean help
 
 help:
 	@echo "make demo   - learn in a few office rooms, then search with and without context (writes demo/)"
@@ -109,6 +109,23 @@ kb-home: $(STAMP)
 # 2 cores; results/home_400).
 bench-home-full: build/kb_home.sqlite
 	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
+
+# The unknown home beyond make bench (about 75 minutes on 2 cores, after make bench: it searches
+# make bench's store and reads its draws): room context on the built map with and without the
+# next-room relations (200 paired apartment episodes each; results/search_apartment_built_rooms,
+# _next), the family houses' ladder of bounds with the given map's policies on the same episodes
+# and the next-room relations there (results/search_family_house_*), and "find my phone" on the
+# built map, the day-1 episodes of make bench's remembered and given runs
+# (results/search_apartment_built_instance).
+bench-unknown-home: $(STAMP)
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_built_rooms --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --set map.days_after=1 --policies frontier,indirect,oracle-prior-indirect,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_built_instance --workers $(WORKERS) --draw-cache build/draws
+	rm -f build/kb_family_house.sqlite build/kb_family_house.sqlite-wal build/kb_family_house.sqlite-shm
+	$(T) $(CTX) learn --style family_house --rooms 30 --kb build/kb_family_house.sqlite --no-progress
+	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --episodes 200 --quiet --out results/search_family_house_built --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_family_house_built_next --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map given --policies uniform,location,oracle-prior,oracle --episodes 200 --quiet --out results/search_family_house_given --workers $(WORKERS) --draw-cache build/draws
 
 # The benchmark at full power (scripts/experiments/bench_full.py; results/full/, its journal, step
 # stamps, draws and family-house store in build/full/): the apartment learning curve (100 paired
