@@ -166,53 +166,51 @@ class RoomPrior:
             )
         return self._nearest
 
-    def room_ratios(self, known: list[ObjectInstance], labels: RoomLabels) -> dict[int, float]:
-        """The clipped ratio f_R of every room holding known furniture with a room probability
-        for the target (module docstring)."""
-        out: dict[int, float] = {}
+    def placed(self, known: list[ObjectInstance], labels: RoomLabels) -> list[tuple]:
+        """The known furniture with the segment each stands in (-1: beyond the mapped floor)."""
         furniture = [o for o in known if self.catalog.type(o.type).is_furniture]
         if not furniture:
-            return out
-        where = labels.of_objects(furniture)
-        for o, r in zip(furniture, where, strict=True):
-            p = self.probs.same_room(o.type, self.target)
-            if r < 0 or p is None:
-                continue
-            f = float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))
-            out[int(r)] = max(out.get(int(r), 0.0), f)
+            return []
+        return list(zip(furniture, labels.of_objects(furniture).tolist(), strict=True))
+
+    def ratio(self, p: float | None) -> float | None:
+        """A probability over the target's share of rooms, clipped (module docstring)."""
+        return None if p is None else float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))
+
+    def room_ratios(self, placed: list[tuple]) -> dict[int, float]:
+        """The clipped ratio f_R of every room holding known furniture (``placed``) with a room
+        probability for the target (module docstring)."""
+        out: dict[int, float] = {}
+        for o, r in placed:
+            f = self.ratio(self.probs.same_room(o.type, self.target))
+            if r >= 0 and f is not None:
+                out[r] = max(out.get(r, 0.0), f)
         return out
 
     def next_ratios(
-        self, known: list[ObjectInstance], labels: RoomLabels
+        self, placed: list[tuple]
     ) -> tuple[dict[int, float], list[tuple[ObjectInstance, float]]]:
         """The space beyond the mapped rooms (module docstring): the clipped next-room ratio g of
-        every segment holding known furniture with a next-room probability for the target, and
-        the furniture seen beyond the mapped floor with its room ratio."""
+        every segment holding known furniture (``placed``) with a next-room probability for the
+        target, and the furniture seen beyond the mapped floor with its room ratio."""
         out: dict[int, float] = {}
         glimpsed: list[tuple[ObjectInstance, float]] = []
-        furniture = [o for o in known if self.catalog.type(o.type).is_furniture]
-        if not furniture:
-            return out, glimpsed
-        where = labels.of_objects(furniture)
-        for o, r in zip(furniture, where, strict=True):
+        for o, r in placed:
             if r < 0:
-                p = self.probs.same_room(o.type, self.target)
-                if p is not None:
-                    glimpsed.append((o, float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))))
+                f = self.ratio(self.probs.same_room(o.type, self.target))
+                if f is not None:
+                    glimpsed.append((o, f))
                 continue
-            p = self.probs.next_room(o.type, self.target)
-            if p is None:
-                continue
-            g = float(np.clip(p / self.share, MIN_FACTOR, MAX_FACTOR))
-            out[int(r)] = max(out.get(int(r), 0.0), g)
+            g = self.ratio(self.probs.next_room(o.type, self.target))
+            if g is not None:
+                out[r] = max(out.get(r, 0.0), g)
         return out, glimpsed
 
-    def beyond(
-        self, known: list[ObjectInstance], labels: RoomLabels, point_rooms: np.ndarray
-    ) -> np.ndarray | None:
+    def beyond(self, placed: list[tuple], point_rooms: np.ndarray) -> np.ndarray | None:
         """(N,) the factor of the points in no segment (module docstring; 1 elsewhere), None
-        where nothing is known of what lies beyond."""
-        ratios, glimpsed = self.next_ratios(known, labels)
+        where nothing is known of what lies beyond (``placed``: the known furniture and its
+        segments)."""
+        ratios, glimpsed = self.next_ratios(placed)
         if not ratios and not glimpsed:
             return None
         out = np.ones(len(self.points))
@@ -241,10 +239,11 @@ class RoomPrior:
         if got is None:
             return None
         labels, point_rooms = got
-        ratios = self.room_ratios(known, labels)
+        placed = self.placed(known, labels)
+        ratios = self.room_ratios(placed)
         beyond = None
         if self.next is not None and self.plan is None:
-            beyond = self.beyond(known, labels, point_rooms)
+            beyond = self.beyond(placed, point_rooms)
         if not ratios and beyond is None:
             return None
         f = np.ones(len(self.points)) if beyond is None else beyond
