@@ -237,12 +237,12 @@ def learn(
                       days=config.days, world=world_noun(config.style, catalog))  # fmt: skip
     store_cm = EvidenceStore.open(config.kb_path, catalog, alpha=config.alpha, create=True)
     with store_cm as store, RunLog(config.record) as log, _progress(config, style) as bar:
+        others = _refuse_counting_twice(store, config, style, rid)
         kb = KnowledgeBase(catalog, store.alpha)
         history = RunHistory.load(store, rid, style, kb, strategy)
-        settings = RunSettings(config, style, rid, label, map_mode, detector)
-        services = RunServices(catalog, kb, store, strategy, history.evidence, on_choice, perceive)
-        run = Run(settings, services)
-        rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination)
+        run = Run(RunSettings(config, style, rid, label, map_mode, detector),
+                  RunServices(catalog, kb, store, strategy, history.evidence, on_choice, perceive))  # fmt: skip
+        rooms = _Rooms(run, log, history, layouts, summary, bar, on_examination, others)
         try:
             if rooms.learn(config):
                 history.release(kb, strategy)
@@ -254,6 +254,34 @@ def learn(
         summary.files = list(log.files)
     summary.wall_s = time.perf_counter() - t_wall
     return summary
+
+
+UP_FRONT_ROOMS = 4096  # rooms whose seeds ``_refuse_counting_twice`` checks before anything runs
+
+
+def _refuse_counting_twice(
+    store: EvidenceStore, config: LearnConfig, style: str, rid: str
+) -> dict[int, str]:
+    """The worlds of ``style`` another run of the store learned ({room seed: its run}), and a
+    one-line error, before anything is written, where this run would visit one of them among
+    its first ``UP_FRONT_ROOMS`` rooms (``_Rooms`` checks every later room before entering it):
+    the store's knowledge reads every run, so a world learned under two settings (``--paper``
+    and the default, two strategies) would count its objects twice. A run resumes its own
+    rooms; other seeds give other worlds."""
+    others = {seed: r for r, st, seed, _ in store.rooms() if st == style and r != rid}
+    for i in range(min(config.rooms, UP_FRONT_ROOMS) if others else 0):
+        _check_not_counted(others, room_seed(config.seed, i), config, style, rid)
+    return others
+
+
+def _check_not_counted(others: dict[int, str], seed: int, config, style: str, rid: str) -> None:
+    """The one-line error of ``_refuse_counting_twice`` if world ``seed`` is another run's."""
+    if seed in others:
+        raise CtxsearchError(
+            f"{config.kb_path}: run {others[seed]} already learned {style} worlds this run "
+            f"({rid}) would visit; learned again under other settings they would count twice "
+            "(use another store, or another --seed for other worlds)"
+        )
 
 
 def _progress(config: LearnConfig, style: str):
@@ -276,6 +304,7 @@ class _Rooms:
     summary: Summary
     bar: tqdm | None
     on_examination: ExamCallback | None
+    others: dict[int, str] = field(default_factory=dict)  # worlds other runs of the store learned
     _last_post: float = 0.0
 
     def learn(self, config: LearnConfig) -> bool:
@@ -293,6 +322,7 @@ class _Rooms:
                     continue
                 if config.limit_reached(summary.examinations):
                     return False
+                _check_not_counted(self.others, s, config, run.settings.style, run.settings.key)
                 if not self.room(config, i, s, day):
                     return False
         return True

@@ -32,7 +32,13 @@ from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.drift import DayEvidence, Forgetting
 from ctxsearch.knowledge.errors import CtxsearchError
 from ctxsearch.knowledge.geometry import ObjectInstance
-from ctxsearch.knowledge.options import MapMode, PerceptionMode, Reexamine, values
+from ctxsearch.knowledge.options import (
+    DEFAULT_CONFIRM_REFERENCE,
+    MapMode,
+    PerceptionMode,
+    Reexamine,
+    values,
+)
 from ctxsearch.knowledge.store import EvidenceStore
 
 ROOM_DONE = "done"
@@ -120,8 +126,8 @@ class LearnConfig:
     detected it (1: at once, Figure 2 as published); ``min_score``: only once one of its
     detections scored at least that confidence (0: any detection counts); ``confirm_reference``:
     an object may be the reference of an examination once that many images of the room detected
-    it (1: at once, as published; a false positive, drawn anew in every image, then
-    almost never is); ``exam_recall``: camera mode plans examinations to see (agent.exam_views:
+    it (``DEFAULT_CONFIRM_REFERENCE``, 2: a false positive, drawn anew in every image, then
+    almost never is; 1: at once, as published, ``PAPER_CONFIRM_REFERENCE``); ``exam_recall``: camera mode plans examinations to see (agent.exam_views:
     the gaze planner's viewpoints stay within the distance at which the catalog's object types
     are detected with that mean single-image recall; None: the planner's own range, as before).
     ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
@@ -148,7 +154,7 @@ class LearnConfig:
     detector: str | None = None
     confirm: int = 1
     min_score: float = 0.0
-    confirm_reference: int = 1
+    confirm_reference: int = DEFAULT_CONFIRM_REFERENCE
     exam_recall: float | None = None
     days: int = 1
     reexamine: str = "never"

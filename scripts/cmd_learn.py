@@ -8,7 +8,12 @@ from pathlib import Path
 
 from ctxsearch.agent.strategies import STRATEGIES, make_strategy
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import Forget, IntervalMethod
+from ctxsearch.knowledge.options import (
+    DEFAULT_CONFIRM_REFERENCE,
+    PAPER_CONFIRM_REFERENCE,
+    Forget,
+    IntervalMethod,
+)
 from ctxsearch.scripts import argtypes, last_stop, stop_code, stop_line
 from ctxsearch.scripts.sweep import SweepOptions, add_sweep_arguments
 
@@ -152,11 +157,17 @@ def _add_camera_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--confirm-reference",
         type=argtypes.positive_int,
-        default=1,
+        default=None,
         metavar="K",
-        help="camera mode: examine an object only once K images of the room detected it (2: "
-        "a false positive, drawn anew in every image, is almost never examined; default: 1, "
-        "at once)",
+        help="camera mode: examine an object only once K images of the room detected it (a "
+        "false positive, drawn anew in every image, is then almost never examined; 1: at once, "
+        f"as published; default: {DEFAULT_CONFIRM_REFERENCE})",
+    )
+    p.add_argument(
+        "--paper",
+        action="store_true",
+        help="the paper's literal learning loop: every detected object may be examined at once "
+        f"(--confirm-reference {PAPER_CONFIRM_REFERENCE})",
     )
     p.add_argument(
         "--exam-recall",
@@ -199,6 +210,20 @@ def _add_day_args(p: argparse.ArgumentParser) -> None:
     argtypes.add_forget_arguments(p)
 
 
+def confirm_reference(args: argparse.Namespace) -> int:
+    """The images that must detect a reference: ``--confirm-reference``, 1 with ``--paper``
+    (the two together only where they agree), else the default."""
+    k = getattr(args, "confirm_reference", None)
+    if getattr(args, "paper", False):
+        if k is not None and k != PAPER_CONFIRM_REFERENCE:
+            raise CtxsearchError(
+                f"--paper examines every detected object (--confirm-reference "
+                f"{PAPER_CONFIRM_REFERENCE}); it contradicts --confirm-reference {k}"
+            )
+        return PAPER_CONFIRM_REFERENCE
+    return DEFAULT_CONFIRM_REFERENCE if k is None else k
+
+
 def run_learn(args: argparse.Namespace) -> int:
     """Handler of ``ctxsearch learn``."""
     # Imported here: learning pulls in MuJoCo, which `ctxsearch --help` must not wait for.
@@ -224,7 +249,7 @@ def run_learn(args: argparse.Namespace) -> int:
             detector=args.detector,
             confirm=args.confirm,
             min_score=args.min_score,
-            confirm_reference=args.confirm_reference,
+            confirm_reference=confirm_reference(args),
             exam_recall=args.exam_recall,
             days=args.days,
             reexamine=args.reexamine,

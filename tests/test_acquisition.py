@@ -493,9 +493,13 @@ def test_resume_with_a_budget_equals_an_uninterrupted_run_with_it(tmp_path):
     kb_full, kb_part = _kb(tmp_path / "full.sqlite", cat), _kb(part, cat)
     for t in cat.type_names:
         assert kb_full.n(t) == kb_part.n(t) and kb_full.nonzero(t) == kb_part.nonzero(t)
-    # The same store without the budget is another run.
-    s5, _ = _office_learn(part, cat, layouts, max_examinations=1, strategy="cost-hif")
-    assert s5.examinations == 1 and s5.run != full.run
+    # The same rooms without the budget would be another run over the same worlds, their
+    # objects counted twice: refused before anything is written.
+    before = _kb(part, cat)
+    with pytest.raises(CtxsearchError, match="count twice"):
+        _office_learn(part, cat, layouts, max_examinations=1, strategy="cost-hif")
+    after = _kb(part, cat)
+    assert all(before.n(t) == after.n(t) for t in cat.type_names)
 
 
 def test_bad_room_budget_is_a_one_line_error(tmp_path):

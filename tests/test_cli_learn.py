@@ -119,8 +119,13 @@ def test_learn_with_a_room_budget(tmp_path, capsys):
     assert "2 rooms done (2 in this call)" in out
     assert "room budget: 45 s simulated per room; the budget ended 2 of the 2 rooms" in out
     n_budget = int(out.split(" in the store")[0].split()[-1])
-    # Without the budget it is another run in the same store: every room to completion.
-    assert main([*base, "--no-progress"]) == 0
+    # Without the budget it would be another run over the same rooms in the same store, their
+    # objects counted twice: refused in one line. In a store of its own, every room to completion.
+    assert main([*base, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "count twice" in err[0]
+    other = ["--kb", str(tmp_path / "whole.sqlite"), "--no-progress"]
+    assert main([*base, *other]) == 0
     out = capsys.readouterr().out
     assert "room budget" not in out
     n_now = int(out.split("examinations: ")[1].split()[0])

@@ -176,9 +176,9 @@ def test_a_confidence_threshold_counts_fewer_related_objects(catalog, tmp_path):
         return learn(cfg, catalog=catalog)
 
     high = run(tmp_path / "high.sqlite", 1.0)
-    assert high.run == "hif/camera+realistic+score1/seed=0/map=built"
+    assert high.run == "hif/camera+realistic+score1+ref2/seed=0/map=built"
     low = run(tmp_path / "low.sqlite", 0.0)
-    assert low.run == "hif/camera+realistic/seed=0/map=built"
+    assert low.run == "hif/camera+realistic+ref2/seed=0/map=built"
 
     def related(path):
         with EvidenceStore.open(path, catalog, read_only=True) as st:

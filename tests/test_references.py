@@ -90,6 +90,10 @@ def test_bench_intervals_counts_phantom_references(tmp_path):
         runs = list(csv.DictReader(f))
     assert {float(r["phantom_reference_share"]) > 0 for r in runs} == {True, False}
     assert "phantom references" in (out / "intervals.md").read_text()
+    assert "Coverage per reference type" in (out / "intervals.md").read_text()
+    for r in rows.values():  # per type: [coverage pooled over seeds, informative entries]
+        for key in ("coverage_by_type", "coverage_by_type_corrected"):
+            assert r[key] and all(0 <= c <= 1 and n >= 1 for c, n in r[key].values())
     for r in [*rows.values(), *runs]:  # the corrected interval, read from each run's store
         for key in ("coverage_informative", "mean_abs_error", "mean_width", "expected_recall"):
             assert 0 <= float(r[f"corrected_{key}" if "recall" not in key else key]) <= 1
@@ -115,3 +119,31 @@ def test_examinations_planned_to_see_see_better_at_a_cost(tmp_path, catalog):
     assert near_key == f"{key}/exam-recall=0.9"
     assert near > far + 0.03 and near > 0.9
     assert near_s > far_s
+
+
+def test_learn_confirms_references_by_default_and_paper_gives_the_literal_loop(
+    tmp_path, capsys
+):
+    """``ctxsearch learn`` examines an object once two images saw it (the default); ``--paper``
+    is the paper's loop (every detected object at once, its own run key); the two flags that
+    contradict each other are a one-line error with exit code 2 and no store written."""
+    from ctxsearch.scripts.cli import main
+
+    base = ["learn", "--style", "office", "--rooms", "1", "--max-examinations", "1"]
+    assert main([*base, "--kb", str(tmp_path / "d.sqlite"), "--no-progress"]) == 0
+    assert "hif/camera+realistic+ref2/seed=0/map=built" in capsys.readouterr().out
+    assert main([*base, "--kb", str(tmp_path / "p.sqlite"), "--no-progress", "--paper"]) == 0
+    out = capsys.readouterr().out
+    assert "hif/camera+realistic/seed=0/map=built" in out and "+ref" not in out
+    bad = tmp_path / "bad.sqlite"
+    code = main([*base, "--kb", str(bad), "--paper", "--confirm-reference", "2"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--paper" in err
+    assert not bad.exists()
+    # The default's rooms learned again by the paper's loop would count twice: refused, the
+    # store's bytes untouched.
+    before = (tmp_path / "d.sqlite").read_bytes()
+    code = main([*base, "--kb", str(tmp_path / "d.sqlite"), "--no-progress", "--paper"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "count twice" in err
+    assert (tmp_path / "d.sqlite").read_bytes() == before

@@ -143,6 +143,7 @@ def corrected_at(store_path: Path, tr: Trace, ks: list[int], alpha: float) -> di
                 for r in sorted(set(refs))
                 if (m := inf & (np.array(refs) == r)).any()
             }
+            row["held"] = held_by_type(lo, hi, p, inf, refs)
             pooled = PooledCounts.from_examinations(
                 catalog.hierarchy, ((t, pairs) for _, t, pairs in exams[:k])
             )
@@ -202,6 +203,35 @@ def phantom_share(tr: Trace, k: int) -> float:
     """The share of the first ``k`` examinations whose reference the room does not hold under
     the type it was examined as (a false positive or a look-alike; NaN before any)."""
     return float(np.mean(tr.phantom[:k])) if k else math.nan
+
+
+def held_by_type(lo, hi, p_true, inf, refs: list[str]) -> dict[str, list[int]]:
+    """Per reference type, [informative entries whose interval holds p_true, informative
+    entries]: coverage per type, pooled over seeds by summing."""
+    held = (lo <= p_true + 1e-12) & (p_true <= hi + 1e-12)
+    r = np.array(refs)
+    return {
+        t: [int((held & m).sum()), int(m.sum())]
+        for t in sorted(set(refs))
+        if (m := inf & (r == t)).any()
+    }
+
+
+def _held_wilson(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float) -> dict:
+    """``held_by_type`` of Wilson's intervals after examination k."""
+    y, n = tr.counts[k - 1]
+    lo, hi = intervals.interval(y, n, alpha)
+    return held_by_type(np.asarray(lo), np.asarray(hi), truth_p, informative(truth_p, n), refs)
+
+
+def _pooled_coverage(helds: list[dict[str, list[int]]]) -> dict[str, list[float]]:
+    """Per reference type, [coverage pooled over the seeds, informative entries summed]."""
+    out: dict[str, list[float]] = {}
+    for t in sorted({t for h in helds for t in h}):
+        a = sum(h[t][0] for h in helds if t in h)
+        b = sum(h[t][1] for h in helds if t in h)
+        out[t] = [a / b, b]
+    return out
 
 
 def _bias(tr: Trace, k: int, truth_p: np.ndarray, refs: list[str], alpha: float) -> dict:
@@ -329,6 +359,12 @@ def _mark_row(
     row.update({name: float(np.nanmedian([c[name] for c in seeds])) for name in seeds[0]})
     row["bias_by_type_corrected"] = _median_by_type(cbias)
     row["bias_by_type"] = _median_by_type(biases)
+    row["coverage_by_type"] = _pooled_coverage(
+        [_held_wilson(t, k, truth_p, refs, alpha) for t, k in zip(traces, ks, strict=True)]
+    )
+    row["coverage_by_type_corrected"] = _pooled_coverage(
+        [t.corrected.get(k, {}).get("held", {}) for t, k in zip(traces, ks, strict=True)]
+    )
     for seed, (k, cells, bias, cb) in enumerate(zip(ks, seeds, biases, cbias, strict=True)):
         key = {"style": head["style"], "detector": head["detector"], "seed": seed,
                "rooms": head["rooms"], "examinations": k}  # fmt: skip
@@ -407,4 +443,27 @@ def markdown(doc: dict) -> str:
         b = r.get("bias_by_type_corrected", {})
         cells = [f"{b[t]:+.3f}" if t in b else "-" for t in types]
         lines.append(f"| {r['style']} | {r['detector']} | " + " | ".join(cells) + " |")
+    lines += ["", "## Coverage per reference type at the last room mark: the share of its "
+              "informative entries (pooled over the seeds; their count in brackets) whose "
+              "interval holds p_true, Wilson / corrected; below 0.90 in bold", "",
+              "| style | detector | " + " | ".join(types) + " |",
+              "|---" * (2 + len(types)) + "|"]  # fmt: skip
+    for r in rows:
+        w, c = r.get("coverage_by_type", {}), r.get("coverage_by_type_corrected", {})
+        cells = [_coverage_cell(w.get(t), c.get(t)) for t in types]
+        lines.append(f"| {r['style']} | {r['detector']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _coverage_cell(wilson: list[float] | None, corrected: list[float] | None) -> str:
+    """'0.85 / **0.88** (40)': a type's Wilson and corrected coverage (below 0.90 in bold) and
+    its informative entries."""
+    if wilson is None:
+        return "-"
+
+    def one(x: list[float] | None) -> str:
+        if x is None:
+            return "-"
+        return f"**{x[0]:.2f}**" if x[0] < 0.90 else f"{x[0]:.2f}"
+
+    return f"{one(wilson)} / {one(corrected)} ({int(wilson[1])})"

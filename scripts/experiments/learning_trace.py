@@ -20,7 +20,7 @@ from ctxsearch.knowledge import intervals
 from ctxsearch.knowledge.catalog import Catalog
 from ctxsearch.knowledge.clustered import ClusteredIntervals, RoomCounts
 from ctxsearch.knowledge.errors import CtxsearchError
-from ctxsearch.knowledge.options import IntervalMethod, PerceptionMode
+from ctxsearch.knowledge.options import DEFAULT_CONFIRM_REFERENCE, IntervalMethod, PerceptionMode
 
 METRICS = ("mean_width", "max_width", "mean_abs_error", "coverage_informative", "coverage")
 # Under --interval clustered, the paper's Wilson figures beside the clustered ones.
@@ -237,7 +237,9 @@ class LearningBenchConfig:
     detector: str | None = None  # camera mode's preset (None: realistic; oracle: none)
     interval: str = "wilson"  # the intervals measured: wilson or clustered
     confirm: int = 1  # camera mode: images that must detect a related object
-    confirm_reference: int = 1  # camera mode: images that must detect a reference
+    confirm_reference: int = (
+        DEFAULT_CONFIRM_REFERENCE  # camera mode: images that must detect a reference
+    )
     exam_recall: float | None = None  # camera mode: examinations planned to see (agent.exam_views)
     min_score: float = 0.0  # camera mode: the confidence a detection must reach to count
 
