@@ -106,7 +106,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "--interval",
         default=None,
         choices=values(IntervalMethod),
-        help=argtypes.INTERVAL_HELP,
+        help=cfg.help_of("knowledge.interval"),
     )
     p.add_argument(
         "--map",
@@ -225,9 +225,9 @@ def _forgetting_knowledge(args: argparse.Namespace, config: SearchConfig):
     k = config.knowledge
     if k.kb is None:
         raise CtxsearchError(f"--forget {args.forget} needs a knowledge store (--kb)")
-    if k.interval != IntervalMethod.WILSON:
+    if args.interval not in (None, IntervalMethod.WILSON):
         raise CtxsearchError(
-            f"--forget {args.forget} does not combine with --interval {k.interval}"
+            f"--forget {args.forget} does not combine with --interval {args.interval}"
         )
     with EvidenceStore.open(k.kb, load_catalog(), read_only=True) as store:
         ev = evidence_of(store.examinations())
@@ -281,7 +281,8 @@ def run_search(args: argparse.Namespace) -> int:
     if args.forget != Forget.NONE:
         kb, seeds = _forgetting_knowledge(args, config)
         source = KnowledgeSource(kb, frozenset(seeds))
-        config = config.updated({"knowledge.kb": None})
+        # Forgetting reads Wilson intervals on its weighted counts (knowledge.drift): recorded so.
+        config = config.updated({"knowledge.kb": None, "knowledge.interval": "wilson"})
     one = search_once(config, args.target, source=source, records=[args.record], catalog=catalog)
     if args.forget != Forget.NONE:
         print(f"knowledge: {args.kb} read with forgetting {argtypes.forgetting(args).label} "

@@ -356,3 +356,33 @@ def test_bench_drift_writes_its_files(tmp_path, capsys):
     assert "| every-day/none |" in (out / "drift.md").read_text()
     assert main(["bench", "drift", "--drift", "Desk/NOPE/Cup:0.5:3", "--out", str(out)]) == 2
     assert "no placement rule named 'Desk/NOPE/Cup'" in capsys.readouterr().err
+
+
+def test_search_with_forgetting_reads_wilson_and_refuses_another_interval(tmp_path, capsys):
+    """The search ranks by the corrected interval by default; forgetting has Wilson intervals
+    only, so ``search --forget`` reads them (and says so), and an explicit other interval is a
+    one-line error."""
+    from ctxsearch.scripts.cli import main
+
+    kb = str(tmp_path / "days.sqlite")
+    learn = ["learn", "--style", "office", "--rooms", "2", "--days", "2", "--perception", "oracle"]
+    assert main([*learn, "--kb", kb, "--no-progress"]) == 0
+    capsys.readouterr()
+    search = [
+        "search",
+        "--kb",
+        kb,
+        "--style",
+        "office",
+        "--target",
+        "Cup",
+        "--budget-seconds",
+        "60",
+    ]
+    assert main([*search, "--show-config"]) == 0
+    assert 'interval = "corrected"' in capsys.readouterr().out
+    assert main([*search, "--forget", "half-life"]) == 0
+    assert "intervals: wilson" in capsys.readouterr().out
+    assert main([*search, "--forget", "half-life", "--interval", "corrected"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not combine with --interval corrected" in err[0]
