@@ -47,10 +47,28 @@ def last_stop() -> int:
     return received[-1] if received else int(signal.SIGINT)
 
 
+DEFER_S = 0.05  # a signal that came where an exception would be ignored comes again this late
+
+
 def raise_stopped(signum, frame) -> None:
-    """The handler while a command runs: the signal as a ``Stopped`` exception."""
+    """The handler while a command runs: the signal as a ``Stopped`` exception. Where Python
+    would ignore an exception (a finalizer, or importlib's module-lock callback, both run from a
+    garbage collection: it prints "Exception ignored" with a traceback and goes on, the stop
+    lost), the signal is sent again ``DEFER_S`` later instead, to land in ordinary code."""
+    if _ignores_exceptions(frame):
+        threading.Timer(DEFER_S, os.kill, (os.getpid(), int(signum))).start()
+        return
     received.append(int(signum))
     raise Stopped(signum)
+
+
+def _ignores_exceptions(frame) -> bool:
+    """Is ``frame`` code whose exceptions Python ignores (``__del__``, a weakref callback of
+    importlib's bootstrap)?"""
+    code = getattr(frame, "f_code", None)
+    if code is None:
+        return False
+    return code.co_name == "__del__" or code.co_filename.startswith("<frozen importlib")
 
 
 def exit_interrupted(signum, frame) -> None:

@@ -490,3 +490,39 @@ def test_the_gym_task_takes_numpy_numbers_and_a_deeply_nested_style_is_refused(t
     deep.write_text("a = " + "[" * 60_000 + "]" * 60_000 + "\n")
     with pytest.raises(StyleError, match="nested more than 64 levels deep"):
         ObjectSearchEnv(str(deep), "perfect", width=32, height=24)
+
+
+def test_a_stop_signal_where_exceptions_are_ignored_comes_again_later(monkeypatch):
+    """A stop signal landing in a finalizer or in importlib's module-lock callback (where Python
+    prints "Exception ignored" and goes on) is not raised there: it is sent again a moment later,
+    to land in ordinary code; anywhere else it is a ``Stopped`` at once."""
+    import signal
+    import types
+
+    import ctxsearch.scripts as scripts
+
+    sent = []
+
+    class FakeTimer:
+        def __init__(self, delay, fn, args):
+            sent.append((delay, fn, args))
+
+        def start(self):
+            pass
+
+    monkeypatch.setattr(scripts.threading, "Timer", FakeTimer)
+    monkeypatch.setattr(scripts, "received", [])
+
+    def frame(name, filename="x.py"):
+        return types.SimpleNamespace(
+            f_code=types.SimpleNamespace(co_name=name, co_filename=filename)
+        )
+
+    scripts.raise_stopped(signal.SIGINT, frame("__del__"))
+    scripts.raise_stopped(signal.SIGTERM, frame("cb", "<frozen importlib._bootstrap>"))
+    assert [(d, a[1]) for d, _, a in sent] == [(scripts.DEFER_S, signal.SIGINT),
+                                               (scripts.DEFER_S, signal.SIGTERM)]  # fmt: skip
+    assert scripts.received == []
+    with pytest.raises(scripts.Stopped):
+        scripts.raise_stopped(signal.SIGINT, frame("run"))
+    assert scripts.received == [signal.SIGINT]
