@@ -116,7 +116,9 @@ bench-home-full: build/kb_home.sqlite
 # _next), the family houses' ladder of bounds with the given map's policies on the same episodes
 # and the next-room relations there (results/search_family_house_*), and "find my phone" on the
 # built map, the day-1 episodes of make bench's remembered and given runs
-# (results/search_apartment_built_instance).
+# (results/search_apartment_built_instance); the control style without layout rules
+# (apartment_shuffled: 30 houses learned, then room context with and without the next-room
+# relations on 200 paired episodes; results/search_apartment_shuffled_built_{rooms,next}).
 bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_built_rooms --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next --workers $(WORKERS) --draw-cache build/draws
@@ -126,6 +128,10 @@ bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --episodes 200 --quiet --out results/search_family_house_built --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_family_house_built_next --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map given --policies uniform,location,oracle-prior,oracle --episodes 200 --quiet --out results/search_family_house_given --workers $(WORKERS) --draw-cache build/draws
+	rm -f build/kb_apartment_shuffled.sqlite build/kb_apartment_shuffled.sqlite-wal build/kb_apartment_shuffled.sqlite-shm
+	$(T) $(CTX) learn --style apartment_shuffled --rooms 30 --kb build/kb_apartment_shuffled.sqlite --no-progress
+	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_shuffled_built_rooms --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_shuffled_built_next --workers $(WORKERS) --draw-cache build/draws
 
 # The benchmark at full power (scripts/experiments/bench_full.py; results/full/, its journal, step
 # stamps, draws and family-house store in build/full/): the apartment learning curve (100 paired
