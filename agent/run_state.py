@@ -127,7 +127,8 @@ class LearnConfig:
     detections scored at least that confidence (0: any detection counts); ``confirm_reference``:
     an object may be the reference of an examination once that many images of the room detected
     it (``DEFAULT_CONFIRM_REFERENCE``, 2: a false positive, drawn anew in every image, then
-    almost never is; 1: at once, as published, ``PAPER_CONFIRM_REFERENCE``); ``exam_recall``: camera mode plans examinations to see (agent.exam_views:
+    almost never is; 1: at once, as published, ``PAPER_CONFIRM_REFERENCE``); ``exam_recall``:
+    camera mode plans examinations to see (agent.exam_views:
     the gaze planner's viewpoints stay within the distance at which the catalog's object types
     are detected with that mean single-image recall; None: the planner's own range, as before).
     ``days``: the rooms are visited on days 0 .. days-1 (1: the paper's single visit);
