@@ -49,6 +49,7 @@ from ctxsearch.scripts.experiments.bench_learning import ground_truth_units
 from ctxsearch.scripts.experiments.learning_trace import (
     LearningBenchConfig,
     Trace,
+    holds,
     informative,
     interval_metrics,
     run_trace,
@@ -208,7 +209,7 @@ def phantom_share(tr: Trace, k: int) -> float:
 def held_by_type(lo, hi, p_true, inf, refs: list[str]) -> dict[str, list[int]]:
     """Per reference type, [informative entries whose interval holds p_true, informative
     entries]: coverage per type, pooled over seeds by summing."""
-    held = (lo <= p_true + 1e-12) & (p_true <= hi + 1e-12)
+    held = holds(lo, hi, p_true)
     r = np.array(refs)
     return {
         t: [int((held & m).sum()), int(m.sum())]

@@ -41,11 +41,16 @@ def informative(p_true: np.ndarray, n: np.ndarray) -> np.ndarray:
     return (np.asarray(n) >= 1) & (np.asarray(p_true) >= lo) & (np.asarray(p_true) <= hi)
 
 
+def holds(lo, hi, p_true) -> np.ndarray:
+    """(E,) bool: the intervals [lo, hi] that hold p_true (to float rounding)."""
+    return (lo <= p_true + 1e-12) & (p_true <= hi + 1e-12)
+
+
 def interval_metrics(lo, hi, centre, p_true, n) -> dict[str, float]:
     """mean/max width, mean |p0 - p_true|, coverage over all entries and over the informative
     ones (NaN where there are none)."""
     w = hi - lo
-    held = (lo <= p_true + 1e-12) & (p_true <= hi + 1e-12)
+    held = holds(lo, hi, p_true)
     inf = informative(p_true, n)
     return {
         "mean_width": float(w.mean()),
