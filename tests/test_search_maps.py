@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 import pytest
 
+from ctxsearch.agent.navigation import OccupancyGrid
 from ctxsearch.agent.search import episode as S
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
@@ -566,3 +567,77 @@ def test_kept_views_give_the_gains_and_choices_of_tracing_afresh(catalog):
     assert a is not None and b is not None
     assert (tuple(a.xy), a.gain, a.share) == (tuple(b.xy), b.gain, b.share)
     assert len(views) - before < before
+
+
+def test_coarse_paths_go_around_a_wall_through_its_door():
+    passable = np.ones((5, 7), bool)
+    passable[:, 3] = False
+    passable[4, 3] = True  # the door, in the bottom row
+    dist, pred = sx._coarse_paths(passable, (0, 0), 0.2)
+    assert dist[0, 0] == 0.0 and np.isinf(dist[2, 3])
+    # to (0, 6): down to the door and up again, 8-connected
+    assert dist[0, 6] == pytest.approx(0.2 * (2 + 6 * math.sqrt(2)))
+    known = np.zeros_like(passable)
+    known[:, :3] = True
+    assert sx._crossing(pred, (0, 6), (0, 0), known, 7) in {(3, 2), (4, 2)}  # by the door
+
+
+def _beyond_world(door: bool = True):
+    """A 12 m square: the robot's room (x < 0) mapped and free, a wall at x = 0 (with a door at
+    y in [2, 3] if ``door``), the rest unknown; a scorer over its lattice."""
+
+    class _Built:
+        x0, y0, resolution = -6.0, -6.0, 0.05
+        occupied = np.zeros((240, 240), bool)
+
+    built = _Built()
+    built.occupied[:, 120:122] = True
+    if door:
+        built.occupied[160:180, 120:122] = False
+    free = np.zeros((240, 240), bool)
+    free[10:230, 10:120] = True
+    grid = OccupancyGrid(free=free, x0=-6.0, y0=-6.0, resolution=0.05)
+    xs = np.arange(-6.0, 6.0, 0.2) + 0.1
+    pts = np.stack(np.meshgrid(xs, xs, [0.5], indexing="ij"), -1).reshape(-1, 3)
+    return sx.ViewpointScorer(built, pts, RobotSpec(), TimeModel()), grid, pts
+
+
+def test_beyond_values_mass_out_of_every_viewpoints_range_through_the_door():
+    scorer, grid, pts = _beyond_world()
+    sight = sx.Sight(3.0, _found)
+    w = np.where((pts[:, 0] > 4.0) & (pts[:, 1] < -3.0), 1.0, 0.0)  # far right, low
+    todo = np.ones(len(pts), bool)
+    here = np.array([-3.0, -3.0])
+    got = scorer.beyond(grid, todo, here, sight, sx.SWEEP_IMAGES, w)
+    assert got is not None
+    assert got.via.xy[0] < 0.0 and abs(got.via.xy[1] - 2.5) < 1.0  # where the way leaves: the door
+    assert got.goal[0] > 0.0 and 0.0 < got.share <= 1.0 and got.rate > 0.0
+    assert got.first_s < got.share / got.rate  # the first leg is part of the way
+    # mass a reachable viewpoint can find is left to ``best``: none beyond
+    near = np.where((pts[:, 0] < -1.0) & (pts[:, 1] < -3.0), 1.0, 0.0)
+    assert scorer.beyond(grid, todo, here, sight, sx.SWEEP_IMAGES, near) is None
+
+
+def test_beyond_without_a_way_through_the_wall_offers_nothing():
+    scorer, grid, pts = _beyond_world(door=False)
+    w = np.where(pts[:, 0] > 4.0, 1.0, 0.0)
+    todo = np.ones(len(pts), bool)
+    got = scorer.beyond(grid, todo, np.array([-3.0, -3.0]), sx.Sight(3.0, _found), 10.0, w)
+    assert got is None
+
+
+@pytest.mark.render
+def test_a_built_map_search_goes_beyond_the_frontier_and_repeats(catalog):
+    """With ``online.beyond`` the online decision offers the place beyond the frontier, the
+    robot takes it, and the same episode gives the same search."""
+    from dataclasses import replace
+
+    from ctxsearch.agent.search.runner import search_once
+
+    cfg = SearchConfig(style="apartment", policies=("frontier",), detector="realistic", seed=2)
+    cfg = cfg.with_scenario(MapMode.BUILT)
+    cfg = replace(cfg, online=replace(cfg.online, beyond=True))
+    one = search_once(cfg, "Cup", catalog=catalog).results[0]
+    two = search_once(cfg, "Cup", catalog=catalog).results[0]
+    assert any("beyond the frontier" in line for line in one.log), one.log
+    assert one.sim_time == two.sim_time and one.gazes == two.gazes

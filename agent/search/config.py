@@ -163,6 +163,12 @@ class OnlineConfig:
     lookahead: bool = setting(
         False, "choose by a two-step look-ahead instead of the most mass per second"
     )
+    beyond: bool = setting(
+        False,
+        "on the robot's own map, also value places not mapped yet: a sweep from any cell "
+        "reachable through unknown space, by the belief it would find per second of the way "
+        "there (frontier potentials); the robot drives to where that way leaves its map",
+    )
     calibration_prior_s: float = setting(
         30.0,
         "expected seconds of weight the calibration of each option kind's estimates starts with",

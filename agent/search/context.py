@@ -46,6 +46,9 @@ CONFIRM_RADIUS_M = 0.5
 BELIEF_ENTITY = "world/search/belief"  # the recording's floor heat map of the belief
 # the belief mass beyond each mapped room of the built map (knowledge.next_rooms), labelled
 BEYOND_ENTITY = "world/search/beyond"
+# the best place beyond the frontier at each decision (online.beyond) and where its way leaves
+# the map, labelled with the belief a sweep there would find
+FRONTIER_ENTITY = "world/search/beyond_frontier"
 
 
 class SearchStopped(Exception):

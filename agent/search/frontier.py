@@ -31,6 +31,7 @@ class Explorer:
         self.exhausted: dict[float, np.ndarray] = {}
         self.swept: dict[float, list[np.ndarray]] = {}
         self.unstuck: list[np.ndarray] = []  # where the floor around was mapped to get unstuck
+        self.advanced: list[np.ndarray] = []  # where the robot went toward a place beyond
 
     def scorer(self) -> sx.ViewpointScorer:
         """The built map's viewpoint scorer (made on first use)."""
@@ -81,6 +82,20 @@ class Explorer:
         return self._best(self.ctx.target_range, self.target_todo(), self.target_sight(),
                           sx.SWEEP_IMAGES, weights, None)  # fmt: skip
 
+    def beyond_viewpoint(self, weights: np.ndarray) -> sx.Beyond | None:
+        """On the robot's own map: the place beyond the frontier whose sweep would find the most
+        belief mass (``weights``) per second of the way there, and the viewpoint where that way
+        leaves the map (``ViewpointScorer.beyond``); None on a map that does not grow."""
+        ctx = self.ctx
+        if ctx.occluders is None or ctx.built is None:
+            return None
+        been = [*self.swept.get(ctx.target_range, []), *self.advanced]
+        avoid = np.array(been) if been else None
+        return self.scorer().beyond(
+            ctx.grid, self.target_todo(), ctx.body.pose().xy, self.target_sight(),
+            sx.SWEEP_IMAGES, weights, avoid,
+        )  # fmt: skip
+
     def target_sight(self) -> sx.Sight:
         """What a sweep for the target is scored for: each point's P(found) at its distance
         (the detection curve), up to the curve's reach."""
@@ -111,6 +126,14 @@ class Explorer:
             if until is None or not until():
                 self.map_floor()
         self.exhaust(rng, vp.xy)
+
+    def advance(self, vp: sx.Viewpoint) -> None:
+        """Drive to ``vp`` (where the way to a place beyond the frontier leaves the map) and
+        image the floor around where it is unknown, so the map grows that way; ``vp`` is not
+        advanced to again."""
+        self.advanced.append(np.asarray(vp.xy, float))
+        if self.ctx.drive_to(vp.xy):
+            self.map_floor()
 
     def map_floor(self, tilts: Sequence[float] = (NEAR_TILT,), min_unknown: float = 0.3) -> int:
         """Images at the near-floor ``tilts`` where at least ``min_unknown`` of the floor around

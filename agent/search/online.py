@@ -35,7 +35,12 @@ from ctxsearch.agent.search import belief
 from ctxsearch.agent.search import regions as rg
 from ctxsearch.agent.search import space as ss
 from ctxsearch.agent.search import viewpoints as sx
-from ctxsearch.agent.search.context import BELIEF_ENTITY, BEYOND_ENTITY, SearchContext
+from ctxsearch.agent.search.context import (
+    BELIEF_ENTITY,
+    BEYOND_ENTITY,
+    FRONTIER_ENTITY,
+    SearchContext,
+)
 from ctxsearch.agent.search.coverage import FURNITURE_TILTS
 from ctxsearch.agent.search.frontier import Explorer
 from ctxsearch.agent.search.memory import memory_prior
@@ -135,6 +140,7 @@ class OnlineSearch:
         prior = ss.expected_mass(ctx.catalog, probs, ctx.target) if probs else None
         self.prior = prior or 1.0
         self.took: dict[str, list[float]] = {}  # kind: [expected, measured] seconds so far
+        self.sight = [0.0, 0.0]  # the direct viewpoints' shares so far: [traced, nothing hidden]
 
     def run(self) -> None:
         """Look around (on the built map only: its first images map the floor; a remembered map
@@ -157,6 +163,7 @@ class OnlineSearch:
                 return
             options = self.region_options(b)
             options += [o for o in [self.direct_option(b.weights)] if o]
+            options += [o for o in [self.beyond_option(b.weights)] if o]
             options += [o for o in (self.via_option(v, b.mass) for v in self.vias) if o]
             if not options:
                 if self.explorer.unstick():
@@ -295,6 +302,11 @@ class OnlineSearch:
         v = ex.target_viewpoint(weights)
         if v is None:
             return None
+        if self.settings.beyond:  # how much of what lies in range the map lets a sweep see
+            self.sight[0] += v.share
+            self.sight[1] += ex.scorer().open_share(
+                v.xy, ex.target_todo(), ex.target_sight(), weights
+            )
         label = (
             f"explore for {ctx.target} at ({v.xy[0]:.1f}, {v.xy[1]:.1f}): "
             f"P(find)={v.share:.3f}, ~{v.seconds:.0f} s"
@@ -305,6 +317,41 @@ class OnlineSearch:
         if self.settings.lookahead:
             finds = ex.scorer().sweep_finds(v.xy, ex.target_sight(), ex.target_todo())
         return Option(v.rate, label, act, "explore", v.seconds, at, at, finds)
+
+    def beyond_option(self, weights: np.ndarray | None) -> Option | None:
+        """With ``online.beyond``, on the robot's own map: go toward the best place beyond the
+        frontier (``Explorer.beyond_viewpoint``), valued by what a sweep there would find per
+        second of the whole way there, times the share of what lay in range that the direct
+        viewpoints' sweeps could see so far (their traced shares over their shares with nothing
+        hidden: the unknown space hides nothing in the estimate, the robot's experience of its
+        map says how much is hidden; 1 before any); the act is its first leg, the drive to
+        where the way leaves the map and images of the unknown floor around
+        (``Explorer.advance``), whose expected seconds calibrate the ``beyond`` kind."""
+        ctx, ex = self.ctx, self.explorer
+        if not self.settings.beyond or weights is None or ctx.maps.map is not MapMode.BUILT:
+            return None
+        got = ex.beyond_viewpoint(weights)
+        if got is None:
+            return None
+        v = got.via
+        seen = self.sight[0] / self.sight[1] if self.sight[1] > 0.0 else 1.0
+        label = (
+            f"toward ({got.goal[0]:.1f}, {got.goal[1]:.1f}) beyond the frontier, via "
+            f"({v.xy[0]:.1f}, {v.xy[1]:.1f}): P(find there)={got.share:.3f} x{seen:.2f} seen"
+        )
+        rec = ctx.recorder
+        if rec.enabled:
+            rec.set_time(ctx.elapsed)
+            rec.log_points(
+                FRONTIER_ENTITY,
+                np.array([[*got.goal, 0.05], [*v.xy, 0.05]]),
+                np.array([[0.2, 0.8, 0.9], [0.2, 0.5, 0.9]]),
+                np.array([0.05 + 0.25 * np.sqrt(got.share), 0.08]),
+                labels=[f"beyond the frontier: {got.share:.2f}", "where the way leaves the map"],
+            )
+        at = (float(v.xy[0]), float(v.xy[1]))
+        act = lambda: ex.advance(v)  # noqa: E731
+        return Option(got.rate * seen, label, act, "beyond", got.first_s, at, at)
 
     def via_option(self, via: ViaOption, mass: float = 1.0) -> Option | None:
         """Sweep for intermediate type ``via`` where a new one is most likely seen per second."""

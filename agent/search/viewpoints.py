@@ -36,6 +36,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from scipy import ndimage
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from ctxsearch.agent.mapping import BuiltMap
 from ctxsearch.agent.navigation import OccupancyGrid
@@ -59,6 +62,8 @@ BIN_CELLS = 2
 BOUND_SLACK = 1e-9
 VISITED_RADIUS = 0.4  # m: a viewpoint this near an earlier sweep's is not chosen again
 HEAD_S = 0.6  # s: mean head slew per image
+FLOOR_IMAGES = 3.0  # near-floor images expected where the robot advances toward a place beyond
+FRONTIER_SNAP_M = 1.0  # m: a beyond-the-frontier place is driven toward via a viewpoint this near
 VIEWS_KEPT = 1024  # kept views (``ViewpointScorer._kept_shown``) at most: ~6,000 points each
 
 
@@ -86,6 +91,20 @@ class Viewpoint:
     def rate(self) -> float:
         """Share of what is left shown per second."""
         return self.share / max(self.seconds, 1e-6)
+
+
+@dataclass(frozen=True)
+class Beyond:
+    """A place beyond the frontier worth a sweep (``ViewpointScorer.beyond``): the reachable
+    viewpoint where the way there leaves the map, the place itself, the share of the belief a
+    sweep there would find, that share per expected second of the whole way (the drive there
+    and the sweep), and the expected seconds of the way's first leg."""
+
+    via: Viewpoint
+    goal: np.ndarray
+    share: float
+    rate: float
+    first_s: float  # expected seconds of the first leg: the drive to ``via``, floor images
 
 
 @dataclass(frozen=True)
@@ -279,6 +298,103 @@ class ViewpointScorer:
                 best = v
         return best
 
+    def beyond(
+        self,
+        grid: OccupancyGrid,
+        todo: np.ndarray,
+        here: np.ndarray,
+        sight: Sight,
+        images: float,
+        weights: np.ndarray,
+        avoid: np.ndarray | None = None,
+    ) -> Beyond | None:
+        """The best place to sweep from that the robot cannot reach on its map yet (a frontier
+        potential): of every coarse cell (``COARSE`` m) neither occupied nor reachable on the
+        grid, the one whose sweep finds the most of the belief ``weights`` (N,) on the todo
+        points out of every reachable candidate's range (what no viewpoint ``best`` weighs
+        can find; the share is of all the todo points' weight) per expected second, and the reachable candidate viewpoint where the way there
+        crosses the frontier (None: no such cell holds any mass, or no candidate stands within
+        ``FRONTIER_SNAP_M`` of the crossing).
+
+        The choices, this module's: the way is the shortest 8-connected path over coarse cells
+        that hold no occupied map cell (unknown space is taken as passable, as a frontier
+        explorer does) from the robot's cell; the seconds are a viewpoint's (the drive along
+        that path and the sweep's ``images``); what the sweep finds is each todo point's
+        weight times ``sight.found`` at its distance in the plane from the cell's centre and
+        the camera's height above the points' weighted mean height, within ``sight.range``,
+        nothing hiding it (the space is not mapped). A cell reachable on the grid is left to
+        ``best``, which traces what hides what."""
+        w = np.asarray(weights, float)[todo]
+        left = float(w.sum())
+        if left <= 0.0:
+            return None
+        cand, seconds = self._reachable(grid, here, images, avoid)
+        if len(cand) == 0:
+            return None
+        k = max(1, int(round(COARSE / self.built.resolution)))
+        occupied = _pool(self.built.occupied, k)
+        h, wd = occupied.shape
+        known = _pool(grid.reachable_mask(here), k)[:h, :wd]
+        passable = ~occupied | known
+        start = self._coarse_cell(here, h, wd)
+        if start is None:
+            return None
+        passable[start] = True
+        dist, pred = _coarse_paths(passable, start, COARSE)
+        # the belief's weight per coarse cell out of every candidate's range, and what a sweep
+        # from each cell finds of it
+        rng = min(sight.range, self.max_view)
+        stand = np.zeros((h, wd), bool)
+        for xy in cand:
+            rc = self._coarse_cell(xy, h, wd)
+            if rc is not None:
+                stand[rc] = True
+        far = ndimage.distance_transform_edt(~stand) * COARSE
+        sub = np.flatnonzero(todo)
+        c, r = self.cells[sub, 0], self.cells[sub, 1]
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < wd)
+        ok[ok] = far[r[ok], c[ok]] > rng
+        mass = np.bincount(r[ok] * wd + c[ok], weights=w[ok], minlength=h * wd).reshape(h, wd)
+        dz = self.spec.camera_height - float((self.points[sub, 2] * w).sum() / left)
+        finds = ndimage.correlate(mass, _sweep_kernel(rng, dz, sight), mode="constant")
+        virtual = passable & ~known & np.isfinite(dist) & (finds > 0.0)
+        if not virtual.any():
+            return None
+        legs = np.vectorize(self.tm.leg_estimate, otypes=[float])(dist[virtual])
+        rate = finds[virtual] / left / (legs + self.tm.looks_estimate(images, HEAD_S))
+        best = int(np.argmax(rate))  # ties: the first in row-major order
+        cell = tuple(int(a[best]) for a in np.nonzero(virtual))
+        cross = _crossing(pred, cell, start, known, wd)
+        at = (np.array([cross[1], cross[0]], float) + 0.5) * COARSE + np.array(self.origin)
+        gap = np.hypot(cand[:, 0] - at[0], cand[:, 1] - at[1])
+        j = int(np.argmin(gap))
+        if gap[j] > FRONTIER_SNAP_M:
+            return None
+        goal = (np.array([cell[1], cell[0]], float) + 0.5) * COARSE + np.array(self.origin)
+        share = float(finds[cell]) / left
+        sweep_s = self.tm.looks_estimate(images, HEAD_S)
+        v = Viewpoint(cand[j], 0, share, float(seconds[j]))
+        first = float(seconds[j]) - sweep_s + self.tm.looks_estimate(FLOOR_IMAGES, HEAD_S)
+        return Beyond(v, goal, share, float(rate[best]), first)
+
+    def open_share(
+        self, xy: np.ndarray, todo: np.ndarray, sight: Sight, weights: np.ndarray
+    ) -> float:
+        """The share of the todo points' weight a sweep at ``xy`` would find if nothing hid
+        anything (``_bounds``: each point's weight times ``sight.found`` within range): what
+        ``best``'s traced share is at most."""
+        w = np.asarray(weights, float)[todo]
+        left = float(w.sum())
+        if left <= 0.0:
+            return 0.0
+        _, m = self._bounds(np.asarray(xy, float)[None, :], self.points[todo], sight, w)
+        return float(m[0]) / left
+
+    def _coarse_cell(self, xy: np.ndarray, h: int, w: int) -> tuple[int, int] | None:
+        """The (row, col) of the coarse cell holding ``xy`` (None: outside the map)."""
+        c, r = np.floor((np.asarray(xy, float) - np.array(self.origin)) / COARSE).astype(int)
+        return (int(r), int(c)) if 0 <= r < h and 0 <= c < w else None
+
     def _reachable(
         self, grid: OccupancyGrid, here: np.ndarray, images: float, avoid: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -458,6 +574,60 @@ class ViewpointScorer:
         docstring)."""
         near = self.visible_points(coarse_blocked(self.built), xy, min(rng, EXHAUST_RADIUS))
         return near & unseen
+
+
+def _coarse_paths(
+    passable: np.ndarray, start: tuple[int, int], cell: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(h, w) shortest 8-connected path lengths (m) over the ``passable`` cells (``cell`` m a
+    side) from ``start`` (inf: none), and each cell's predecessor on its path (flat index; -9999
+    at the start and where none)."""
+    h, w = passable.shape
+    idx = np.arange(h * w).reshape(h, w)
+    rows, cols, lens = [], [], []
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):  # each neighbour pair once
+        lo, hi = max(0, -dc), w - max(0, dc)
+        both = passable[: h - dr, lo:hi] & passable[dr:, lo + dc : hi + dc]
+        rows.append(idx[: h - dr, lo:hi][both])
+        cols.append(idx[dr:, lo + dc : hi + dc][both])
+        lens.append(np.full(int(both.sum()), cell * math.hypot(dr, dc)))
+    r, c, d = np.concatenate(rows), np.concatenate(cols), np.concatenate(lens)
+    g = csr_matrix((np.r_[d, d], (np.r_[r, c], np.r_[c, r])), shape=(h * w, h * w))
+    dist, pred = dijkstra(g, indices=start[0] * w + start[1], return_predecessors=True)
+    return dist.reshape(h, w), pred.reshape(h, w)
+
+
+def _crossing(
+    pred: np.ndarray, cell: tuple[int, int], start: tuple[int, int], known: np.ndarray, w: int
+) -> tuple[int, int]:
+    """The last cell of ``known`` on the path from ``start`` to ``cell`` (``pred``:
+    ``_coarse_paths``' predecessors): where the way leaves the reachable map."""
+    path = [cell]
+    while path[-1] != start:
+        p = int(pred[path[-1]])
+        if p < 0:
+            break
+        path.append((p // w, p % w))
+    last = start
+    for rc in reversed(path):  # from the start outwards
+        if not known[rc]:
+            break
+        last = rc
+    return last
+
+
+def _sweep_kernel(rng: float, dz: float, sight: Sight) -> np.ndarray:
+    """(2n+1, 2n+1) what a sweep finds of a coarse cell's weight at each offset: ``sight.found``
+    at the distance from a camera ``dz`` m above it (1 without a curve) within ``rng`` m in the
+    plane, 0 beyond."""
+    n = int(math.ceil(rng / COARSE))
+    off = np.arange(-n, n + 1) * COARSE
+    dxy = np.hypot(off[:, None], off[None, :])
+    k = np.zeros_like(dxy)
+    near = dxy <= rng
+    d = np.sqrt(dxy[near] ** 2 + dz * dz)
+    k[near] = 1.0 if sight.found is None else sight.found(d)
+    return k
 
 
 def _heap(bound: np.ndarray, upper: np.ndarray, exact: np.ndarray) -> list:
