@@ -240,7 +240,9 @@ def test_a_resumed_realistic_run_equals_an_uninterrupted_one(tmp_path, catalog):
         return learn(cfg, catalog=catalog)
 
     whole = run(tmp_path / "a.sqlite", 6)
-    assert whole.run == "hif/camera+realistic+ref2/seed=0/map=built" and whole.detector == "realistic"
+    assert (
+        whole.run == "hif/camera+realistic+ref2/seed=0/map=built" and whole.detector == "realistic"
+    )
     run(tmp_path / "b.sqlite", 3)
     resumed = run(tmp_path / "b.sqlite", 3)  # replays 3 (with images), then 3 new
     assert resumed.examinations == 3

@@ -121,9 +121,7 @@ def test_examinations_planned_to_see_see_better_at_a_cost(tmp_path, catalog):
     assert near_s > far_s
 
 
-def test_learn_confirms_references_by_default_and_paper_gives_the_literal_loop(
-    tmp_path, capsys
-):
+def test_learn_confirms_references_by_default_and_paper_gives_the_literal_loop(tmp_path, capsys):
     """``ctxsearch learn`` examines an object once two images saw it (the default); ``--paper``
     is the paper's loop (every detected object at once, its own run key); the two flags that
     contradict each other are a one-line error with exit code 2 and no store written."""

@@ -627,17 +627,19 @@ def test_beyond_without_a_way_through_the_wall_offers_nothing():
 
 
 @pytest.mark.render
-def test_a_built_map_search_goes_beyond_the_frontier_and_repeats(catalog):
+def test_a_built_map_search_goes_beyond_the_frontier_and_repeats(catalog, tmp_path):
     """With ``online.beyond`` the online decision offers the place beyond the frontier, the
-    robot takes it, and the same episode gives the same search."""
+    robot takes it, the recording marks it, and the same episode gives the same search."""
     from dataclasses import replace
 
     from ctxsearch.agent.search.runner import search_once
+    from tests.rrd_files import read_rrd
 
     cfg = SearchConfig(style="apartment", policies=("frontier",), detector="realistic", seed=2)
     cfg = cfg.with_scenario(MapMode.BUILT)
     cfg = replace(cfg, online=replace(cfg.online, beyond=True))
-    one = search_once(cfg, "Cup", catalog=catalog).results[0]
+    one = search_once(cfg, "Cup", catalog=catalog, records=[tmp_path / "b.rrd"]).results[0]
     two = search_once(cfg, "Cup", catalog=catalog).results[0]
     assert any("beyond the frontier" in line for line in one.log), one.log
+    assert "/world/search/beyond_frontier" in read_rrd(tmp_path / "b.rrd").entities
     assert one.sim_time == two.sim_time and one.gazes == two.gazes
