@@ -110,10 +110,11 @@ kb-home: $(STAMP)
 bench-home-full: build/kb_home.sqlite
 	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
 
-# The unknown home beyond make bench (about 75 minutes on 2 cores, after make bench: it searches
+# The unknown home beyond make bench (about 100 minutes on 2 cores, after make bench: it searches
 # make bench's store and reads its draws): room context on the built map with and without the
 # next-room relations (200 paired apartment episodes each; results/search_apartment_built_rooms,
-# _next), the family houses' ladder of bounds with the given map's policies on the same episodes
+# _next), and with places beyond the frontier valued as well, the bounds beside
+# (results/search_apartment_built_beyond), the family houses' ladder of bounds with the given map's policies on the same episodes
 # and the next-room relations there (results/search_family_house_*), and "find my phone" on the
 # built map, the day-1 episodes of make bench's remembered and given runs
 # (results/search_apartment_built_instance); the control style without layout rules
@@ -122,6 +123,7 @@ bench-home-full: build/kb_home.sqlite
 bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_built_rooms --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect,bound-plan,bound-rooms --episodes 200 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_apartment_built_beyond --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --set map.days_after=1 --policies frontier,indirect,oracle-prior-indirect,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_built_instance --workers $(WORKERS) --draw-cache build/draws
 	rm -f build/kb_family_house.sqlite build/kb_family_house.sqlite-wal build/kb_family_house.sqlite-shm
 	$(T) $(CTX) learn --style family_house --rooms 30 --kb build/kb_family_house.sqlite --no-progress
