@@ -12,6 +12,18 @@ beyond the frontier is what exploring is for). Its *seconds* are the planned dri
 distance, a quarter turn) plus the images of a sweep. Viewpoints are ranked by the share of what
 is left that they show per second: information gain per expected second.
 
+Places beyond the frontier (``ViewpointScorer.beyond``, a frontier potential). Of every coarse
+cell (``COARSE`` m) neither occupied nor reachable on the grid, the one whose sweep finds the
+most belief per expected second, counting only the todo points out of every reachable
+candidate's range (what no viewpoint ``best`` weighs can find; the share is of all the todo
+points' weight). The choices, this module's: the way is the shortest 8-connected path over
+coarse cells that hold no occupied map cell (unknown space is passable, as a frontier explorer
+assumes) from the robot's cell; the seconds are a viewpoint's (the drive along that path and the
+sweep); what the sweep finds is each point's weight times P(found) at its distance in the plane
+from the cell's centre and the camera's height above the points' weighted mean height, within
+the sight's range, nothing hiding it (the space is not mapped). A cell reachable on the grid is
+left to ``best``, which traces what hides what.
+
 Exhaustion. After a sweep at p, the points within ``EXHAUST_RADIUS`` of p that p's rays reach
 and that are still unseen are *exhausted* for that range: they cannot be seen from nearby
 (inside furniture, under a bed), so they no longer attract the robot. Without it the points
@@ -308,74 +320,48 @@ class ViewpointScorer:
         weights: np.ndarray,
         avoid: np.ndarray | None = None,
     ) -> Beyond | None:
-        """The best place to sweep from that the robot cannot reach on its map yet (a frontier
-        potential): of every coarse cell (``COARSE`` m) neither occupied nor reachable on the
-        grid, the one whose sweep finds the most of the belief ``weights`` (N,) on the todo
-        points out of every reachable candidate's range (what no viewpoint ``best`` weighs
-        can find; the share is of all the todo points' weight) per expected second, and the reachable candidate viewpoint where the way there
-        crosses the frontier (None: no such cell holds any mass, or no candidate stands within
-        ``FRONTIER_SNAP_M`` of the crossing).
-
-        The choices, this module's: the way is the shortest 8-connected path over coarse cells
-        that hold no occupied map cell (unknown space is taken as passable, as a frontier
-        explorer does) from the robot's cell; the seconds are a viewpoint's (the drive along
-        that path and the sweep's ``images``); what the sweep finds is each todo point's
-        weight times ``sight.found`` at its distance in the plane from the cell's centre and
-        the camera's height above the points' weighted mean height, within ``sight.range``,
-        nothing hiding it (the space is not mapped). A cell reachable on the grid is left to
-        ``best``, which traces what hides what."""
+        """The best place beyond the frontier (module docstring) for the belief ``weights`` (N,)
+        on the ``todo`` points, and the reachable candidate viewpoint where the way there leaves
+        the map (None: no such place finds any mass, or no candidate stands within
+        ``FRONTIER_SNAP_M`` of where the way leaves)."""
         w = np.asarray(weights, float)[todo]
         left = float(w.sum())
-        if left <= 0.0:
-            return None
         cand, seconds = self._reachable(grid, here, images, avoid)
-        if len(cand) == 0:
+        if left <= 0.0 or len(cand) == 0:
             return None
         k = max(1, int(round(COARSE / self.built.resolution)))
         occupied = _pool(self.built.occupied, k)
         h, wd = occupied.shape
         known = _pool(grid.reachable_mask(here), k)[:h, :wd]
         passable = ~occupied | known
-        start = self._coarse_cell(here, h, wd)
+        start = _coarse_cell(self.origin, here, (h, wd))
         if start is None:
             return None
         passable[start] = True
         dist, pred = _coarse_paths(passable, start, COARSE)
-        # the belief's weight per coarse cell out of every candidate's range, and what a sweep
-        # from each cell finds of it
         rng = min(sight.range, self.max_view)
-        stand = np.zeros((h, wd), bool)
-        for xy in cand:
-            rc = self._coarse_cell(xy, h, wd)
-            if rc is not None:
-                stand[rc] = True
-        far = ndimage.distance_transform_edt(~stand) * COARSE
         sub = np.flatnonzero(todo)
-        c, r = self.cells[sub, 0], self.cells[sub, 1]
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < wd)
-        ok[ok] = far[r[ok], c[ok]] > rng
-        mass = np.bincount(r[ok] * wd + c[ok], weights=w[ok], minlength=h * wd).reshape(h, wd)
+        mass = _far_mass(self.cells[sub], w, [_coarse_cell(self.origin, xy, (h, wd)) for xy in cand],
+                         rng, (h, wd))  # fmt: skip
         dz = self.spec.camera_height - float((self.points[sub, 2] * w).sum() / left)
         finds = ndimage.correlate(mass, _sweep_kernel(rng, dz, sight), mode="constant")
         virtual = passable & ~known & np.isfinite(dist) & (finds > 0.0)
         if not virtual.any():
             return None
+        sweep_s = self.tm.looks_estimate(images, HEAD_S)
         legs = np.vectorize(self.tm.leg_estimate, otypes=[float])(dist[virtual])
-        rate = finds[virtual] / left / (legs + self.tm.looks_estimate(images, HEAD_S))
+        rate = finds[virtual] / left / (legs + sweep_s)
         best = int(np.argmax(rate))  # ties: the first in row-major order
         cell = tuple(int(a[best]) for a in np.nonzero(virtual))
-        cross = _crossing(pred, cell, start, known, wd)
-        at = (np.array([cross[1], cross[0]], float) + 0.5) * COARSE + np.array(self.origin)
+        at = _cell_xy(self.origin, _crossing(pred, cell, start, known, wd))
         gap = np.hypot(cand[:, 0] - at[0], cand[:, 1] - at[1])
         j = int(np.argmin(gap))
         if gap[j] > FRONTIER_SNAP_M:
             return None
-        goal = (np.array([cell[1], cell[0]], float) + 0.5) * COARSE + np.array(self.origin)
         share = float(finds[cell]) / left
-        sweep_s = self.tm.looks_estimate(images, HEAD_S)
         v = Viewpoint(cand[j], 0, share, float(seconds[j]))
         first = float(seconds[j]) - sweep_s + self.tm.looks_estimate(FLOOR_IMAGES, HEAD_S)
-        return Beyond(v, goal, share, float(rate[best]), first)
+        return Beyond(v, _cell_xy(self.origin, cell), share, float(rate[best]), first)
 
     def open_share(
         self, xy: np.ndarray, todo: np.ndarray, sight: Sight, weights: np.ndarray
@@ -389,11 +375,6 @@ class ViewpointScorer:
             return 0.0
         _, m = self._bounds(np.asarray(xy, float)[None, :], self.points[todo], sight, w)
         return float(m[0]) / left
-
-    def _coarse_cell(self, xy: np.ndarray, h: int, w: int) -> tuple[int, int] | None:
-        """The (row, col) of the coarse cell holding ``xy`` (None: outside the map)."""
-        c, r = np.floor((np.asarray(xy, float) - np.array(self.origin)) / COARSE).astype(int)
-        return (int(r), int(c)) if 0 <= r < h and 0 <= c < w else None
 
     def _reachable(
         self, grid: OccupancyGrid, here: np.ndarray, images: float, avoid: np.ndarray | None
@@ -574,6 +555,38 @@ class ViewpointScorer:
         docstring)."""
         near = self.visible_points(coarse_blocked(self.built), xy, min(rng, EXHAUST_RADIUS))
         return near & unseen
+
+
+def _coarse_cell(
+    origin: tuple[float, float], xy: np.ndarray, shape: tuple[int, int]
+) -> tuple[int, int] | None:
+    """The (row, col) of the coarse cell (``COARSE`` m from ``origin``) holding ``xy`` (None:
+    outside a grid of ``shape``)."""
+    c, r = np.floor((np.asarray(xy, float) - np.array(origin)) / COARSE).astype(int)
+    return (int(r), int(c)) if 0 <= r < shape[0] and 0 <= c < shape[1] else None
+
+
+def _cell_xy(origin: tuple[float, float], cell: tuple[int, int]) -> np.ndarray:
+    """The centre of coarse cell (row, col)."""
+    return (np.array([cell[1], cell[0]], float) + 0.5) * COARSE + np.array(origin)
+
+
+def _far_mass(
+    cells: np.ndarray, w: np.ndarray, stand: Sequence, rng: float, shape: tuple[int, int]
+) -> np.ndarray:
+    """(h, w) the weight ``w`` of the points in coarse ``cells`` (P, 2: col, row) summed per
+    cell, of the points farther than ``rng`` (in the plane, cell to cell) from every cell of
+    ``stand`` ((row, col) or None: the reachable candidates')."""
+    h, wd = shape
+    near = np.zeros(shape, bool)
+    for rc in stand:
+        if rc is not None:
+            near[rc] = True
+    far = ndimage.distance_transform_edt(~near) * COARSE
+    c, r = cells[:, 0], cells[:, 1]
+    ok = (r >= 0) & (r < h) & (c >= 0) & (c < wd)
+    ok[ok] = far[r[ok], c[ok]] > rng
+    return np.bincount(r[ok] * wd + c[ok], weights=w[ok], minlength=h * wd).reshape(shape)
 
 
 def _coarse_paths(
