@@ -110,7 +110,7 @@ kb-home: $(STAMP)
 bench-home-full: build/kb_home.sqlite
 	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
 
-# The unknown home beyond make bench (about 100 minutes on 2 cores, after make bench: it searches
+# The unknown home beyond make bench (about 110 minutes on 2 cores, after make bench: it searches
 # make bench's store and reads its draws): room context on the built map with and without the
 # next-room relations (200 paired apartment episodes each; results/search_apartment_built_rooms,
 # _next), and with places beyond the frontier valued as well, the bounds beside
@@ -119,7 +119,8 @@ bench-home-full: build/kb_home.sqlite
 # built map, the day-1 episodes of make bench's remembered and given runs
 # (results/search_apartment_built_instance); the control style without layout rules
 # (apartment_shuffled: 30 houses learned, then room context with and without the next-room
-# relations on 200 paired episodes; results/search_apartment_shuffled_built_{rooms,next}).
+# relations on 200 paired episodes, and with places beyond the frontier;
+# results/search_apartment_shuffled_built_{rooms,next,beyond}).
 bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_built_rooms --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next --workers $(WORKERS) --draw-cache build/draws
@@ -134,6 +135,7 @@ bench-unknown-home: $(STAMP)
 	$(T) $(CTX) learn --style apartment_shuffled --rooms 30 --kb build/kb_apartment_shuffled.sqlite --no-progress
 	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_shuffled_built_rooms --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_shuffled_built_next --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_apartment_shuffled_built_beyond --workers $(WORKERS) --draw-cache build/draws
 
 # The benchmark at full power (scripts/experiments/bench_full.py; results/full/, its journal, step
 # stamps, draws and family-house store in build/full/): the apartment learning curve (100 paired
