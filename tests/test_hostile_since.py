@@ -370,7 +370,10 @@ def test_a_false_alarm_rate_outside_0_1_is_a_usage_error(tmp_path, capsys, rate)
 
 # ---- Ctrl-C -------------------------------------------------------------------------------------
 def _interrupt(argv: list[str], delay: float, cwd: Path) -> tuple[int, str]:
-    """Run ``argv`` as a user would, send it SIGINT (Ctrl-C) after ``delay`` s; (code, stderr)."""
+    """Run ``argv`` as a user would, send it SIGINT (Ctrl-C) ``delay`` s after its interpreter
+    started on the program's imports (numpy mapped into it, where /proc says; a signal before
+    that lands in CPython's own start-up, ``site``, which no program can catch: on a loaded
+    machine 0.2 s after the fork may still be there); (code, stderr)."""
     import subprocess
     import time
 
@@ -382,6 +385,15 @@ def _interrupt(argv: list[str], delay: float, cwd: Path) -> tuple[int, str]:
         env={**os.environ, "MUJOCO_GL": "egl"},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as from a terminal
     )
+    maps = Path(f"/proc/{proc.pid}/maps")
+    until = time.monotonic() + 60.0
+    while maps.exists() and proc.poll() is None and time.monotonic() < until:
+        try:
+            if "numpy" in maps.read_text(errors="replace"):
+                break
+        except OSError:
+            break
+        time.sleep(0.01)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
