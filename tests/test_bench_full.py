@@ -61,7 +61,22 @@ def test_the_summary_pairs_room_context_with_and_without(tmp_path):
     assert s["vs_baseline"]["location"]["geo_mean"] == 0.5
     assert s["vs_baseline"]["location (no room context)"]["geo_mean"] == 1.0
     assert s["room_context"]["with_vs_without"]["geo_mean"] == 0.5
-    assert "with room context against without" in (tmp_path / "summary.md").read_text()
+    assert s["success"] == {"uniform": 1.0, "location": 1.0, "location (no room context)": 1.0}
+    md = (tmp_path / "summary.md").read_text()
+    assert "with room context against without" in md
+    assert "| location | 0.50 [0.50, 0.50] 4/0/0" in md and "| 0.50 [0.50, 0.50] |" in md
+
+
+def test_the_summary_counts_each_policy_s_successes(tmp_path):
+    path = tmp_path / "apartment" / "instance" / "built"
+    path.mkdir(parents=True)
+    rows = ["episode,policy,success,time_to_find_s", "0,frontier,true,10.0",
+            "1,frontier,false,300.0", "0,indirect,true,5.0", "1,indirect,true,20.0"]  # fmt: skip
+    (path / "episodes.csv").write_text("\n".join(rows) + "\n")
+    write_summary(tmp_path)
+    s = json.loads((tmp_path / "summary.json").read_text())["apartment"]["instance"]["built"]
+    assert s["success"] == {"frontier": 0.5, "indirect": 1.0}
+    assert "| frontier | 1 | 1 | | 50% |" in (tmp_path / "summary.md").read_text()
 
 
 def test_every_step_parses_and_its_policies_resolve(tmp_path):

@@ -449,6 +449,11 @@ def test_paired_stats_see_what_a_median_pinned_by_ties_cannot():
     doc = p.to_json()
     assert set(doc) == {"geo_mean", "geo_mean_ci", "ratio_of_means", "ratio_of_means_ci",
                         "wilcoxon_p", "wins", "losses", "ties", "n", "episodes_for_power"}  # fmt: skip
+    from ctxsearch.agent.search.measures import geo_cell
+
+    assert geo_cell(doc).endswith(f"{p.wins}/{p.losses}/{p.ties} p<0.001")
+    assert geo_cell(weaker.to_json()).split(" p")[-1].startswith(("=", "<"))
+    assert geo_cell(same.to_json()).endswith("0/0/300 p=1.000")
 
 
 def test_instance_targets_keep_one_instance_of_the_target_in_the_same_worlds(office, catalog):

@@ -235,9 +235,12 @@ def paired_stats(t: Sequence[float], t_base: Sequence[float], seed: int = 0) -> 
 
 def geo_cell(r: dict) -> str:
     """A Markdown cell of a ``PairedStats.to_json`` entry: the geometric mean [interval],
-    wins/losses/ties and the signed-rank p ("-" where there is no estimate)."""
+    wins/losses/ties and the signed-rank p ("p<0.001" below that; "-" where there is no
+    estimate)."""
     if r["geo_mean"] is None:
         return "-"
     lo, hi = r["geo_mean_ci"]
+    p = r["wilcoxon_p"]
+    p_text = "p<0.001" if p is not None and p < 0.001 else f"p={p:.3f}"
     return (f"{r['geo_mean']:.2f} [{lo:.2f}, {hi:.2f}] {r['wins']}/{r['losses']}/{r['ties']} "
-            f"p={r['wilcoxon_p']:.3f}")  # fmt: skip
+            f"{p_text}")  # fmt: skip
