@@ -161,8 +161,20 @@ def forgetting(args: argparse.Namespace):
     return Forgetting(args.forget, args.half_life, args.false_alarm)
 
 
-def add_interval_argument(p: argparse.ArgumentParser) -> None:
-    """``--interval wilson|clustered|corrected``."""
+SEARCH_INTERVAL_HELP = (
+    "interval method the search ranks by: corrected (the default, the search's: clustered, and "
+    "each examination weighted by the chance its images would have shown a related object), "
+    "clustered (Wilson on a room-level effective sample size) or wilson (the paper's eq. 1-2)"
+)
+
+
+def add_interval_argument(p: argparse.ArgumentParser, search: bool = False) -> None:
+    """``--interval wilson|clustered|corrected``: Wilson by default (the paper's, what ``kb``
+    and ``learn`` print), or with ``search`` the search configuration's default
+    (``knowledge.interval``; the option's value is then None unless given)."""
     p.add_argument(
-        "--interval", default="wilson", choices=tuple(IntervalMethod), help=INTERVAL_HELP
+        "--interval",
+        default=None if search else "wilson",
+        choices=tuple(IntervalMethod),
+        help=SEARCH_INTERVAL_HELP if search else INTERVAL_HELP,
     )

@@ -105,7 +105,7 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
         metavar="FILE.json",
         help="ground truth from `ctxsearch truth` for the asymptote (default: sampled)",
     )
-    argtypes.add_interval_argument(p)
+    argtypes.add_interval_argument(p, search=True)
     p.set_defaults(func=run_curve)
     p = bench_sub.add_parser(
         "transfer",
@@ -176,7 +176,7 @@ def run_curve(args: argparse.Namespace) -> int:
 
     marks = parse_room_marks(args.rooms)
     truth = Path(args.truth) if args.truth else None
-    base = _search_base(
+    base = _search_base(  # --interval None: the search configuration's default
         args, args.style, {"knowledge.truth": truth, "knowledge.interval": args.interval}
     )
     config = CurveConfig(base, marks, _scenarios(args), perception=args.perception)

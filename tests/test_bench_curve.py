@@ -240,6 +240,19 @@ def test_default_scenarios_match_the_cli_copy():
     assert {n: ",".join(s.policies) for n, s in DEFAULT_SCENARIOS.items()} == SCENARIO_POLICIES
 
 
+def test_the_curve_ranks_by_the_search_s_interval_unless_told(curve_dir):
+    """The curve measures the search as ``bench search`` runs it: the search configuration's
+    interval (corrected; clustered for a store without views, as the oracle's) unless
+    ``--interval`` names one."""
+    from ctxsearch.agent.search.config import SearchConfig
+    from ctxsearch.scripts.cli import build_parser
+
+    doc = json.loads((curve_dir / "curve.json").read_text())
+    assert doc["interval"] == SearchConfig().knowledge.interval == "corrected"
+    args = build_parser().parse_args([*CURVE, "--out", "x", "--interval", "wilson"])
+    assert args.interval == "wilson"
+
+
 def test_paired_ratio_counts_wins_and_losses():
     from ctxsearch.scripts.experiments.scenarios import paired_ratio
 
