@@ -10,7 +10,8 @@ identical at every k and to lie outside every world the largest k learned in.
 
 Writes ``DIR/curve.json`` (per k: examinations, per scenario the paired ratio of the context
 policy to the baseline and of the asymptote to the baseline), ``DIR/curve.md``, ``DIR/curve.png``
-(the paired ratio against k on a symlog axis with its 95% band, the asymptote dashed) and
+(the paired ratio's geometric mean against k on a symlog axis with its 95% band, the
+asymptote dashed) and
 ``DIR/curve.csv`` (one row per k, scenario, episode and policy; a baseline or asymptote row
 repeats, at every k, the run made at ``measured_at_k``). The snapshots stay in
 ``DIR/stores/k=K.sqlite`` (stores of an earlier run there are an error, never overwritten),
@@ -355,25 +356,27 @@ def _paired_table(doc: dict, names: list[str]) -> list[str]:
 
 
 def plot_curve(doc: dict, path: Path) -> None:
-    """curve.png: the paired ratio against k (symlog), its band, the asymptote dashed."""
+    """curve.png: the geometric mean of the paired ratio against k (symlog) with its 95%
+    bootstrap band, the headline statistic of the tables (a median is pinned at 1 by ties), and
+    the asymptote's dashed."""
     fig = Figure(figsize=(7, 4.5), dpi=120)
     ax = fig.subplots()
     ks = [e["k"] for e in doc["curve"]]
     for i, (name, sc) in enumerate(doc["scenarios"].items()):
         color = f"C{i}"
-        rs = [e["scenarios"][name]["context_to_baseline"] for e in doc["curve"]]
-        med = [r["median"] for r in rs]
-        ax.plot(ks, med, "o-", color=color, label=f"{name} map: {sc['context']} / {sc['baseline']}")
-        ax.fill_between(ks, [r["ci"][0] for r in rs], [r["ci"][1] for r in rs], color=color,
-                        alpha=0.2, lw=0)  # fmt: skip
-        asym = doc["curve"][-1]["scenarios"][name]["asymptote_to_baseline"]["median"]
+        rs = [e["scenarios"][name]["paired"]["context_to_baseline"] for e in doc["curve"]]
+        geo = [r["geo_mean"] for r in rs]
+        ax.plot(ks, geo, "o-", color=color, label=f"{name} map: {sc['context']} / {sc['baseline']}")
+        ax.fill_between(ks, [r["geo_mean_ci"][0] for r in rs], [r["geo_mean_ci"][1] for r in rs],
+                        color=color, alpha=0.2, lw=0)  # fmt: skip
+        asym = doc["curve"][-1]["scenarios"][name]["paired"]["asymptote_to_baseline"]["geo_mean"]
         ax.axhline(asym, color=color, ls="--", lw=1.2, label=f"{sc['asymptote']} (asymptote)")
     ax.axhline(1.0, color="grey", ls=":", lw=1)
     ax.set_xscale("symlog", linthresh=1)
     ax.set_xlim(left=0)
     ax.set_xticks(ks, [str(k) for k in ks])
     ax.set_xlabel("worlds learned k (symlog)")
-    ax.set_ylabel("paired median ratio  t_context / t_baseline")
+    ax.set_ylabel("paired ratio t_context / t_baseline (geometric mean)")
     ax.set_title(
         f"learning curve: {doc['style']}, {doc['episodes']} paired episodes, detector "
         f"{doc['detector']}",
