@@ -23,11 +23,6 @@ STYLES = ("apartment", "family_house")
 NO_RC = "no room context"
 
 
-def read_times(path: Path) -> dict[str, list[float]]:
-    """{policy: time to find per episode, in episode order} of an episodes.csv."""
-    return {p: [t for t, _ok in v] for p, v in read_episodes(path).items()}
-
-
 def read_episodes(path: Path) -> dict[str, list[tuple[float, bool]]]:
     """{policy: (time to find, success) per episode, in episode order} of an episodes.csv."""
     out: dict[str, list[tuple[int, float, bool]]] = {}
