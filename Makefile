@@ -78,11 +78,8 @@ bench-a: $(STAMP)
 # detector settings x 2 seeds).
 	$(T) $(CTX) bench intervals --styles apartment --rooms 3,10 --seeds 2 --truth-samples 400 --out results/intervals_apartment --workers $(WORKERS)
 # Detector x interval against the truth, camera mode: office after 10 and 30 rooms (14 runs: 7
-# detector settings x 2 seeds). The lanes as measured on 2026-12-05 under today's defaults (62:46
-# in all): lane A about 57 minutes with HIF against other strategies in it, lane B 61 with the
-# remembered map's find-my-phone pair (18 minutes, now in make bench-unknown-home beside the
-# built map's on the same episodes, make bench-full running them at 400 episodes); HIF's runs
-# (5 minutes) moved to lane B, which puts the lanes near 52 and 48 minutes.
+# detector settings x 2 seeds). Measured on 2026-12-06 (52 minutes in all, a clean clone): lane A
+# 49 minutes, lane B 50 (the remembered map's find-my-phone pair lives in make bench-unknown-home).
 	$(T) $(CTX) bench intervals --styles office --rooms 10,30 --seeds 2 --truth-samples 400 --out results/intervals --workers $(WORKERS)
 # The robot's rooms against the plans: 10 houses of every stock house style, explored and segmented.
 	$(T) $(CTX) bench rooms --houses 10 --out results/rooms --workers $(WORKERS)
@@ -168,7 +165,7 @@ bench-b: $(STAMP)
 # the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache); the
 # built map's default policies include the ladder of bounds (bound-rooms, bound-target-room,
 # bound-plan: what exact knowledge of one kind would buy there; docs/results.md). The office's
-# learning runs (HIF against other strategies) end this lane: it is the shorter one.
+# learning runs (HIF against other strategies) end this lane, which balances the two.
 	rm -f build/kb_apartment.sqlite build/kb_apartment.sqlite-wal build/kb_apartment.sqlite-shm
 	mkdir -p build && cp results/curve/stores/k=0030.sqlite build/kb_apartment.sqlite
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --episodes 200 --quiet --out results/search_apartment_built --workers $(WORKERS) --draw-cache build/draws
