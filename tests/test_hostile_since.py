@@ -25,6 +25,7 @@ from ctxsearch.knowledge import files
 from ctxsearch.knowledge.catalog import DEFAULT_CATALOG, load_catalog
 from ctxsearch.knowledge.errors import CatalogError, CtxsearchError
 from ctxsearch.scripts.cli import main
+from tests.procs import wait_until_importing
 
 CATALOG = load_catalog()
 
@@ -385,15 +386,7 @@ def _interrupt(argv: list[str], delay: float, cwd: Path) -> tuple[int, str]:
         env={**os.environ, "MUJOCO_GL": "egl"},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as from a terminal
     )
-    maps = Path(f"/proc/{proc.pid}/maps")
-    until = time.monotonic() + 60.0
-    while maps.exists() and proc.poll() is None and time.monotonic() < until:
-        try:
-            if "numpy" in maps.read_text(errors="replace"):
-                break
-        except OSError:
-            break
-        time.sleep(0.01)
+    wait_until_importing(proc.pid)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
