@@ -107,12 +107,17 @@ kb-home: $(STAMP)
 bench-home-full: build/kb_home.sqlite
 	$(T) $(CTX) bench home --kb build/kb_home.sqlite --style apartment --episodes 400 --days-after 1 --room-context --quiet --out results/home_400 --workers $(WORKERS) --draw-cache build/draws
 
-# The unknown home beyond make bench (about 130 minutes on 2 cores, after make bench: it searches
-# make bench's store and reads its draws): room context on the built map with and without the
-# next-room relations (200 paired apartment episodes each; results/search_apartment_built_rooms,
-# _next), and with places beyond the frontier valued as well, the bounds beside
-# (results/search_apartment_built_beyond), the family houses' ladder of bounds with the given map's policies on the same episodes
-# and the next-room relations there (results/search_family_house_*), "find my phone" with room
+# The unknown home beyond make bench (about three hours on 2 cores, after make bench: it searches
+# make bench's store and reads its draws; an estimate: 130 minutes measured before the 400-episode
+# runs, which took about 105 CPU minutes, and the family houses' places beyond 34): room context
+# on the built map with and without the next-room relations (200 paired apartment episodes each;
+# results/search_apartment_built_rooms, _next), the next-room relations and places beyond the
+# frontier on 400 paired apartment episodes (without places beyond, with the furniture plan's
+# bound: results/search_apartment_built_next_400; with them: results/search_apartment_built_beyond,
+# its bounds results/search_apartment_built_beyond_bounds, and glimpsed furniture's room taken to
+# reach 4 m: results/search_apartment_built_beyond_glimpse4), the family houses' ladder of bounds
+# with the given map's policies on the same episodes, the next-room relations there and places
+# beyond the frontier (results/search_family_house_*), "find my phone" with room
 # context on three maps, the same 60 held-out houses on the day after the robot toured each:
 # remembered, given and built (results/search_apartment_{remembered,given,built}_instance); the
 # control style without layout rules
@@ -122,7 +127,10 @@ bench-home-full: build/kb_home.sqlite
 bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_built_rooms --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next --workers $(WORKERS) --draw-cache build/draws
-	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect,bound-plan,bound-rooms --episodes 200 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_apartment_built_beyond --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect,bound-plan --episodes 400 --room-context --set knowledge.next_rooms=true --quiet --out results/search_apartment_built_next_400 --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,indirect,oracle-prior-indirect --episodes 400 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_apartment_built_beyond --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies frontier,bound-rooms,bound-plan --episodes 400 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_apartment_built_beyond_bounds --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --policies indirect,oracle-prior-indirect --episodes 400 --room-context --set knowledge.next_rooms=true --set online.beyond=true --set knowledge.glimpse_m=4 --quiet --out results/search_apartment_built_beyond_glimpse4 --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map remembered --set map.home=tour --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_remembered_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map given --set map.days_after=1 --policies uniform,location,oracle-prior,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_given_instance --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_apartment.sqlite --style apartment --map built --set map.days_after=1 --policies frontier,indirect,oracle-prior-indirect,oracle --episodes 60 --targets instance --room-context --quiet --out results/search_apartment_built_instance --workers $(WORKERS) --draw-cache build/draws
@@ -131,6 +139,7 @@ bench-unknown-home: $(STAMP)
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --episodes 200 --quiet --out results/search_family_house_built --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --set knowledge.next_rooms=true --quiet --out results/search_family_house_built_next --workers $(WORKERS) --draw-cache build/draws
 	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map given --policies uniform,location,oracle-prior,oracle --episodes 200 --quiet --out results/search_family_house_given --workers $(WORKERS) --draw-cache build/draws
+	$(T) $(CTX) bench search --kb build/kb_family_house.sqlite --style family_house --map built --policies frontier,indirect,oracle-prior-indirect,bound-rooms --episodes 200 --room-context --set knowledge.next_rooms=true --set online.beyond=true --quiet --out results/search_family_house_built_beyond --workers $(WORKERS) --draw-cache build/draws
 	rm -f build/kb_apartment_shuffled.sqlite build/kb_apartment_shuffled.sqlite-wal build/kb_apartment_shuffled.sqlite-shm
 	$(T) $(CTX) learn --style apartment_shuffled --rooms 30 --kb build/kb_apartment_shuffled.sqlite --no-progress
 	$(T) $(CTX) bench search --kb build/kb_apartment_shuffled.sqlite --style apartment_shuffled --map built --policies frontier,indirect,oracle-prior-indirect --episodes 200 --room-context --quiet --out results/search_apartment_shuffled_built_rooms --workers $(WORKERS) --draw-cache build/draws
@@ -160,7 +169,7 @@ bench-b: $(STAMP)
 	$(T) $(CTX) bench curve --style apartment --rooms 0,1,3,10,30 --seed 0 --episodes 20 --quiet --out results/curve --workers $(WORKERS)
 # The headline: houses after 30 learned houses, 200 paired episodes per map scenario. The store is
 # the curve's after 30 houses: the same run as `ctxsearch learn --style apartment --rooms 30 --kb
-# build/kb_apartment.sqlite` (same intervals, 2770 examinations), not learned twice; the old
+# build/kb_apartment.sqlite` (same intervals, 2079 examinations), not learned twice; the old
 # store's WAL files go too (SQLite would replay a stale log into the copy). Both scenarios search
 # the same 200 episodes: the second reads the first's draw from build/draws (--draw-cache); the
 # built map's default policies include the ladder of bounds (bound-rooms, bound-target-room,
