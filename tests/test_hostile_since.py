@@ -386,7 +386,7 @@ def _interrupt(argv: list[str], delay: float, cwd: Path) -> tuple[int, str]:
         env={**os.environ, "MUJOCO_GL": "egl"},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as from a terminal
     )
-    wait_until_importing(proc.pid)
+    wait_until_importing(proc)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)

@@ -146,7 +146,7 @@ def test_sighup_before_the_store_exists_is_one_line_and_nothing_is_learned(tmp_p
         [str(script), *LEARN, "--kb", str(kb)], cwd=ROOT, stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
-    wait_until_importing(p.pid)  # loading its modules: the store is made after them
+    wait_until_importing(p)  # loading its modules: the store is made after them
     p.send_signal(signal.SIGHUP)
     code, _, err = _ended_alone(p)
     assert code == 128 + signal.SIGHUP
